@@ -91,7 +91,7 @@ bench: setup
 	  else echo "make bench: $$f not found (set DATA=...); skipping $$s"; fi; done; \
 	echo "$(BIN)/performer bench streams $(BENCH_PIN) --audio models/assets/clip.ogg $$songs --out $(BENCH_OUT)/streams"; \
 	$(BIN)/performer bench streams $(BENCH_PIN) --audio models/assets/clip.ogg $$songs --out $(BENCH_OUT)/streams || exit 2
-	$(BIN)/performer bench check --budgets benchmarks/budgets.toml $(BENCH_OUT)
+	$(BIN)/performer bench check --budgets benchmarks/budgets.toml --summary $(BENCH_OUT)/summary.md $(BENCH_OUT)
 
 # make soak: docs/reliability.md. Exit 1 if a check fails; figures in $(SOAK_OUT).
 SOAK_MINUTES ?= 60

@@ -19,7 +19,7 @@ with no client, then while ``--clients`` clients (another process) connect at on
 server capped at ``--max-clients`` and stay connected; prints the per-hop compute p50/p99
 of both runs, their ratio, how many clients were served or refused, and the RSS change.
 
-*crowd*: the load's client process: opens ``--clients`` WebSocket connections at once,
+*crowd*: the load's client process: opens ``--clients`` WebSocket connections at once (``--wait-go``: after a stdin line),
 prints ``{"connected": ...}`` once every attempt got its hello or its refusal, reads
 binary frames for ``--seconds`` (0: until the server closes), then prints a JSON summary
 (hellos, close codes, frames and non-finite frames per client).
@@ -163,9 +163,18 @@ class _Helper:
 class Crowd(_Helper):
     """``crowd`` in another process: ``clients`` WebSocket connections opened at once."""
 
-    def __init__(self, url: str, clients: int, seconds: float = 0.0, fmt: str = "binary") -> None:
+    def __init__(self, url: str, clients: int, seconds: float = 0.0, fmt: str = "binary", check_every: int = 1,
+                 wait_go: bool = False) -> None:
         self.proc = _spawn("crowd", "--url", url, "--clients", str(clients), "--seconds", str(seconds),
-                           "--format", fmt)
+                           "--format", fmt, "--check-every", str(check_every), *(["--wait-go"] if wait_go else []))
+        if wait_go:  # started and imported: its start-up cost is paid before the measurement
+            _read_json_line(self.proc, 60)
+
+    def go(self) -> None:
+        """With ``wait_go``: open the connections now."""
+        assert self.proc.stdin is not None
+        self.proc.stdin.write("go\n")
+        self.proc.stdin.flush()
 
     def connected(self, timeout: float = 60.0) -> dict:
         """Blocks until every connection attempt got its hello or its refusal."""
@@ -194,13 +203,17 @@ class UdpCounter(_Helper):
         return out
 
 
-async def _crowd(url: str, clients: int, seconds: float, fmt: str) -> dict:
+async def _crowd(url: str, clients: int, seconds: float, fmt: str, check_every: int = 1,
+                 wait_go: bool = False) -> dict:
     from websockets.asyncio.client import connect
     from websockets.exceptions import ConnectionClosed
 
     from realtime.wire import decode_frame
 
     loop = asyncio.get_running_loop()
+    if wait_go:
+        print(json.dumps({"ready": True}), flush=True)
+        await loop.run_in_executor(None, sys.stdin.readline)
     closes: Counter = Counter()
     errors: Counter = Counter()
     frames: list[int] = []
@@ -237,7 +250,8 @@ async def _crowd(url: str, clients: int, seconds: float, fmt: str) -> dict:
                         break
                     if isinstance(msg, bytes):
                         n += 1
-                        nonfinite += not bool(np.isfinite(decode_frame(msg).pose).all())
+                        if n % check_every == 0:
+                            nonfinite += not bool(np.isfinite(decode_frame(msg).pose).all())
                     else:
                         doc = json.loads(msg)
                         if doc.get("type") == "frame":
@@ -331,16 +345,20 @@ def measure_load(clients: int, max_clients: int, seconds: float, repeat: int = 1
     runs: dict[str, list[dict]] = {"unloaded": [], "loaded": []}
     crowds: list[dict] = []
     rss_start = rss_bytes()
+    rss_first = None  # after the first (unloaded, loaded) pair: one-time costs paid
     for _ in range(repeat):
+        if rss_first is None and runs["loaded"]:
+            rss_first = rss_bytes()
         for kind in ("unloaded", "loaded"):
             ws = WebSocketSink("127.0.0.1", 0, max_clients=max_clients, offsets=np.tile([0.0, 0.1, 0.0], (21, 1)))
             check = FrameCheck()
-            crowd = None
+            # the client process starts before the engine; each client checks every 10th frame
+            crowd = None if kind == "unloaded" else Crowd(ws.ws_url, clients, seconds=max(1.0, seconds - 2.0),
+                                                          check_every=10, wait_go=True)
 
-            def during(_eng, ws=ws, kind=kind) -> None:
-                nonlocal crowd
-                if kind == "loaded":
-                    crowd = Crowd(ws.ws_url, clients, seconds=max(1.0, seconds - 2.0))
+            def during(_eng, crowd=crowd) -> None:
+                if crowd is not None:
+                    crowd.go()
                     crowds.append({"connected": crowd.connected()})
 
             try:
@@ -359,6 +377,7 @@ def measure_load(clients: int, max_clients: int, seconds: float, repeat: int = 1
         "unloaded": med["unloaded"], "loaded": med["loaded"],
         "p99_ratio": med["loaded"]["p99"] / med["unloaded"]["p99"],
         "runs": runs, "crowds": crowds, "rss_growth_mb": (rss_bytes() - rss_start) / 2**20,
+        "rss_growth_after_first_mb": None if rss_first is None else (rss_bytes() - rss_first) / 2**20,
     }
 
 
@@ -466,8 +485,11 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--clients", type=int, default=200)
         p.add_argument("--seconds", type=float, default=3.0, help="0: until the server closes")
         p.add_argument("--format", default="binary", choices=("binary", "json"))
+        p.add_argument("--check-every", type=int, default=1, help="decode and check every Nth binary frame")
+        p.add_argument("--wait-go", action="store_true", help="print {\"ready\": true}, connect on a stdin line")
         a = p.parse_args(argv[1:])
-        print(json.dumps(asyncio.run(_crowd(a.url, a.clients, a.seconds, a.format))), flush=True)
+        out = asyncio.run(_crowd(a.url, a.clients, a.seconds, a.format, a.check_every, a.wait_go))
+        print(json.dumps(out), flush=True)
         return 0
     if argv[:1] == ["load"]:
         p = argparse.ArgumentParser(prog="soak.py load")
@@ -481,7 +503,9 @@ def main(argv: list[str] | None = None) -> int:
               f"per-hop compute p50 {r['unloaded']['p50']:.2f} -> {r['loaded']['p50']:.2f} ms, "
               f"p99 {r['unloaded']['p99']:.2f} -> {r['loaded']['p99']:.2f} ms (ratio {r['p99_ratio']:.2f}); "
               f"served {[c.get('hellos') for c in r['crowds']]}, closes {[c.get('closes') for c in r['crowds']]}, "
-              f"RSS {r['rss_growth_mb']:+.1f} MiB")
+              f"RSS {r['rss_growth_mb']:+.1f} MiB in all"
+              + ("" if r["rss_growth_after_first_mb"] is None else
+                 f", {r['rss_growth_after_first_mb']:+.1f} MiB after the first pair"))
         return 0
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--minutes", type=float, default=60.0, help="minutes of audio (default 60)")

@@ -295,3 +295,41 @@ def plot_streams(r: dict, out: Path) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def summary_markdown(results: list[dict]) -> str:
+    """One headline table over several results (``performer bench check --summary``).
+
+    A row per latency result (per-hop and end-to-end p50/p99 in ms, peak RSS, the naive /
+    streaming ratios, offline real-time factor) and the sustained stream count of each
+    sweep, with the commands that produced them: what docs/latency.md and the README quote.
+    """
+    lat = [r for r in results if r.get("kind") == "latency"]
+    lines = []
+    if lat:
+        lines += ["| recording | per-hop p50 | per-hop p99 | e2e OSC p50 | e2e OSC p99 | e2e WS p50 | e2e WS p99 "
+                  "| algorithmic max | jitter p99 | lost | peak RSS MB | CPU % | naive/streaming model p50 "
+                  "| naive/streaming per hop p50 | offline RTF causal |",
+                  "|---|" + "---:|" * 14]
+        for r in lat:
+            m = r["metrics"]
+            lines.append(
+                f"| {r['label']} | {_f(m['per_hop_ms_p50'])} | {_f(m['per_hop_ms_p99'])} | {_f(m['e2e_osc_ms_p50'])} "
+                f"| {_f(m['e2e_osc_ms_p99'])} | {_f(m['e2e_ws_ms_p50'])} | {_f(m['e2e_ws_ms_p99'])} "
+                f"| {_f(m['algorithmic_ms_max'])} | {_f(m['jitter_ms_p99'])} | {m['lost_frames']} "
+                f"| {_f(m['peak_rss_mb'], 0)} | {_f(m['cpu_percent'], 1)} "
+                f"| {_f(m.get('model_step_naive_over_streaming'), 1)}× | {_f(m.get('per_hop_naive_over_streaming'), 1)}× "
+                f"| {_f(m.get('rtf_causal'), 4)} |")
+        lines.append("")
+        lines.append("Times in ms; RTF: seconds of compute per second of audio.")
+        lines.append("")
+    for r in (r for r in results if r.get("kind") == "streams"):
+        lines.append(f"Concurrent streams sustained (every stream's p99 end-to-end < {FRAME_PERIOD_MS:.1f} ms): "
+                     f"**{r['sustained_streams']}** (`{r.get('command', '')}`)")
+        lines.append("")
+    cmds = [r.get("command") for r in lat if r.get("command")]
+    if cmds:
+        lines += ["Commands:", "", "```sh", *cmds, "```", ""]
+    if lat:
+        lines.append(f"Machine: {machine_line(lat[0])}")
+    return "\n".join(lines) + "\n"

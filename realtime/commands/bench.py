@@ -121,6 +121,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                     "value and how far over it is. Exit 1 when any budget is exceeded.")
     ck.add_argument("results", nargs="+", metavar="RESULT", help="result JSON files, or directories searched for them")
     ck.add_argument("--budgets", required=True, metavar="TOML", help="budgets file")
+    ck.add_argument("--summary", metavar="FILE.md",
+                    help="also write one headline table of every result (what docs/latency.md quotes)")
     ck.set_defaults(func=check)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
@@ -225,6 +227,11 @@ def check(args: argparse.Namespace) -> int:
         except (OSError, ValueError) as exc:
             raise ConfigError(f"unreadable result: {exc}", source=f) from None
     verdicts = apply(results, budgets)
+    if args.summary:
+        from realtime.bench.report import summary_markdown
+
+        Path(args.summary).write_text(summary_markdown(results))
+        print(f"performer bench: wrote {args.summary}", file=sys.stderr)
     print(format_verdicts(verdicts))
     failed = [v for v in verdicts if not v.ok]
     if failed:
