@@ -331,14 +331,20 @@ def paced_run(pipeline, audio: np.ndarray, sr: int, seconds: float, sinks, durin
     return {**eng.stats(), "rss_delta": rss_bytes() - rss0}
 
 
-def measure_load(clients: int, max_clients: int, seconds: float, repeat: int = 1, pipeline=None) -> dict:
+def measure_load(clients: int, max_clients: int, seconds: float, repeat: int = 1, pipeline=None,
+                 engine_cpus: set[int] | None = None, client_cpus: set[int] | None = None) -> dict:
     """Per-hop compute p99 without clients and with ``clients`` connecting at once (cap ``max_clients``).
 
     Runs are interleaved (unloaded, loaded, unloaded, ...); the figures are the medians
-    over repeats. Clients stay connected for the whole loaded run.
+    over repeats. Clients stay connected for the whole loaded run. ``engine_cpus`` pins
+    this process (engine, WebSocket server) and ``client_cpus`` the client process, so the
+    clients' own CPU use, which on a stage is spent on the viewers' machines, does not
+    count as engine load (None: no pinning, both share every CPU).
     """
     from realtime.ws_server import WebSocketSink
 
+    if engine_cpus:
+        os.sched_setaffinity(0, engine_cpus)
     if pipeline is None:
         pipeline, _ = default_pipeline()
     audio, sr = clip_audio()
@@ -355,6 +361,8 @@ def measure_load(clients: int, max_clients: int, seconds: float, repeat: int = 1
             # the client process starts before the engine; each client checks every 10th frame
             crowd = None if kind == "unloaded" else Crowd(ws.ws_url, clients, seconds=max(1.0, seconds - 2.0),
                                                           check_every=10, wait_go=True)
+            if crowd is not None and client_cpus:
+                os.sched_setaffinity(crowd.proc.pid, client_cpus)
 
             def during(_eng, crowd=crowd) -> None:
                 if crowd is not None:
@@ -374,6 +382,7 @@ def measure_load(clients: int, max_clients: int, seconds: float, repeat: int = 1
     med = {k: {q: float(np.median([r[q] for r in v])) for q in ("p50", "p99")} for k, v in runs.items()}
     return {
         "clients": clients, "max_clients": max_clients, "seconds": seconds, "repeat": repeat,
+        "engine_cpus": sorted(engine_cpus or []), "client_cpus": sorted(client_cpus or []),
         "unloaded": med["unloaded"], "loaded": med["loaded"],
         "p99_ratio": med["loaded"]["p99"] / med["unloaded"]["p99"],
         "runs": runs, "crowds": crowds, "rss_growth_mb": (rss_bytes() - rss_start) / 2**20,
@@ -497,8 +506,11 @@ def main(argv: list[str] | None = None) -> int:
         p.add_argument("--max-clients", type=int, default=16)
         p.add_argument("--seconds", type=float, default=8.0)
         p.add_argument("--repeat", type=int, default=2)
+        p.add_argument("--engine-cpus", help="pin the engine (this process) to these CPUs, e.g. 0")
+        p.add_argument("--client-cpus", help="pin the client process to these CPUs, e.g. 1")
         a = p.parse_args(argv[1:])
-        r = measure_load(a.clients, a.max_clients, a.seconds, a.repeat)
+        cpus = [None if c is None else {int(x) for x in c.split(",")} for c in (a.engine_cpus, a.client_cpus)]
+        r = measure_load(a.clients, a.max_clients, a.seconds, a.repeat, engine_cpus=cpus[0], client_cpus=cpus[1])
         print(f"load: {a.clients} clients at once, cap {a.max_clients}, {a.seconds:g} s runs x {a.repeat}: "
               f"per-hop compute p50 {r['unloaded']['p50']:.2f} -> {r['loaded']['p50']:.2f} ms, "
               f"p99 {r['unloaded']['p99']:.2f} -> {r['loaded']['p99']:.2f} ms (ratio {r['p99_ratio']:.2f}); "
