@@ -67,17 +67,36 @@ def measure(checkpoint: str, audio: np.ndarray, repeat: int, stream_frames: int)
             per[i] = time.perf_counter() - t0
         out["stream_ms_p50"] = float(np.percentile(per, 50) * 1000.0)
         out["stream_ms_p99"] = float(np.percentile(per, 99) * 1000.0)
+        out["stream_ops_per_frame"] = count_ops(gen, feats[:64])
     return out
+
+
+def count_ops(gen, feats: np.ndarray) -> float:
+    """Mean number of aten operations one ``gen.push`` of a single frame dispatches."""
+    from torch.utils._python_dispatch import TorchDispatchMode
+
+    class _Count(TorchDispatchMode):
+        n = 0
+
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            _Count.n += 1
+            return func(*args, **(kwargs or {}))
+
+    with _Count():
+        for i in range(len(feats)):
+            gen.push(feats[i : i + 1])
+    return _Count.n / max(len(feats), 1)
 
 
 def table(rows: list[dict]) -> str:
     head = ("| model | checkpoint | parameters | file MB | offline ms/frame | offline RTF | streaming ms/frame p50 / p99 "
-            "| runs live |\n|---|---|---:|---:|---:|---:|---:|---|")
+            "| torch ops per streamed frame | runs live |\n|---|---|---:|---:|---:|---:|---:|---:|---|")
     lines = [head]
     for r in rows:
         stream = f"{r['stream_ms_p50']:.2f} / {r['stream_ms_p99']:.2f}" if "stream_ms_p50" in r else "–"
+        ops = f"{r['stream_ops_per_frame']:.0f}" if "stream_ops_per_frame" in r else "–"
         lines.append(f"| {r['model']} | `{r['checkpoint']}` | {r['params'] / 1e6:.2f} M | {r['file_mb']:.1f} "
-                     f"| {r['offline_ms_per_frame']:.3f} | {r['offline_rtf']:.4f} | {stream} "
+                     f"| {r['offline_ms_per_frame']:.3f} | {r['offline_rtf']:.4f} | {stream} | {ops} "
                      f"| {'yes' if r['live'] and r['causal'] else 'no'} |")
     return "\n".join(lines)
 
