@@ -93,7 +93,7 @@ def test_config_round_trip_fingerprint_and_dims() -> None:
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        ({"kind": "mfcc"}, "kind"),
+        ({"kind": "no_such_kind"}, "kind"),
         ({"n_fft": 512}, "n_fft"),
         ({"n_mels": 0}, "n_mels"),
         ({"fmin": 5000.0, "fmax": 4000.0}, "fmin"),

@@ -24,6 +24,17 @@ Feature kinds (:class:`FeatureConfig`):
   ``10 * log10(max(amin, |STFT|**2))`` dB per FFT bin (= ``librosa.amplitude_to_db``
   with ``amin = sqrt(amin)``), the linear-spectrogram input the Guzheng-playing work
   used; :meth:`FeatureConfig.linear` gives n_fft = 1024, i.e. 513 bins.
+* ``"mfcc"`` (D = 28, the input of A2B and of Kao & Su's violinist model): columns
+  ``[0, 13)`` are 13 MFCCs as ``librosa.feature.mfcc`` defines them on the log-mel
+  above (DCT-II, ``norm="ortho"``, no liftering; librosa's ``top_db=80`` clip is off,
+  as for ``logmel_onset``); column 13 is the log mean energy of the frame's ``n_fft``
+  raw samples, ``10 * log10(max(amin, mean(x**2)))`` dB (= ``power_to_db`` of the
+  square of ``librosa.feature.rms(center=False)``); columns ``[14, 28)`` are the first
+  derivatives of those 14 as a BACKWARD difference, ``f[t] - f[t - 1]`` (0 for frame
+  0). librosa's ``feature.delta`` is a centred 9-frame Savitzky-Golay filter that
+  needs 4 future frames (133 ms); the backward difference keeps the kind causal and
+  streamable. :meth:`FeatureConfig.mfcc` gives librosa's mfcc defaults (n_fft = 2048,
+  n_mels = 128).
 
 STFT: periodic Hann window (``scipy.signal.get_window('hann', n_fft)``, librosa's
 default), no normalisation; mel filterbank ``librosa.filters.mel`` (Slaney scale and
@@ -47,7 +58,8 @@ from models.timebase import HOP, SAMPLE_RATE
 # Bump when the numbers any config produces change (definitions, resampler, framing):
 # it is part of every fingerprint, so caches and checkpoints notice.
 FEATURE_VERSION: int = 1
-KINDS: tuple[str, ...] = ("logmel_onset", "linear")
+KINDS: tuple[str, ...] = ("logmel_onset", "linear", "mfcc")
+N_MFCC: int = 13  # MFCCs of the "mfcc" kind (fixed: a config field would change every fingerprint)
 _OFFLINE_CHUNK = 1024  # frames per batch in extract_features (bounds memory)
 
 
@@ -55,9 +67,9 @@ _OFFLINE_CHUNK = 1024  # frames per batch in extract_features (bounds memory)
 class FeatureConfig:
     """What the audio features are. Frozen; compare with :meth:`fingerprint`.
 
-    kind: "logmel_onset" or "linear" (see module docstring).
+    kind: "logmel_onset", "linear" or "mfcc" (see module docstring).
     n_fft: STFT window length in samples at 22050 Hz (>= HOP = 735).
-    n_mels, fmin, fmax: mel filterbank (Hz; used by "logmel_onset" only).
+    n_mels, fmin, fmax: mel filterbank (Hz; used by "logmel_onset" and "mfcc").
     amin: power floor before the log (1e-10 = -100 dB).
     sample_rate, hop: fixed by models.timebase; stored so fingerprints cover them.
     """
@@ -94,6 +106,8 @@ class FeatureConfig:
             raise ConfigError(f"n_fft={self.n_fft!r} must be an int in [{HOP}, 16384] (window >= one hop)")
         if not 1 <= self.n_mels <= 512:
             raise ConfigError(f"n_mels={self.n_mels!r} must be an int in [1, 512]")
+        if self.kind == "mfcc" and self.n_mels < N_MFCC:
+            raise ConfigError(f"the mfcc kind needs n_mels >= {N_MFCC} (it keeps {N_MFCC} coefficients), got {self.n_mels}")
         if not 0.0 <= self.fmin < self.fmax <= SAMPLE_RATE / 2:
             raise ConfigError(f"need 0 <= fmin < fmax <= {SAMPLE_RATE / 2} Hz; got fmin={self.fmin}, fmax={self.fmax}")
         if not 0.0 < self.amin < 1.0:
@@ -104,9 +118,17 @@ class FeatureConfig:
         """The linear-magnitude spectrogram option: n_fft=1024 gives 513 dB bins."""
         return cls(kind="linear", n_fft=n_fft)
 
+    @classmethod
+    def mfcc(cls, n_mels: int = 128, n_fft: int = 2048) -> FeatureConfig:
+        """The MFCC option (13 MFCC + log mean energy + backward differences, D = 28) with
+        librosa.feature.mfcc's defaults n_mels = 128, n_fft = 2048."""
+        return cls(kind="mfcc", n_fft=n_fft, n_mels=n_mels)
+
     @property
     def dim(self) -> int:
         """Feature dimension D of one frame."""
+        if self.kind == "mfcc":
+            return 2 * (N_MFCC + 1)
         return self.n_mels + 1 if self.kind == "logmel_onset" else self.n_fft // 2 + 1
 
     def to_dict(self) -> dict[str, Any]:
@@ -145,18 +167,25 @@ class SpectralKernel:
         self.cfg = cfg
         self.window = get_window("hann", cfg.n_fft, fftbins=True).astype(np.float64)
         self.mel_t = None
-        if cfg.kind == "logmel_onset":
+        self.dct_t = None
+        if cfg.kind in ("logmel_onset", "mfcc"):
             mel = librosa.filters.mel(
                 sr=cfg.sample_rate, n_fft=cfg.n_fft, n_mels=cfg.n_mels, fmin=cfg.fmin, fmax=cfg.fmax, dtype=np.float64
             )
             self.mel_t = np.ascontiguousarray(mel.T)  # (n_fft//2+1, n_mels)
+        if cfg.kind == "mfcc":
+            from scipy.fft import dct
+
+            # Columns of the orthonormal DCT-II (librosa.feature.mfcc's dct_type=2, norm="ortho").
+            self.dct_t = np.ascontiguousarray(dct(np.eye(cfg.n_mels), type=2, norm="ortho", axis=-1)[:, :N_MFCC])
 
     def __call__(self, frames: np.ndarray, prev_logmel: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
         """Features of consecutive frames.
 
         frames: (k, n_fft) float64 windows of 22050 Hz audio (frame t = hop-ending window).
-        prev_logmel: (n_mels,) log-mel of the frame before ``frames[0]``, None at stream start.
-        Returns ((k, D) float32 features, last log-mel row to pass as the next prev_logmel).
+        prev_logmel: the state row of the frame before ``frames[0]``, None at stream start:
+        its log-mel (n_mels,) for "logmel_onset", its 13 MFCC + log energy (14,) for "mfcc".
+        Returns ((k, D) float32 features, last state row to pass as the next prev_logmel).
         """
         spec = np.fft.rfft(frames * self.window, axis=-1)
         power = spec.real**2 + spec.imag**2  # (k, n_fft//2+1)
@@ -164,6 +193,15 @@ class SpectralKernel:
         if self.mel_t is None:
             return (10.0 * np.log10(np.maximum(power, amin))).astype(np.float32), None
         logmel = 10.0 * np.log10(np.maximum(power @ self.mel_t, amin))  # (k, n_mels)
+        if self.dct_t is not None:  # "mfcc": static 14 + backward differences
+            static = np.empty((logmel.shape[0], N_MFCC + 1))
+            static[:, :N_MFCC] = logmel @ self.dct_t
+            static[:, N_MFCC] = 10.0 * np.log10(np.maximum((frames * frames).mean(axis=-1), amin))
+            first = static[:1] if prev_logmel is None else prev_logmel[None]
+            out = np.empty((static.shape[0], self.cfg.dim), np.float32)
+            out[:, : N_MFCC + 1] = static
+            out[:, N_MFCC + 1 :] = static - np.concatenate([first, static[:-1]])
+            return out, static[-1].copy()
         # Predecessor rows; frame 0 of a stream is its own predecessor (onset 0, as librosa pads).
         first = logmel[:1] if prev_logmel is None else prev_logmel[None]
         onset = np.maximum(logmel - np.concatenate([first, logmel[:-1]]), 0.0).mean(axis=1)

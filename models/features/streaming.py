@@ -158,7 +158,7 @@ def _compare(seconds: float) -> None:
 
     clip = load_audio(bundled_clip_path())[0][: int(seconds * SAMPLE_RATE)]
     rng = np.random.default_rng(0)
-    for cfg in (FeatureConfig(), FeatureConfig.linear()):
+    for cfg in (FeatureConfig(), FeatureConfig.linear(), FeatureConfig.mfcc()):
         for sr in COMMON_RATES:
             x = resample(clip, SAMPLE_RATE, sr)
             offline = extract_features(resample(x, sr, SAMPLE_RATE), cfg)
@@ -182,7 +182,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rate", type=int, default=48000, help="input sample rate for --bench (Hz)")
     p.add_argument("--block", type=int, default=None, help="samples per push for --bench (default: one frame)")
     p.add_argument("--seconds", type=float, default=60.0, help="audio length for --bench/--compare (s)")
-    p.add_argument("--kind", default="logmel_onset", help="feature kind for --bench")
+    p.add_argument("--kind", default="logmel_onset", choices=("logmel_onset", "linear", "mfcc"),
+                   help="feature kind for --bench")
     args = p.parse_args(argv)
     if args.compare:
         _compare(args.seconds)
@@ -190,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.bench:
         _latency_table()
         return 0
-    cfg = FeatureConfig() if args.kind == "logmel_onset" else FeatureConfig.linear()
+    cfg = {"logmel_onset": FeatureConfig, "linear": FeatureConfig.linear, "mfcc": FeatureConfig.mfcc}[args.kind]()
     _bench(args.rate, args.block, args.seconds, cfg)
     return 0
 
