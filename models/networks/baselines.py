@@ -8,7 +8,10 @@ same per-bone quaternion normalisation as the GAN generator.
   frame t from audio up to t + delay (a time delay). Here it is causal: output frame t
   is computed from audio frames <= t and stands for the pose of frame t - delay, so
   the motion lags the music by ``delay`` frames (``output_delay``); train it with
-  ``loss(y[..., delay:], target[..., :T - delay])``.
+  ``loss(y[..., delay:], target[..., :T - delay])``. ``input_norm`` standardises the
+  features first (BatchNorm1d without affine parameters, running statistics of the
+  training set); configs/lstm_mfcc.toml uses it on the 28 MFCC features, whose c0
+  spans O(1000), where the A2B code fed them unscaled.
 * :func:`plain_unet`: the paper's U-Net shape with no residual identity paths and no
   attention gates (plain skip concatenation).
 """
@@ -30,12 +33,14 @@ from models.rig.motion import POSE_DIM
 
 @dataclass(frozen=True)
 class LSTMConfig:
-    """feature_dim: D; pose_dim: POSE_DIM; hidden: LSTM units; delay: output lag in frames (>= 0)."""
+    """feature_dim: D; pose_dim: POSE_DIM; hidden: LSTM units; delay: output lag in frames (>= 0);
+    input_norm: standardise the input features (BatchNorm1d, no affine)."""
 
     feature_dim: int = 65
     pose_dim: int = POSE_DIM
     hidden: int = 256
     delay: int = 6
+    input_norm: bool = False
 
     @property
     def causal(self) -> bool:
@@ -60,6 +65,7 @@ class LSTMRegressor(nn.Module):
         super().__init__()
         self.config = config
         self.output_delay = config.delay
+        self.norm = nn.BatchNorm1d(config.feature_dim, affine=False) if config.input_norm else nn.Identity()
         self.lstm = nn.LSTM(config.feature_dim, config.hidden, num_layers=1, batch_first=True)
         self.head = nn.Conv1d(config.hidden, config.pose_dim, 1)
         init_pose_head(self.head)
@@ -67,7 +73,7 @@ class LSTMRegressor(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if x.ndim != 3 or x.shape[1] != self.config.feature_dim:
             raise ConfigError(f"LSTM input must be (B, {self.config.feature_dim}, T), got {tuple(x.shape)}")
-        h, _ = self.lstm(x.transpose(1, 2))
+        h, _ = self.lstm(self.norm(x).transpose(1, 2))
         return normalize_pose(self.head(h.transpose(1, 2)))
 
 

@@ -23,6 +23,8 @@ from typing import Any
 
 from models.errors import ConfigError
 
+LR_SCHEDULES: tuple[str, ...] = ("constant", "noam")
+
 
 @dataclass
 class TrainConfig:
@@ -36,18 +38,25 @@ class TrainConfig:
     batch_size: int = 16
     lr: float = 1e-4  # Adam, as in the paper
     beta1: float = 0.5
+    # "constant": lr throughout. "noam": the Transformer warm-up schedule (Vaswani et al. 2017),
+    # lr = d_model**-0.5 * min(step**-0.5, step * warmup_steps**-1.5) with the model's d_model;
+    # ``lr`` is then unused (models/training/schedule.py).
+    lr_schedule: str = "constant"
+    warmup_steps: int = 500
     stage1_steps: int = 3000
     stage2_steps: int = 1500
     w_rot: float = 100.0
     w_fk: float = 100.0
     w_gan: float = 1.0
     w_vel: float = 0.0  # velocity L1 (rotations + end effectors); not in the paper, see docs/training.md
+    w_acc: float = 0.0  # acceleration L1 (rotations + end effectors); not in the paper, see docs/training.md
     init_from: str | None = None  # start from this checkpoint's weights (fine-tuning)
     disc_width: int = 64
     tempos: list[float] = field(default_factory=lambda: [0.75, 0.875, 1.0, 1.125, 1.25])
     exclude_unverified: bool = True  # train only on dances whose audio alignment is verified
     eval_every: int = 250
     threads: int = 2
+    dtm: dict[str, Any] = field(default_factory=dict)  # model "dtm": loss weights etc. (models.training.dtm)
 
     @property
     def total_steps(self) -> int:
@@ -80,10 +89,16 @@ class TrainConfig:
         if not all(isinstance(t, (int, float)) and not isinstance(t, bool) for t in d.get("tempos", [])):
             raise ConfigError(f"tempos must be a list of numbers, got {d['tempos']!r:.60}", source=source)
         cfg = cls(**d)
-        for name in ("segment", "batch_size", "stage1_steps", "stage2_steps", "eval_every", "threads"):
+        for name in ("segment", "batch_size", "stage1_steps", "stage2_steps", "eval_every", "threads", "warmup_steps"):
             v = getattr(cfg, name)
-            if not isinstance(v, int) or isinstance(v, bool) or v < (0 if name.endswith("_steps") else 1):
+            if not isinstance(v, int) or isinstance(v, bool) or v < (0 if name in ("stage1_steps", "stage2_steps") else 1):
                 raise ConfigError(f"{name} must be a positive integer, got {v!r}", source=source)
+        if cfg.lr_schedule not in LR_SCHEDULES:
+            raise ConfigError(f"lr_schedule must be one of {LR_SCHEDULES}, got {cfg.lr_schedule!r:.60}", source=source)
+        from models.networks.checkpoint import MODELS  # the registry (imports torch); checked before any data work
+
+        if cfg.model not in MODELS:
+            raise ConfigError(f"model must be one of {sorted(MODELS)}, got {cfg.model!r:.60}", source=source)
         if cfg.total_steps < 1:
             raise ConfigError("stage1_steps + stage2_steps must be at least 1", source=source)
         if cfg.segment % 16:

@@ -53,6 +53,15 @@ def velocity_l1(pred: torch.Tensor, true: torch.Tensor, offsets: torch.Tensor) -
     return dq + (ep.diff(dim=1) - et.diff(dim=1)).abs().mean()
 
 
+def acceleration_l1(pred: torch.Tensor, true: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
+    """L1 between second differences of pred and true: quaternion components plus
+    end-effector positions (metres per frame squared). Penalises the per-frame jerk of a
+    causal model whose coarse levels update every 2**level frames; not in the paper."""
+    aq = (pred[:, 3:].diff(n=2, dim=-1) - true[:, 3:].diff(n=2, dim=-1)).abs().mean()
+    ep, et = effector_positions(pred, offsets), effector_positions(true, offsets)
+    return aq + (ep.diff(n=2, dim=1) - et.diff(n=2, dim=1)).abs().mean()
+
+
 def d_loss(real_maps: list[torch.Tensor], fake_maps: list[torch.Tensor]) -> torch.Tensor:
     """Least-squares discriminator loss, averaged over the four scales."""
     terms = [((r - 1) ** 2).mean() + (f**2).mean() for r, f in zip(real_maps, fake_maps)]

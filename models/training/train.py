@@ -13,7 +13,6 @@ checkpoints. Everything the run writes goes to ``out_dir``:
 
 from __future__ import annotations
 
-import csv
 import json
 import random
 import time
@@ -28,12 +27,15 @@ from models.data.dwm import dance_dirs
 from models.data.split import split_names
 from models.features.spectral import FeatureConfig
 from models.networks.checkpoint import build_model, save_checkpoint
-from models.networks.discriminator import DiscriminatorConfig, MultiScaleDiscriminator
+from models.errors import ConfigError
+from models.networks.discriminator import RECEPTIVE_FIELDS, DiscriminatorConfig, MultiScaleDiscriminator
 from models.rig.humanoid import BONES
 from models.rig.motion import POSE_DIM
 from models.rig.skeleton import load_default_skeleton
 from models.training import losses
 from models.training.config import TrainConfig
+from models.training.runlog import RunLog
+from models.training.schedule import learning_rate
 from models.training.corpus import Clip, build_corpus
 
 
@@ -113,45 +115,24 @@ def _seed_all(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-def _plot(log_path: Path, png: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    rows = list(csv.DictReader(open(log_path)))
-    if not rows:
-        return
-    step = np.array([int(r["step"]) for r in rows])
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4))
-    for key, ax in (("loss_rot", axes[0]), ("loss_fk", axes[0]), ("loss_vel", axes[0]), ("loss_g_gan", axes[1]),
-                    ("loss_d", axes[1])):
-        vals = np.array([float(r[key]) if r.get(key) else np.nan for r in rows])
-        if np.isfinite(vals).any():
-            ax.plot(step, vals, label=key, alpha=0.8)
-    for key in ("val_rot_l1", "val_energy"):
-        vals = np.array([float(r[key]) if r[key] else np.nan for r in rows])
-        ok = np.isfinite(vals)
-        if ok.any():
-            axes[2].plot(step[ok], vals[ok], "o-", label=key)
-    axes[0].set_yscale("log")
-    for ax, title in zip(axes, ("regression losses", "GAN losses", "validation")):
-        ax.set_title(title)
-        ax.set_xlabel("step")
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend()
-    fig.tight_layout()
-    fig.savefig(png, dpi=90)
-    plt.close(fig)
+LOSS_PANELS = (("regression losses", ("loss_rot", "loss_fk", "loss_vel", "loss_acc"), True),
+               ("GAN losses", ("loss_g_gan", "loss_d"), False),
+               ("validation", ("val_rot_l1", "val_energy"), False))
 
 
-LOG_FIELDS = ["step", "stage", "loss_rot", "loss_fk", "loss_vel", "loss_g_gan", "loss_d", "frames_per_s",
+LOG_FIELDS = ["step", "stage", "loss_rot", "loss_fk", "loss_vel", "loss_acc", "loss_g_gan", "loss_d", "frames_per_s",
               "val_rot_l1", "val_eff_l1_m", "val_energy"]
 
 
 def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_dir: str | Path | None = None,
           progress: bool = True) -> Path:
     """Train ``cfg.model`` on the DWM dataset at ``data_root``; returns the best checkpoint path."""
+    if cfg.model == "dtm":  # two phases of its own (decomposition, composition)
+        from models.training.dtm import train_dtm
+        return train_dtm(cfg, data_root, out_dir, cache_dir, progress)
+    if cfg.model == "gcn":  # its own losses, discriminator and music classifier (models/training/gcn_train.py)
+        from models.training.gcn_train import train_gcn
+        return train_gcn(cfg, data_root, out_dir, cache_dir, progress)
     from tqdm import tqdm
 
     out = Path(out_dir)
@@ -180,10 +161,17 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
     disc = MultiScaleDiscriminator(DiscriminatorConfig(feature_dim=fcfg.dim, pose_dim=POSE_DIM, width=cfg.disc_width))
     opt_g = torch.optim.Adam(model.parameters(), lr=cfg.lr, betas=(cfg.beta1, 0.999))
     opt_d = torch.optim.Adam(disc.parameters(), lr=cfg.lr, betas=(cfg.beta1, 0.999))
+    d_model = getattr(getattr(model, "config", None), "d_model", None)  # for lr_schedule = "noam"
+    learning_rate(cfg.lr_schedule, 1, cfg.lr, d_model, cfg.warmup_steps)  # a schedule the model cannot use fails now
+    gan_frames = cfg.segment - int(getattr(model, "output_delay", 0))  # what the discriminator sees per segment
+    if cfg.stage2_steps > 0 and cfg.w_gan > 0 and gan_frames < max(RECEPTIVE_FIELDS):  # fail now, not after stage 1
+        raise ConfigError(f"stage 2 (GAN) needs segment - output delay >= {max(RECEPTIVE_FIELDS)} frames for the "
+                          f"discriminator, got {gan_frames}; raise segment or set stage2_steps = 0")
     offsets = torch.from_numpy(load_default_skeleton().offsets).float()
 
     step, best = 0, float("inf")
-    state_path, log_path = out / "state.pt", out / "log.csv"
+    state_path = out / "state.pt"
+    runlog = RunLog(out, LOG_FIELDS, LOSS_PANELS)
     if state_path.exists():  # resume
         st = torch.load(state_path, weights_only=False)
         model.load_state_dict(st["model"])
@@ -193,15 +181,10 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
         step, best = st["step"], st["best"]
         rng.bit_generator.state = st["rng"]
         torch.set_rng_state(st["torch_rng"])
-        rows = [r for r in csv.DictReader(open(log_path)) if int(r["step"]) <= step] if log_path.exists() else []
-        with open(log_path, "w", newline="") as fh:  # drop rows logged after the saved state
-            w = csv.DictWriter(fh, LOG_FIELDS)
-            w.writeheader()
-            w.writerows(rows)
+        runlog.start(resume_step=step)  # drops rows logged after the saved state
         print(f"resuming from step {step} ({state_path})")
     else:
-        with open(log_path, "w", newline="") as fh:
-            csv.DictWriter(fh, LOG_FIELDS).writeheader()
+        runlog.start()
     (out / "config.json").write_text(json.dumps({"train": cfg.to_dict(), "data": str(data_root),
                                                  "train_dances": train_names, "val_dances": val_names}, indent=1))
 
@@ -235,12 +218,19 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
             l_vel = losses.velocity_l1(pred, target, offsets)
             loss = loss + cfg.w_vel * l_vel
             row["loss_vel"] = l_vel.item()
+        if cfg.w_acc > 0:
+            l_acc = losses.acceleration_l1(pred, target, offsets)
+            loss = loss + cfg.w_acc * l_acc
+            row["loss_acc"] = l_acc.item()
         if gan:
             l_gan = losses.g_gan_loss(disc(feats, pred))
             loss = loss + cfg.w_gan * l_gan
             row["loss_g_gan"] = float(l_gan)
         opt_g.zero_grad(set_to_none=True)
         loss.backward()
+        if cfg.lr_schedule != "constant":  # the generator's lr for this (1-based) step
+            for group in opt_g.param_groups:
+                group["lr"] = learning_rate(cfg.lr_schedule, step + 1, cfg.lr, d_model, cfg.warmup_steps)
         opt_g.step()
         step += 1
         frames += cfg.batch_size * cfg.segment
@@ -258,10 +248,9 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
             torch.save({"model": model.state_dict(), "disc": disc.state_dict(), "opt_g": opt_g.state_dict(),
                         "opt_d": opt_d.state_dict(), "step": step, "best": best,
                         "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}, state_path)
-        with open(log_path, "a", newline="") as fh:
-            csv.DictWriter(fh, LOG_FIELDS).writerow(row)
+        runlog.append(row)
         if step % cfg.eval_every == 0 or step == cfg.total_steps:
-            _plot(log_path, out / "losses.png")
+            runlog.plot()
         bar.set_postfix(rot=f"{float(l_rot):.4f}", fk=f"{float(l_fk):.4f}",
                         **({"gan": f"{row['loss_g_gan']:.3f}"} if gan else {}))
         bar.update(1)
