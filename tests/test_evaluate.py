@@ -128,6 +128,7 @@ def test_evaluate_writes_every_metric_for_model_and_real_rows(eval_run, capsys):
     for name, row in rows.items():
         missing = set(ROW_KEYS) - set(row)
         assert not missing, (name, missing)
+        assert row.pop("multimodality") is None  # n/a: a deterministic model, and real data
         assert all(v is not None and math.isfinite(v) for v in row.values()), (name, row)
     model, real = rows["causal (tiny.pt)"], rows[REAL_ROW]
     assert real["rot_l1"] == 0 and real["pos_l1"] == 0 and real["pck@0.2"] == 1 and real["energy_ratio"] == 1

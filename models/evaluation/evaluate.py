@@ -74,7 +74,9 @@ class EvalOptions:
     hop: int = 64
     segment: int = SEGMENT
     seed: int = 0
+    multimodality_samples: int = 5  # generations per dance behind "multimodality" (stochastic models; < 2: off)
     progress: bool = True
+    gan_scores: bool = False  # add GAN-train / GAN-test (models.evaluation.gan_scores); generates the train split too
 
 
 @dataclass
@@ -157,6 +159,20 @@ def clip_music_beats(data_root: str | Path, clip) -> np.ndarray:
 
     audio, _ = load_audio(load_dance(Path(data_root) / clip.name).audio_path, SAMPLE_RATE)
     return span_beats(audio, clip.first_frame, clip.num_frames)
+
+
+def clip_audio(data_root: str | Path, clip) -> np.ndarray:
+    """The song of a corpus clip at 22050 Hz from the clip's first frame on: clip frame ``t``
+    ends at sample ``(t + 1) * HOP`` (for models that listen to the waveform, ``needs_audio``)."""
+    from models.data.dwm import load_dance
+    from models.features.audio_io import load_audio
+
+    audio, _ = load_audio(load_dance(Path(data_root) / clip.name).audio_path, SAMPLE_RATE)
+    return audio[max(int(clip.first_frame), 0) * HOP :]
+
+
+def _audio_kw(model, data_root: str | Path, clip) -> dict:
+    return {"audio": clip_audio(data_root, clip)} if getattr(model, "needs_audio", False) else {}
 
 
 def real_set(data_root: str | Path, clips: list, with_beats: bool = True, progress: bool = True) -> RealSet:
@@ -313,6 +329,38 @@ def _windows_or_fail(pos: Sequence[np.ndarray]) -> np.ndarray:
     return w
 
 
+def model_multimodality(lm, clips: list, data_root: str | Path, classifier, opts: EvalOptions) -> float | None:
+    """Multimodality (Lee et al., NeurIPS 2019) of a loaded model on ``clips``, or None (n/a).
+
+    Only for stochastic models (``model.stochastic``, a seedable generation): each
+    dance is generated ``opts.multimodality_samples`` times with seeds ``opts.seed + 1``,
+    ``+ 2``, ..., every generation becomes the mean style-classifier feature of its
+    64-frame windows, and :func:`~models.evaluation.metrics.multimodality` averages
+    their pairwise distances over the dances. Deterministic models give the same
+    dance every time: None, shown as n/a.
+    """
+    import torch
+    from tqdm import tqdm
+
+    from models.evaluation.classifier import embed
+    from models.evaluation.metrics import multimodality
+    from models.generate import run_model
+
+    k = int(opts.multimodality_samples)
+    if not getattr(lm.model, "stochastic", False) or k < 2:
+        return None
+    groups = []
+    for c in tqdm(clips, desc=f"multimodality {lm.path.name}", unit="dance", disable=not opts.progress):
+        gens = []
+        for i in range(1, k + 1):
+            with torch.no_grad():
+                p = run_model(lm.model, c.features, opts.window, opts.hop, seed=opts.seed + i,
+                              **_audio_kw(lm.model, data_root, c))
+            gens.append(embed(classifier, _windows_or_fail([positions(p)])).mean(axis=0))
+        groups.append(np.stack(gens))
+    return multimodality(groups)
+
+
 # --------------------------------------------------------------------------- driver
 
 
@@ -367,11 +415,26 @@ def evaluate(checkpoints: Sequence[str | Path], data_root: str | Path, opts: Eva
         gen_poses, gen_pos = [], []
         for c in tqdm(clips, desc=f"generate {lm.path.name}", unit="dance", disable=not opts.progress):
             with torch.no_grad():
-                p = run_model(lm.model, c.features, opts.window, opts.hop)
+                p = run_model(lm.model, c.features, opts.window, opts.hop, **_audio_kw(lm.model, data_root, c))
             gen_poses.append(p)
             gen_pos.append(positions(p))
         row, per_dance = score(gen_pos, gen_poses, real, real_emb, classifier, opts.segment,
                                f"score {lm.path.name}" if opts.progress else None)
+        row["multimodality"] = model_multimodality(lm, clips, data_root, classifier, opts)
+        if opts.gan_scores:
+            from models.evaluation.gan_scores import gan_scores
+
+            def generate_train(lm=lm) -> list[np.ndarray]:
+                tclips = train.clips if lm.features.fingerprint() == fcfg0.fingerprint() else \
+                    load_clips(data_root, [c.name for c in train.clips], lm.features, opts)
+                with torch.no_grad():
+                    return [positions(run_model(lm.model, c.features, opts.window, opts.hop,
+                                                **_audio_kw(lm.model, data_root, c)))
+                            for c in tqdm(tclips, desc=f"GAN-train {lm.path.name}", unit="dance",
+                                          disable=not opts.progress)]
+
+            row.update(gan_scores(generate_train, [c.style for c in train.clips], gen_pos, real, classifier,
+                                  opts.classifier_epochs, opts.seed))
         name = _row_name(lm.path, lm.name, set(results))
         results[name] = row
         details[name] = {"checkpoint": str(lm.path), "model_name": lm.name, "per_dance": per_dance}
@@ -379,6 +442,11 @@ def evaluate(checkpoints: Sequence[str | Path], data_root: str | Path, opts: Eva
     row, per_dance = score(real.positions, [c.poses for c in real.clips], real, real_emb, classifier, opts.segment,
                            "score real data" if opts.progress else None)
     row["fd"] = frechet_distance(real_emb, train_emb)
+    row["multimodality"] = None  # n/a: one real dance per song
+    if opts.gan_scores:
+        from models.evaluation.gan_scores import real_reference
+
+        row.update(real_reference(real, classifier))
     results[REAL_ROW] = row
     details[REAL_ROW] = {"per_dance": per_dance, "fd_against": "real training-split windows"}
     details["_run"] = {

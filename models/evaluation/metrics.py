@@ -485,6 +485,18 @@ def diversity(feats: np.ndarray) -> float:
     return float(np.mean(pdist(f)))
 
 
+def multimodality(groups: Sequence[np.ndarray]) -> float:
+    """Mean pairwise Euclidean distance between generations for the same music, averaged over the music.
+
+    Lee et al., "Dancing to Music" (NeurIPS 2019): ``groups[i]`` holds one feature
+    vector per generation ``(K_i, F)`` (K_i >= 2) made for music ``i`` with different
+    random draws. 0 for a deterministic model; higher means more distinct dances per song.
+    """
+    if not groups:
+        raise DataError("no groups of generations", source="groups")
+    return float(np.mean([np.mean(pdist(_features(g, f"groups[{i}]", 2))) for i, g in enumerate(groups)]))
+
+
 # --------------------------------------------------------------------------- one call per sequence
 
 

@@ -43,8 +43,12 @@ METRICS: dict[str, MetricInfo] = {
     "beat_hit_chance": MetricInfo("Hit rate by chance", "", "none", "hit rate of beats at random frames"),
     "fd": MetricInfo("FD", "", "lower", "Heusel et al., NeurIPS 2017 (style-classifier features)"),
     "diversity": MetricInfo("Diversity", "", "higher", "Lee et al., NeurIPS 2019"),
+    "multimodality": MetricInfo("Multimodality", "", "higher",
+                                "Lee et al., NeurIPS 2019 (distinct generations per song; n/a: deterministic)"),
     "energy_ratio": MetricInfo("Energy ratio", "", "one", "velocity spread generated / real"),
     "jerk": MetricInfo("Jerk", "m/s³", "real", "third derivative of positions"),
+    "gan_train": MetricInfo("GAN-train", "", "higher", "Shmelkov et al., ECCV 2018 (optional, --gan-scores)"),
+    "gan_test": MetricInfo("GAN-test", "", "higher", "Shmelkov et al., ECCV 2018 (optional, --gan-scores)"),
 }
 
 ARROWS: dict[str, str] = {"higher": "↑", "lower": "↓", "one": "→1", "real": "≈real", "none": ""}

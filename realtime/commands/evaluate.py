@@ -46,6 +46,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--window", type=int, default=128, help="causal models: window length in frames (default 128)")
     p.add_argument("--hop", type=int, default=64, help="causal models: hop in frames (default 64)")
     p.add_argument("--threads", type=int, default=1, metavar="N", help="torch intra-op threads (default 1)")
+    p.add_argument("--gan-scores", action="store_true",
+                   help="also GAN-train / GAN-test accuracies of the style classifier (docs/metrics.md); "
+                        "generates every training dance too")
+    p.add_argument("--multimodality-samples", type=int, default=5, metavar="K",
+                   help="stochastic models (dtm): generations per dance behind the multimodality metric "
+                        "(default 5; 0 or 1: off); deterministic models show n/a")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -62,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--{name.replace('_', '-')} must be >= 1, got {v}")
     opts = EvalOptions(split=args.split, cache_dir=args.cache, classifier_epochs=args.classifier_epochs,
                        dances_per_style=args.dances, max_frames=args.max_frames, window=args.window,
-                       hop=args.hop, progress=not args.quiet)
+                       hop=args.hop, progress=not args.quiet, gan_scores=args.gan_scores,
+                       multimodality_samples=max(0, args.multimodality_samples))
     with torch_threads(args.threads):
         paths = run_evaluation(args.checkpoint, args.data, args.out, command_line(args), opts)
     print("wrote " + ", ".join(str(p) for p in paths.values()))
@@ -78,4 +85,8 @@ def command_line(args: argparse.Namespace) -> str:
                     ("--window", args.window if args.window != 128 else None), ("--hop", args.hop if args.hop != 64 else None)):
         if v is not None:
             parts += [flag, str(v)]
+    if getattr(args, "gan_scores", False):
+        parts.append("--gan-scores")
+    if getattr(args, "multimodality_samples", 5) != 5:
+        parts += ["--multimodality-samples", str(args.multimodality_samples)]
     return " ".join(shlex.quote(str(p)) for p in parts)
