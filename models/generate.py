@@ -4,11 +4,15 @@ Each model kind runs the way it is meant to run (:func:`run_model`):
 
 * ``causal``: :func:`models.networks.streaming.offline_windowed` (128-frame windows,
   64-frame hop, crossfaded), which equals what the real-time engine streams;
-* offline U-Nets (``unet_gan``, ``unet_plain``): one full forward over the song, the
+* offline U-Nets (``unet_gan``, ``unet_plain``) and the violinist model (``violin``,
+  offline only, docs/violin.md): one full forward over the song, the
   features padded at the end to a multiple of 16 frames by repeating the last frame,
   the output cropped back;
 * ``lstm``: one forward over the features padded at the end with ``output_delay``
-  repeated frames; output frame ``t + delay`` is pose ``t``.
+  repeated frames; output frame ``t + delay`` is pose ``t``;
+* ``gcn``: :meth:`models.networks.gcn.GCNDancer.generate_poses` on the whole song: its
+  music classifier hears the raw audio (passed as ``audio``), seeded GP noise, one
+  generator forward, cubic-spline smoothing (offline only, docs/gcn.md).
 
 Pose ``t`` describes the instant feature frame ``t`` ends: audio time ``(t + 1) / 30`` s
 (:func:`models.features.spectral.frame_time_s`). A file of ``n`` samples at 22050 Hz
@@ -113,12 +117,20 @@ def _pad_end(x: np.ndarray, n: int) -> np.ndarray:
     return np.concatenate([x, np.repeat(x[-1:], n, axis=0)]) if n else x
 
 
-def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64) -> np.ndarray:
+def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, seed: int | None = None,
+              audio: np.ndarray | None = None) -> np.ndarray:
     """Poses ``(T, POSE_DIM)`` float32 for features ``(T, D)`` at 30 fps, one per frame.
 
     ``window``/``hop`` (frames) apply to causal U-Nets only (see the module docstring
-    for how each model kind is run). Non-finite features become 0 and values are
-    clipped, as on the live path. Quaternions come out unit and sign-continuous.
+    for how each model kind is run). A model with a ``generate(features)`` method
+    (``dtm``) runs that; ``seed`` (default 0) is passed to stochastic ones
+    (``model.stochastic``), so the same seed gives the same dance. Non-finite features
+    become 0 and values are clipped, as on the live path. Quaternions come out unit
+    and sign-continuous.
+
+    ``audio``: the song (n,) at 22050 Hz with frame t ending at sample (t + 1) * HOP, for
+    models that listen to the waveform themselves (``model.needs_audio``: ``gcn``'s
+    music style classifier); they raise ConfigError without it.
     """
     import torch
 
@@ -133,6 +145,11 @@ def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64) -> 
     if isinstance(model, CausalGenerator):
         return offline_windowed(model, x, window=window, hop=hop)
     x, _ = sanitize_features(x)
+    if getattr(model, "needs_audio", False):  # gcn: style from the raw waveform, whole song at once
+        return model.generate_poses(x, audio, seed=seed)
+    if callable(getattr(model, "generate", None)):  # a whole-song procedure of its own (dtm)
+        kw = {"seed": int(seed or 0)} if getattr(model, "stochastic", False) else {}
+        return model.generate(x, **kw)
     t = len(x)
     delay = int(getattr(model, "output_delay", 0))
     mult = 1 if delay or getattr(model.config, "causal", False) else 2**LEVELS
@@ -235,7 +252,7 @@ def generate(
     feats = extract_features(audio, loaded.features)
     timings["features"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    poses = run_model(loaded.model, feats, window=window, hop=hop)
+    poses = run_model(loaded.model, feats, window=window, hop=hop, audio=audio)
     timings["model"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     export_motion(poses, out, source_audio=str(audio_path), checkpoint=str(loaded.path), model_name=loaded.name)

@@ -40,13 +40,19 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
     """Load ``checkpoint`` (default: the packaged one) into an extractor factory and a pose model.
 
     Raises :class:`CheckpointError` naming the file if it is missing, unreadable, not a
-    causal model, or made for another rig or feature code.
+    causal model, or made for another rig or feature code. A model that declares
+    ``offline_only`` (``violin``, ``dtm``: they read future frames) is refused with one
+    line saying so and why (its ``offline_reason``), before any streaming state is built.
     """
     from models.features.streaming import StreamingFeatureExtractor
     from models.networks.streaming import StreamingGenerator
 
     loaded = load_model(checkpoint)
     path, meta, cfg = loaded.path, loaded.meta, loaded.features
+    if getattr(loaded.model, "offline_only", False):  # e.g. dtm: needs the whole song's beats up front
+        reason = getattr(loaded.model, "offline_reason", "it needs the whole song")
+        raise CheckpointError(f"model {loaded.name!r} is offline-only ({reason}); it cannot run live: "
+                              "use `performer generate` or `performer evaluate`", source=path)
     try:
         generator = StreamingGenerator(loaded.model, window=window, hop=hop)
     except PerformerError as exc:

@@ -16,6 +16,14 @@ from models.rig.motion import POSE_DIM
 SMALL = GeneratorConfig(channels=(8, 8, 12, 12, 16))
 FEATURES = {"kind": "logmel_onset", "n_mels": 64, "fingerprint": "logmel_onset-d65-abc123"}
 RIG = {"bones": list(BONES), "pose_dim": POSE_DIM}
+# Per model name, a small config taking 65 features (None: the name's defaults); SMALL otherwise.
+SMALL_CONFIGS = {
+    "gcn": {"feature_dim": 65, "noise_channels": 8, "style_dim": 4, "widths": [8, 8, 8, 8, 8],
+            "disc_widths": [8, 8, 8, 8], "t_kernel": 3, "classifier_width": 4},
+    "lstm": None,
+    "violin": {"feature_dim": 65, "d_model": 16, "levels": 2, "blocks": 1},
+    "dtm": {"feature_dim": 65, "hidden": 16, "z_init": 4, "z_mov": 8, "z_dance": 8, "style_hidden": 8, "noise_dim": 4},
+}
 
 
 def save(path, name="causal", config=SMALL, **kw):
@@ -31,7 +39,7 @@ def save(path, name="causal", config=SMALL, **kw):
 def test_round_trip_every_model(tmp_path, name):
     path = tmp_path / f"{name}.pt"
     torch.manual_seed(0)
-    model = save(path, name, None if name == "lstm" else SMALL).eval()
+    model = save(path, name, SMALL_CONFIGS.get(name, SMALL)).eval()
     loaded, meta = load_checkpoint(path, expect_feature_fingerprint=FEATURES["fingerprint"], expect_bones=BONES)
     x = torch.randn(1, 65, 32)
     assert torch.allclose(loaded(x), model(x))

@@ -32,6 +32,9 @@ from torch import nn
 from models.errors import CheckpointError, ConfigError
 from models.networks.baselines import LSTMConfig, LSTMRegressor, make_unet
 from models.networks.generator import GeneratorConfig
+from models.networks.violin import ViolinConfig, ViolinNet
+from models.networks.gcn import GCNConfig, GCNDancer
+from models.networks.dtm import DanceToMusic, DTMConfig
 
 FORMAT = "live-performer-checkpoint"
 FORMAT_VERSION = 1
@@ -42,6 +45,9 @@ MODELS: dict[str, tuple[type, dict[str, Any]]] = {
     "unet_gan": (GeneratorConfig, {"causal": False, "residual": True, "attention": True}),
     "unet_plain": (GeneratorConfig, {"causal": False, "residual": False, "attention": False}),
     "lstm": (LSTMConfig, {}),
+    "violin": (ViolinConfig, {}),  # Kao & Su 2020, offline only (models/networks/violin.py)
+    "gcn": (GCNConfig, {}),
+    "dtm": (DTMConfig, {}),
 }
 
 
@@ -62,6 +68,12 @@ def build_model(name: str = "causal", config: Any = None) -> nn.Module:
         raise ConfigError(f"model {name!r} takes a {cls.__name__}, got {type(config).__name__}")
     if fixed:
         config = dataclasses.replace(config, **fixed)
+    if name == "violin":
+        return ViolinNet(config)
+    if name == "dtm":
+        return DanceToMusic(config)
+    if name == "gcn":
+        return GCNDancer(config)
     return LSTMRegressor(config) if name == "lstm" else make_unet(config)
 
 

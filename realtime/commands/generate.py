@@ -10,8 +10,8 @@ Generate the performer's motion for a whole audio file, offline, and write it as
 every frame), chosen by the suffix of --out.
 
 A causal model runs exactly as the real-time engine streams it (--window/--hop
-crossfaded windows); offline models (unet_gan, unet_plain, lstm) run once over the
-whole song. Pose t belongs to the audio up to (t + 1) / 30 s; a file of D seconds
+crossfaded windows); offline models (unet_gan, unet_plain, lstm, gcn) run once over
+the whole song (gcn: its style classifier listens to the file, docs/gcn.md). Pose t belongs to the audio up to (t + 1) / 30 s; a file of D seconds
 gives floor(D * 30) frames. Any audio of at least one frame (33 ms) is generated.
 """
 
