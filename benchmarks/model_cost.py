@@ -55,24 +55,25 @@ def measure(checkpoint: str, audio: np.ndarray, repeat: int, stream_frames: int)
     if out["causal"]:
         from models.networks.streaming import StreamingGenerator
 
-        gen = StreamingGenerator(lm.model)
         n = min(stream_frames, t)
-        for i in range(64):  # warm-up
-            gen.push(feats[i : i + 1])
-        gen.reset()
-        per = np.empty(n)
-        for i in range(n):
-            t0 = time.perf_counter()
-            gen.push(feats[i : i + 1])
-            per[i] = time.perf_counter() - t0
-        out["stream_ms_p50"] = float(np.percentile(per, 50) * 1000.0)
-        out["stream_ms_p99"] = float(np.percentile(per, 99) * 1000.0)
-        out["stream_ops_per_frame"] = count_ops(gen, feats[:64])
+        for kind, key in (("numpy", "stream"), ("torch", "stream_torch")):  # the engine's step, the reference
+            gen = StreamingGenerator(lm.model, step=kind)
+            for i in range(64):  # warm-up
+                gen.push(feats[i : i + 1])
+            gen.reset()
+            per = np.empty(n)
+            for i in range(n):
+                t0 = time.perf_counter()
+                gen.push(feats[i : i + 1])
+                per[i] = time.perf_counter() - t0
+            out[f"{key}_ms_p50"] = float(np.percentile(per, 50) * 1000.0)
+            out[f"{key}_ms_p99"] = float(np.percentile(per, 99) * 1000.0)
+        out["stream_ops_per_frame"] = count_ops(StreamingGenerator(lm.model, step="torch"), feats[:64])
     return out
 
 
 def count_ops(gen, feats: np.ndarray) -> float:
-    """Mean number of aten operations one ``gen.push`` of a single frame dispatches."""
+    """Mean number of aten operations one ``gen.push`` of a single frame dispatches (torch step)."""
     from torch.utils._python_dispatch import TorchDispatchMode
 
     class _Count(TorchDispatchMode):
@@ -89,15 +90,19 @@ def count_ops(gen, feats: np.ndarray) -> float:
 
 
 def table(rows: list[dict]) -> str:
-    head = ("| model | checkpoint | parameters | file MB | offline ms/frame | offline RTF | streaming ms/frame p50 / p99 "
-            "| torch ops per streamed frame | runs live |\n|---|---|---:|---:|---:|---:|---:|---:|---|")
+    head = ("| model | checkpoint | parameters | file MB | offline ms/frame | offline RTF "
+            "| streaming ms/frame p50 / p99 (engine, NumPy step) | same, torch step | torch ops per streamed frame "
+            "| runs live |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---|")
     lines = [head]
+
+    def ms(r: dict, key: str) -> str:
+        return f"{r[key + '_ms_p50']:.2f} / {r[key + '_ms_p99']:.2f}" if key + "_ms_p50" in r else "–"
+
     for r in rows:
-        stream = f"{r['stream_ms_p50']:.2f} / {r['stream_ms_p99']:.2f}" if "stream_ms_p50" in r else "–"
         ops = f"{r['stream_ops_per_frame']:.0f}" if "stream_ops_per_frame" in r else "–"
         lines.append(f"| {r['model']} | `{r['checkpoint']}` | {r['params'] / 1e6:.2f} M | {r['file_mb']:.1f} "
-                     f"| {r['offline_ms_per_frame']:.3f} | {r['offline_rtf']:.4f} | {stream} | {ops} "
-                     f"| {'yes' if r['live'] and r['causal'] else 'no'} |")
+                     f"| {r['offline_ms_per_frame']:.3f} | {r['offline_rtf']:.4f} | {ms(r, 'stream')} "
+                     f"| {ms(r, 'stream_torch')} | {ops} | {'yes' if r['live'] and r['causal'] else 'no'} |")
     return "\n".join(lines)
 
 

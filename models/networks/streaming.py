@@ -27,6 +27,7 @@ from models.errors import ConfigError
 from models.networks.blend import blend_track, num_slots, slot_weights
 from models.networks.causal import CausalGenerator
 from models.networks.generator import LEVELS, UNetGenerator
+from models.networks.numpy_step import NumpyStep
 
 FEATURE_LIMIT = 1e4  # |feature| clip: keeps float32 activations finite (features are O(1..100))
 
@@ -105,24 +106,34 @@ def offline_windowed(
 class StreamingGenerator:
     """Frame-by-frame :func:`offline_windowed` for a :class:`CausalGenerator` (eval mode).
 
-    All ``ceil(window / hop)`` window slots advance together as one batch through
-    :meth:`CausalGenerator.step` (every window has the same pooling phase because hop
-    is a multiple of 16), so one frame costs one incremental step, never a window
+    All ``ceil(window / hop)`` window slots advance together as one batch through the
+    incremental step (every window has the same pooling phase because hop is a
+    multiple of 16), so one frame costs one incremental step, never a window
     recompute. A slot is reset to the zero state when its next window starts.
     Weights are frozen when the stream is made (BN folded); make a new one after training.
+
+    ``step="numpy"`` (default) runs :class:`~models.networks.numpy_step.NumpyStep`, the
+    lean real-time implementation; ``step="torch"`` runs :meth:`CausalGenerator.step`,
+    the reference. Both give the same poses to float32 rounding.
     """
 
-    def __init__(self, model: CausalGenerator, window: int = 128, hop: int = 64) -> None:
+    def __init__(self, model: CausalGenerator, window: int = 128, hop: int = 64, step: str = "numpy") -> None:
         if not isinstance(model, CausalGenerator):
             raise ConfigError(f"streaming needs a causal generator, got {type(model).__name__}")
+        if step not in ("numpy", "torch"):
+            raise ConfigError(f"step must be 'numpy' or 'torch', got {step!r}")
         _check_windows(window, hop)
         self.model = model.eval()
         self.window, self.hop = window, hop
         self.n_slots = num_slots(window, hop)
         self.feature_dim = model.config.feature_dim
         self.pose_dim = model.config.pose_dim
-        with torch.inference_mode():
-            self.state = model.init_stream_state(self.n_slots)
+        self.step_kind = step
+        if step == "numpy":
+            self.state = NumpyStep(model, self.n_slots)
+        else:
+            with torch.inference_mode():
+                self.state = model.init_stream_state(self.n_slots)
         self.frame = 0
         self.nonfinite_frames = 0
         self._prev_quat: np.ndarray | None = None
@@ -152,14 +163,22 @@ class StreamingGenerator:
         k = len(x)
         slots = np.empty((self.n_slots, k, self.pose_dim), dtype=np.float32)
         frames = np.arange(self.frame, self.frame + k)
-        xt = torch.from_numpy(x)
-        with torch.inference_mode():
+        if self.step_kind == "numpy":
+            rows = np.empty((self.n_slots, x.shape[1]), np.float32)
             for i in range(k):
                 t = self.frame + i
                 if t % self.hop == 0:  # a window starts here: its slot restarts from zero
                     self.state.zero_rows((t // self.hop) % self.n_slots)
-                y = self.model.step(xt[i].expand(self.n_slots, -1), self.state)
-                slots[:, i] = y.numpy()
+                rows[...] = x[i]
+                slots[:, i] = self.state.step(rows)
+        else:
+            xt = torch.from_numpy(x)
+            with torch.inference_mode():
+                for i in range(k):
+                    t = self.frame + i
+                    if t % self.hop == 0:
+                        self.state.zero_rows((t // self.hop) % self.n_slots)
+                    slots[:, i] = self.model.step(xt[i].expand(self.n_slots, -1), self.state).numpy()
         self.frame += k
         if k == 0:
             return np.zeros((0, self.pose_dim), dtype=np.float32)

@@ -28,7 +28,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--config", metavar="FILE.toml", help="training config (default: built-in defaults)")
     p.add_argument("--data", required=True, metavar="DIR", help="the DWM dataset directory (holds DANCE_* dirs)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory (resumed if it holds state.pt)")
-    p.add_argument("--model", metavar="NAME", help="override the config's model: causal | unet_gan | unet_plain | lstm | gcn | violin")
+    p.add_argument("--model", metavar="NAME", help="override the config's model: causal | unet_gan | unet_plain | lstm | violin | dtm | gcn")
     p.add_argument("--steps", type=int, nargs=2, metavar=("STAGE1", "STAGE2"),
                    help="override the steps of the two stages")
     p.add_argument("--seed", type=int, help="override the config's seed")
