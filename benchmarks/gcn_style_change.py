@@ -15,8 +15,8 @@ CLI), and plots over time:
 with the seam of the two songs marked. Writes ``--png`` (default
 docs/img/gcn_style_change.png) and prints when the decided style switched.
 
-    .venv/bin/python benchmarks/gcn_style_change.py --checkpoint runs/gcn/best.pt --data ../shared/data/dwm
-    .venv/bin/performer generate out/gcn_style_change.wav --out out/gcn_style_change.npz --checkpoint runs/gcn/best.pt
+    .venv/bin/python benchmarks/gcn_style_change.py --checkpoint models/assets/gcn.pt --data ../shared/data/dwm
+    .venv/bin/performer generate out/gcn_style_change.wav --out out/gcn_style_change.npz --checkpoint models/assets/gcn.pt
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ sys.path.insert(0, str(REPO))
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--checkpoint", default="runs/gcn/best.pt", help="a gcn checkpoint")
+    p.add_argument("--checkpoint", default=str(REPO / "models" / "assets" / "gcn.pt"), help="a gcn checkpoint (default: the shipped models/assets/gcn.pt)")
     p.add_argument("--data", default="../shared/data/dwm", help="the DWM dataset directory")
     p.add_argument("--songs", nargs=2, default=["DANCE_R_5", "DANCE_W_22"], metavar="DANCE",
                    help="two dances of different styles (default: validation songs DANCE_R_5 DANCE_W_22)")

@@ -302,7 +302,7 @@ LOG_FIELDS = ["step", "stage", "loss_recon", "loss_cross", "loss_dist", "loss_kl
 
 
 LOSS_PANELS = (("decomposition (stage 1)", ("loss_recon", "loss_cross", "loss_dist", "loss_kl", "loss_initp",
-                                            "loss_style"), False),
+                                            "loss_style"), True),
                ("composition (stage 2)", ("loss_zmov", "loss_g_gan", "loss_d", "loss_info"), False),
                ("validation", ("val_recon_rot_l1", "val_style_acc", "val_energy"), False))
 

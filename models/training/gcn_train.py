@@ -406,7 +406,7 @@ def train_gcn(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cach
         runlog.append(row)
         if step % cfg.eval_every == 0 or last:
             runlog.plot()
-        bar.set_postfix(rot=f"{float(l_rot):.4f}", pos=f"{float(l_pos):.4f}",
+        bar.set_postfix(rot=f"{l_rot.item():.4f}", pos=f"{l_pos.item():.4f}",
                         **({"d": f"{row['loss_d']:.3f}"} if gan else {}))
         bar.update(1)
     bar.close()

@@ -21,7 +21,8 @@ Panel = tuple[str, Sequence[str], bool]
 def plot_log(log_path: str | Path, png: str | Path, panels: Sequence[Panel]) -> None:
     """Write ``png``: one panel per ``(title, columns, log_y)``, each column against ``step``.
 
-    Columns missing from the log or empty throughout are left out. A panel whose title
+    Columns missing from the log or empty throughout are left out, and so are panels
+    left with none (a run without a GAN stage has no GAN panel). A panel whose title
     starts with "validation" draws points joined by lines (it is logged every
     ``eval_every`` steps), the others plain lines. Nothing is written for an empty log.
     """
@@ -35,15 +36,16 @@ def plot_log(log_path: str | Path, png: str | Path, panels: Sequence[Panel]) -> 
     if not rows:
         return
     step = np.array([int(r["step"]) for r in rows])
-    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 4), squeeze=False)
-    for ax, (title, keys, log_y) in zip(axes[0], panels):
+    cols = {key: np.array([float(r[key]) if r.get(key) else np.nan for r in rows]) for _, keys, _ in panels for key in keys}
+    shown = [pn for pn in panels if any(np.isfinite(cols[k]).any() for k in pn[1])] or list(panels[:1])
+    fig, axes = plt.subplots(1, len(shown), figsize=(5 * len(shown), 4), squeeze=False)
+    for ax, (title, keys, log_y) in zip(axes[0], shown):
         for key in keys:
-            vals = np.array([float(r[key]) if r.get(key) else np.nan for r in rows])
-            ok = np.isfinite(vals)
+            ok = np.isfinite(cols[key])
             if ok.any():
                 style = "o-" if title.startswith("validation") else "-"
-                ax.plot(step[ok], vals[ok], style, label=key, alpha=0.8)
-        if log_y and ax.lines:
+                ax.plot(step[ok], cols[key][ok], style, label=key, alpha=0.8)
+        if log_y and ax.lines and all((ln.get_ydata() > 0).all() for ln in ax.lines):
             ax.set_yscale("log")
         ax.set_title(title)
         ax.set_xlabel("step")

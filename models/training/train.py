@@ -251,7 +251,7 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
         runlog.append(row)
         if step % cfg.eval_every == 0 or step == cfg.total_steps:
             runlog.plot()
-        bar.set_postfix(rot=f"{float(l_rot):.4f}", fk=f"{float(l_fk):.4f}",
+        bar.set_postfix(rot=f"{l_rot.item():.4f}", fk=f"{l_fk.item():.4f}",
                         **({"gan": f"{row['loss_g_gan']:.3f}"} if gan else {}))
         bar.update(1)
     bar.close()
