@@ -210,7 +210,7 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
             opt_d.zero_grad(set_to_none=True)
             loss_d.backward()
             opt_d.step()
-            row["loss_d"] = float(loss_d)
+            row["loss_d"] = loss_d.item()
         l_rot = losses.rotation_l1(pred, target)
         l_fk = losses.effector_l1(pred, target, offsets)
         loss = cfg.w_rot * l_rot + cfg.w_fk * l_fk
@@ -225,7 +225,7 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
         if gan:
             l_gan = losses.g_gan_loss(disc(feats, pred))
             loss = loss + cfg.w_gan * l_gan
-            row["loss_g_gan"] = float(l_gan)
+            row["loss_g_gan"] = l_gan.item()
         opt_g.zero_grad(set_to_none=True)
         loss.backward()
         if cfg.lr_schedule != "constant":  # the generator's lr for this (1-based) step
