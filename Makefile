@@ -6,8 +6,9 @@ VENV    := .venv
 BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 # System packages: PortAudio for live input, liblo-tools (oscdump) to prove the
-# OSC wire format, fluidsynth + soundfont to re-render the bundled clip.
-APT_PKGS := libportaudio2 liblo-tools
+# OSC wire format, mono-mcs to compile and run the Unity receiver's C# OSC parser
+# against our encoder (tests/test_listen.py; about 20 s to install).
+APT_PKGS := libportaudio2 liblo-tools mono-mcs
 
 .PHONY: setup system-deps web browser-deps demo test test-fast bench soak clean help
 
@@ -26,8 +27,8 @@ system-deps:
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
 	    echo "installing system packages:$$missing"; \
 	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing) >/dev/null \
-	      || echo "warning: could not install$$missing; live audio input or oscdump tests will be skipped"; \
-	  else echo "note: missing system packages:$$missing (live audio input / oscdump tests will be skipped)"; fi; \
+	      || echo "warning: could not install$$missing; live audio input, oscdump or C# tests will be skipped"; \
+	  else echo "note: missing system packages:$$missing (live audio input / oscdump / C# tests will be skipped)"; fi; \
 	fi
 
 $(STAMP): pyproject.toml
