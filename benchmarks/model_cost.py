@@ -5,7 +5,8 @@ takes over the whole song's features (offline, the way ``performer generate`` an
 ``performer evaluate`` run it), median of ``--repeat`` runs in this one process, as ms
 per 30 fps frame and real-time factor (seconds of compute per second of audio). Causal
 models also get the streaming engine's cost: ``StreamingGenerator.push`` one frame at a
-time (what ``performer run`` does per hop), median and p99 per frame. Feature extraction
+time (what ``performer run`` does per hop), median and p99 per frame, with the engine's
+NumPy step and with the torch reference step, and the torch ops one frame dispatches. Feature extraction
 is not included (it is shared: docs/features.md); ``--threads`` torch threads (default 1,
 the engine's setting). Pin to two cores as the latency suite does::
 
