@@ -400,7 +400,8 @@ def feature_beats(features: np.ndarray, shift: float = 1.0) -> np.ndarray:
 
     from models.timebase import SAMPLE_RATE
 
-    env = np.nan_to_num(np.asarray(features, np.float64)[:, -1], nan=0.0, posinf=0.0, neginf=0.0)
+    # An onset strength is >= 0; clipping keeps librosa's tempogram (log1p) finite on other inputs.
+    env = np.maximum(np.nan_to_num(np.asarray(features, np.float64)[:, -1], nan=0.0, posinf=0.0, neginf=0.0), 0.0)
     if len(env) < 8 or env.max() <= 0:
         return np.zeros(0)
     _, frames = librosa.beat.beat_track(onset_envelope=env, sr=SAMPLE_RATE, hop_length=HOP)
