@@ -18,7 +18,7 @@ Input features are sanitised the same way on every path: non-finite values becom
 from __future__ import annotations
 
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 
 import numpy as np
 import torch
@@ -131,15 +131,20 @@ class StreamingGenerator:
         self.step_kind = step
         if step == "numpy":
             self.state = NumpyStep(model, self.n_slots)
+            self._step, self._mode = self.state.step, nullcontext
         else:
             with torch.inference_mode():
                 self.state = model.init_stream_state(self.n_slots)
+            self._step, self._mode = self._torch_step, torch.inference_mode  # its state is inference tensors
         self.frame = 0
         self.nonfinite_frames = 0
         self._prev_quat: np.ndarray | None = None
         # Slot weights repeat every n_slots * hop frames once all slots have started.
         self._period = self.n_slots * hop
         self._steady = slot_weights(np.arange(self._period, 2 * self._period), window, hop)[1]
+
+    def _torch_step(self, rows: np.ndarray) -> np.ndarray:
+        return self.model.step(torch.from_numpy(rows), self.state).numpy()
 
     def _weights(self, frames: np.ndarray) -> np.ndarray:
         """(n_slots, k) crossfade weights of each slot at the given frames."""
@@ -163,22 +168,14 @@ class StreamingGenerator:
         k = len(x)
         slots = np.empty((self.n_slots, k, self.pose_dim), dtype=np.float32)
         frames = np.arange(self.frame, self.frame + k)
-        if self.step_kind == "numpy":
-            rows = np.empty((self.n_slots, x.shape[1]), np.float32)
+        rows = np.empty((self.n_slots, x.shape[1]), np.float32)  # the frame, once per window slot
+        with self._mode():
             for i in range(k):
                 t = self.frame + i
                 if t % self.hop == 0:  # a window starts here: its slot restarts from zero
                     self.state.zero_rows((t // self.hop) % self.n_slots)
                 rows[...] = x[i]
-                slots[:, i] = self.state.step(rows)
-        else:
-            xt = torch.from_numpy(x)
-            with torch.inference_mode():
-                for i in range(k):
-                    t = self.frame + i
-                    if t % self.hop == 0:
-                        self.state.zero_rows((t // self.hop) % self.n_slots)
-                    slots[:, i] = self.model.step(xt[i].expand(self.n_slots, -1), self.state).numpy()
+                slots[:, i] = self._step(rows)
         self.frame += k
         if k == 0:
             return np.zeros((0, self.pose_dim), dtype=np.float32)
