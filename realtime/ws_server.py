@@ -4,9 +4,10 @@ One port carries both: ``http://HOST:PORT/`` serves the web client's static file
 and ``ws://HOST:PORT/ws`` (or ``/``) is the pose stream. The server runs an asyncio
 loop in its own daemon thread; :meth:`WebSocketSink.send`, called on the engine
 thread, encodes the frame (:mod:`realtime.wire`), hands it to the loop with
-``call_soon_threadsafe`` and returns at once. Every client has a bounded queue that
-drops its OLDEST frame when full, so a slow or stalled client only loses its own
-frames. The protocol (query string, client messages, close codes) is in
+``call_soon_threadsafe`` and returns at once. On the loop, a frame goes straight into
+a client's socket buffer while that buffer is under ``write_limit`` and nothing is
+queued for the client; otherwise into the client's bounded queue, which drops its
+OLDEST frame when full, so a slow or stalled client only loses its own frames. The protocol (query string, client messages, close codes) is in
 docs/protocol.md.
 """
 
@@ -33,6 +34,7 @@ from urllib.parse import parse_qs, unquote, urlsplit
 import numpy as np
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
+from websockets.protocol import State
 from websockets.http11 import Request, Response
 
 from models.errors import ConfigError, NetworkError, PerformerError
@@ -99,6 +101,7 @@ class _Client:
     drops: int = 0
     progress: float = 0.0  # loop time of the last completed send
     aborted: bool = False
+    sending: bool = False  # the writer task is inside ws.send (a direct write now would reorder)
     controller: bool = False  # authenticated with the token: may send control messages
     allowance: float = 0.0  # message-rate token bucket (messages)
     last_message: float = 0.0  # loop time of the bucket's last update
@@ -347,9 +350,41 @@ class WebSocketSink:
             if c.fmt == "json":
                 if text is None:
                     text = frame_json(decode_frame(data))
-                self._enqueue(c, text)
+                message: bytes | str = text
             else:
-                self._enqueue(c, data)
+                message = data
+            if not self._write_now(c, message):
+                self._enqueue(c, message)
+
+    def _write_now(self, c: _Client, message: bytes | str) -> bool:
+        """Write ``message`` to the socket at once if nothing is queued or being sent for ``c``
+        and its write buffer is under ``write_limit``; False (not written) otherwise.
+
+        The common case with many viewers: one buffered socket write per client and
+        frame instead of waking the client's writer task (a task switch per client and
+        frame made 200 served viewers raise the engine's per-hop p99 2.5x, through the
+        interpreter lock; docs/reliability.md). A client that falls behind fills its
+        buffer, and from then on goes through its drop-oldest queue and the stall check.
+        The same calls as ``websockets.broadcast``.
+        """
+        ws = c.ws
+        if c.queue or c.sending or ws.send_in_progress is not None or ws.protocol.state is not State.OPEN:
+            return False
+        if ws.transport.get_write_buffer_size() > self._write_limit:
+            return False
+        try:
+            if isinstance(message, str):
+                ws.protocol.send_text(message.encode())
+            else:
+                ws.protocol.send_binary(message)
+            ws.send_data()
+        except Exception:  # noqa: BLE001 - a connection going away; its reader ends it
+            return True
+        c.progress = self._loop.time()
+        c.sent += 1
+        self._messages += 1
+        self._bytes += len(message)
+        return True
 
     def _enqueue(self, c: _Client, message: bytes | str) -> None:
         if len(c.queue) == c.queue.maxlen:
@@ -450,7 +485,11 @@ class WebSocketSink:
             c.wakeup.clear()
             while c.queue:
                 message = c.queue.popleft()
-                await c.ws.send(message)
+                c.sending = True
+                try:
+                    await c.ws.send(message)
+                finally:
+                    c.sending = False
                 c.progress = self._loop.time()
                 c.sent += 1
                 self._messages += 1
