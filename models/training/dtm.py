@@ -52,6 +52,7 @@ from models.errors import ConfigError, DataError
 from models.networks.dtm import (DanceToMusic, DTMConfig, DTMCritics, extract_units, feature_beats, kl_normal,
                                  reparameterize, style_window)
 from models.networks.generator import config_from_dict
+from models.training.resume import load_state, save_state
 from models.training.runlog import RunLog
 
 STYLES: tuple[str, ...] = ("C", "R", "W")
@@ -359,15 +360,9 @@ def train_dtm(cfg, data_root: str | Path, out_dir: str | Path, cache_dir: str | 
     step = 0
     state_path = out / "state.pt"
     runlog = RunLog(out, LOG_FIELDS, LOSS_PANELS)
+    parts = {"model": model, "critics": critics, **{f"opt_{k}": o for k, o in opt.items()}}
     if state_path.exists():
-        st = torch.load(state_path, weights_only=False)
-        model.load_state_dict(st["model"])
-        critics.load_state_dict(st["critics"])
-        for k, o in opt.items():
-            o.load_state_dict(st["opt"][k])
-        step = st["step"]
-        rng.bit_generator.state = st["rng"]
-        torch.set_rng_state(st["torch_rng"])
+        step = load_state(state_path, parts, rng)["step"]
         runlog.start(resume_step=step)  # drops rows logged after the saved state
         print(f"resuming from step {step} ({state_path})")
     else:
@@ -415,9 +410,7 @@ def train_dtm(cfg, data_root: str | Path, out_dir: str | Path, cache_dir: str | 
             save(out / "last.pt", extra)
             if step == cfg.total_steps:
                 save(out / "best.pt", extra)
-            torch.save({"model": model.state_dict(), "critics": critics.state_dict(),
-                        "opt": {k: o.state_dict() for k, o in opt.items()}, "step": step,
-                        "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}, state_path)
+            save_state(state_path, parts, rng, step=step)
         runlog.append(row)
         if step % cfg.eval_every == 0 or step == cfg.total_steps:
             runlog.plot()

@@ -52,6 +52,7 @@ from models.rig.skeleton import load_default_skeleton
 from models.timebase import HOP, SAMPLE_RATE
 from models.training import losses
 from models.training.config import TrainConfig
+from models.training.resume import load_state, save_state
 from models.training.runlog import RunLog
 from models.training.corpus import Clip, build_corpus
 from models.training.train import SegmentSampler, _seed_all
@@ -322,15 +323,10 @@ def train_gcn(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cach
     state_path = out / "state.pt"
     runlog = RunLog(out, LOG_FIELDS, LOSS_PANELS)
     rng = np.random.default_rng(cfg.seed)
+    parts = {"model": model, "disc": disc, "opt_g": opt_g, "opt_d": opt_d}
     if state_path.exists():  # resume
-        st = torch.load(state_path, weights_only=False)
-        model.load_state_dict(st["model"])
-        disc.load_state_dict(st["disc"])
-        opt_g.load_state_dict(st["opt_g"])
-        opt_d.load_state_dict(st["opt_d"])
+        st = load_state(state_path, parts, rng)
         step, clf_report = st["step"], st["classifier"]
-        rng.bit_generator.state = st["rng"]
-        torch.set_rng_state(st["torch_rng"])
         runlog.start(resume_step=step)  # drops rows logged after the saved state
         print(f"resuming from step {step} ({state_path})")
     else:
@@ -400,9 +396,7 @@ def train_gcn(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cach
             model.style_net.eval()
             save(out / "last.pt", {k: row[k] for k in ("val_rot_l1", "val_pos_l1_m", "val_energy")})
             shutil.copyfile(out / "last.pt", out / "best.pt")  # a GAN has no model selection here
-            torch.save({"model": model.state_dict(), "disc": disc.state_dict(), "opt_g": opt_g.state_dict(),
-                        "opt_d": opt_d.state_dict(), "step": step, "classifier": clf_report,
-                        "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}, state_path)
+            save_state(state_path, parts, rng, step=step, classifier=clf_report)
         runlog.append(row)
         if step % cfg.eval_every == 0 or last:
             runlog.plot()

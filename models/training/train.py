@@ -34,6 +34,7 @@ from models.rig.motion import POSE_DIM
 from models.rig.skeleton import load_default_skeleton
 from models.training import losses
 from models.training.config import TrainConfig
+from models.training.resume import load_state, save_state
 from models.training.runlog import RunLog
 from models.training.schedule import learning_rate
 from models.training.corpus import Clip, build_corpus
@@ -172,15 +173,10 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
     step, best = 0, float("inf")
     state_path = out / "state.pt"
     runlog = RunLog(out, LOG_FIELDS, LOSS_PANELS)
+    parts = {"model": model, "disc": disc, "opt_g": opt_g, "opt_d": opt_d}
     if state_path.exists():  # resume
-        st = torch.load(state_path, weights_only=False)
-        model.load_state_dict(st["model"])
-        disc.load_state_dict(st["disc"])
-        opt_g.load_state_dict(st["opt_g"])
-        opt_d.load_state_dict(st["opt_d"])
+        st = load_state(state_path, parts, rng)
         step, best = st["step"], st["best"]
-        rng.bit_generator.state = st["rng"]
-        torch.set_rng_state(st["torch_rng"])
         runlog.start(resume_step=step)  # drops rows logged after the saved state
         print(f"resuming from step {step} ({state_path})")
     else:
@@ -245,9 +241,7 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
             if row["val_rot_l1"] < best:  # type: ignore[operator]
                 best = float(row["val_rot_l1"])  # type: ignore[arg-type]
                 save(out / "best.pt", {k: row[k] for k in ("val_rot_l1", "val_eff_l1_m", "val_energy")})
-            torch.save({"model": model.state_dict(), "disc": disc.state_dict(), "opt_g": opt_g.state_dict(),
-                        "opt_d": opt_d.state_dict(), "step": step, "best": best,
-                        "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state()}, state_path)
+            save_state(state_path, parts, rng, step=step, best=best)
         runlog.append(row)
         if step % cfg.eval_every == 0 or step == cfg.total_steps:
             runlog.plot()
