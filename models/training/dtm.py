@@ -52,7 +52,7 @@ from models.errors import ConfigError, DataError
 from models.networks.dtm import (DanceToMusic, DTMConfig, DTMCritics, extract_units, feature_beats, kl_normal,
                                  reparameterize, style_window)
 from models.networks.generator import config_from_dict
-from models.training.resume import load_state, save_state
+from models.training.resume import resume_or_start, save_state
 from models.training.runlog import RunLog
 
 STYLES: tuple[str, ...] = ("C", "R", "W")
@@ -357,16 +357,10 @@ def train_dtm(cfg, data_root: str | Path, out_dir: str | Path, cache_dir: str | 
     opt = optimizers(model, critics, cfg.lr, cfg.beta1, opts)
     offsets = torch.from_numpy(load_default_skeleton().offsets).float()
 
-    step = 0
     state_path = out / "state.pt"
     runlog = RunLog(out, LOG_FIELDS, LOSS_PANELS)
     parts = {"model": model, "critics": critics, **{f"opt_{k}": o for k, o in opt.items()}}
-    if state_path.exists():
-        step = load_state(state_path, parts, rng)["step"]
-        runlog.start(resume_step=step)  # drops rows logged after the saved state
-        print(f"resuming from step {step} ({state_path})")
-    else:
-        runlog.start()
+    step = resume_or_start(state_path, parts, rng, runlog)["step"]
     (out / "config.json").write_text(json.dumps({
         "train": cfg.to_dict(), "data": str(data_root), "train_dances": train_names, "val_dances": val_names,
         "units": len(data.units), "sequences": len(data.sequences), "val_units": len(val.units)}, indent=1))

@@ -52,7 +52,7 @@ from models.rig.skeleton import load_default_skeleton
 from models.timebase import HOP, SAMPLE_RATE
 from models.training import losses
 from models.training.config import TrainConfig
-from models.training.resume import load_state, save_state
+from models.training.resume import resume_or_start, save_state
 from models.training.runlog import RunLog
 from models.training.corpus import Clip, build_corpus
 from models.training.train import SegmentSampler, _seed_all
@@ -318,19 +318,12 @@ def train_gcn(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cach
     opt_d = torch.optim.Adam(disc.parameters(), lr=cfg.lr * opts.disc_lr_factor, betas=(cfg.beta1, 0.999))
     offsets = torch.from_numpy(load_default_skeleton().offsets).float()
 
-    step = 0
-    clf_report: dict | None = None
     state_path = out / "state.pt"
     runlog = RunLog(out, LOG_FIELDS, LOSS_PANELS)
     rng = np.random.default_rng(cfg.seed)
     parts = {"model": model, "disc": disc, "opt_g": opt_g, "opt_d": opt_d}
-    if state_path.exists():  # resume
-        st = load_state(state_path, parts, rng)
-        step, clf_report = st["step"], st["classifier"]
-        runlog.start(resume_step=step)  # drops rows logged after the saved state
-        print(f"resuming from step {step} ({state_path})")
-    else:
-        runlog.start()
+    st = resume_or_start(state_path, parts, rng, runlog)
+    step, clf_report = st["step"], st.get("classifier")
     (out / "config.json").write_text(json.dumps({"train": cfg.to_dict(), "data": str(data_root),
                                                  "train_dances": train_names, "val_dances": val_names}, indent=1))
 

@@ -36,3 +36,15 @@ def load_state(path: str | Path, parts: Mapping[str, Any], rng: np.random.Genera
     rng.bit_generator.state = st["rng"]
     torch.set_rng_state(st["torch_rng"])
     return st
+
+
+def resume_or_start(state_path: str | Path, parts: Mapping[str, Any], rng: np.random.Generator, runlog) -> dict:
+    """Resume from ``state_path`` if it exists (its log cut back to the saved step), else
+    start ``runlog`` afresh. Returns the saved values (``{"step": 0}`` for a new run)."""
+    if not Path(state_path).exists():
+        runlog.start()
+        return {"step": 0}
+    st = load_state(state_path, parts, rng)
+    runlog.start(resume_step=st["step"])  # drops rows logged after the saved state
+    print(f"resuming from step {st['step']} ({state_path})")
+    return st

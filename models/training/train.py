@@ -34,7 +34,7 @@ from models.rig.motion import POSE_DIM
 from models.rig.skeleton import load_default_skeleton
 from models.training import losses
 from models.training.config import TrainConfig
-from models.training.resume import load_state, save_state
+from models.training.resume import resume_or_start, save_state
 from models.training.runlog import RunLog
 from models.training.schedule import learning_rate
 from models.training.corpus import Clip, build_corpus
@@ -170,17 +170,11 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
                           f"discriminator, got {gan_frames}; raise segment or set stage2_steps = 0")
     offsets = torch.from_numpy(load_default_skeleton().offsets).float()
 
-    step, best = 0, float("inf")
     state_path = out / "state.pt"
     runlog = RunLog(out, LOG_FIELDS, LOSS_PANELS)
     parts = {"model": model, "disc": disc, "opt_g": opt_g, "opt_d": opt_d}
-    if state_path.exists():  # resume
-        st = load_state(state_path, parts, rng)
-        step, best = st["step"], st["best"]
-        runlog.start(resume_step=step)  # drops rows logged after the saved state
-        print(f"resuming from step {step} ({state_path})")
-    else:
-        runlog.start()
+    st = resume_or_start(state_path, parts, rng, runlog)
+    step, best = st["step"], st.get("best", float("inf"))
     (out / "config.json").write_text(json.dumps({"train": cfg.to_dict(), "data": str(data_root),
                                                  "train_dances": train_names, "val_dances": val_names}, indent=1))
 
