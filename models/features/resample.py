@@ -145,6 +145,38 @@ class StreamingResampler:
         """Compute outputs ``_n_out .. end-1`` from the buffer and drop used history."""
         if end <= self._n_out:
             return np.zeros(0)
+        if self.up == 1:  # integer decimation (44.1 -> 22.05 kHz): one phase, see _decimate
+            out = self._decimate(end)
+        else:
+            out = self._gather(end)
+        self._n_out = end
+        keep_from = int(self.inputs_needed(self._n_out)) - self._taps  # oldest input still needed
+        drop = max(0, keep_from - self._buf_start)
+        if drop:
+            self._buf = self._buf[drop:]
+            self._buf_start += drop
+        return out
+
+    def _decimate(self, end: int) -> np.ndarray:
+        """Outputs ``_n_out .. end-1`` when ``up == 1``: one correlation over the inputs they
+        need, every ``down``-th value kept.
+
+        With one phase every output applies the same taps, so ``np.correlate`` computes them
+        in one C loop; the general gather below builds a (k, taps) copy of the inputs and of
+        the taps first, which made it 5-7x slower per block on the engine's live path (44.1 kHz,
+        512-sample blocks). The sums are the same up to float64 rounding order.
+        """
+        out = np.empty(end - self._n_out)
+        for lo in range(self._n_out, end, _CHUNK):  # chunks bound memory on long signals
+            hi = min(end, lo + _CHUNK)
+            newest0 = lo * self.down + self.half_len  # newest input of output lo
+            newest1 = (hi - 1) * self.down + self.half_len
+            span = self._buf[newest0 - self._buf_start - (self._taps - 1) : newest1 - self._buf_start + 1]
+            out[lo - self._n_out : hi - self._n_out] = np.correlate(span, self._phases[0], "valid")[:: self.down]
+        return out
+
+    def _gather(self, end: int) -> np.ndarray:
+        """Outputs ``_n_out .. end-1`` for any ratio: per output, its input window dotted with its phase's taps."""
         out = np.empty(end - self._n_out)
         for lo in range(self._n_out, end, _CHUNK):
             newest, phase = np.divmod(np.arange(lo, min(end, lo + _CHUNK)) * self.down + self.half_len, self.up)
@@ -155,12 +187,6 @@ class StreamingResampler:
             rows = np.take(windows, newest - newest[0], axis=0)  # (k, L), oldest .. newest input
             taps = np.take(self._phases, phase, axis=0)  # (k, L)
             out[lo - self._n_out : lo - self._n_out + rows.shape[0]] = np.einsum("kl,kl->k", rows, taps)
-        self._n_out = end
-        keep_from = int(self.inputs_needed(self._n_out)) - self._taps  # oldest input still needed
-        drop = max(0, keep_from - self._buf_start)
-        if drop:
-            self._buf = self._buf[drop:]
-            self._buf_start += drop
         return out
 
 
