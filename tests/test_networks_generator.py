@@ -139,5 +139,28 @@ def test_config_validation():
         GeneratorConfig(kernel=4)
     with pytest.raises(ConfigError):
         CausalGenerator(paper_config())
+    for bad in (-0.1, 1.0):
+        with pytest.raises(ConfigError, match="dropout"):
+            GeneratorConfig(dropout=bad)
     cfg = GeneratorConfig(channels=SMALL)
     assert GeneratorConfig.from_dict(cfg.to_dict()) == cfg
+
+
+def test_dropout_acts_in_training_only_and_leaves_the_stream_unchanged():
+    """Training mode draws a new mask per call; eval mode (and so the streaming step) is the
+    same network as without dropout, and stays causal."""
+    torch.manual_seed(0)
+    plain = CausalGenerator(GeneratorConfig(channels=SMALL))
+    dropped = CausalGenerator(GeneratorConfig(channels=SMALL, dropout=0.5))
+    dropped.load_state_dict(plain.state_dict())
+    x = torch.randn(2, 65, 48)
+    plain.eval(), dropped.eval()
+    with torch.no_grad():
+        want = plain(x)
+        assert torch.equal(dropped(x), want)
+        st = dropped.init_stream_state()
+        stepped = torch.stack([dropped.step(x[:1, :, t], st)[0] for t in range(x.shape[-1])], dim=1)
+    torch.testing.assert_close(stepped, want[0], atol=1e-4, rtol=0)
+    dropped.train()
+    a, b = dropped(x), dropped(x)
+    assert not torch.allclose(a, b)

@@ -250,26 +250,63 @@ def test_same_seed_same_run_other_seed_differs(run_a, data, tmp_path):
     assert not same_weights(weights(other / "last.pt"), weights(first / "last.pt"))
 
 
+def crash_on_sample(monkeypatch, n: int):
+    """Make the n-th training batch draw raise KeyboardInterrupt (a killed run); returns the undo."""
+    sample = train_module.SegmentSampler.sample
+    calls = {"n": 0}
+
+    def crashing(self, batch_size):
+        calls["n"] += 1
+        if calls["n"] == n:
+            raise KeyboardInterrupt
+        return sample(self, batch_size)
+
+    monkeypatch.setattr(train_module.SegmentSampler, "sample", crashing)
+    return lambda: monkeypatch.setattr(train_module.SegmentSampler, "sample", sample)
+
+
+def test_ema_run_saves_the_moving_average_and_resumes_exactly(run_a, data, tmp_path, monkeypatch):
+    """ema_decay: best.pt/last.pt hold the averaged weights (kept in state.pt beside the raw
+    ones), validation scores them, and an interrupted run resumes to the same average."""
+    cfg = {"ema_decay": 0.9, "model_config": {"channels": [8, 8, 8, 8, 8], "dropout": 0.2}, "stage1_steps": 20}
+    out = run_train(data, tmp_path / "ema", **cfg)
+    st = torch.load(out / "state.pt", weights_only=False)
+    ema = {k.removeprefix("module."): v for k, v in st["ema"].items() if k.startswith("module.")}
+    last = weights(out / "last.pt")
+    assert same_weights(last, ema)
+    assert not same_weights(last, st["model"])  # the average lags the raw weights
+    plain = read_log(run_train(data, tmp_path / "plain", stage1_steps=20))
+    rows = read_log(out)
+    assert [r["val_rot_l1"] for r in rows if r["val_rot_l1"]] != [r["val_rot_l1"] for r in plain if r["val_rot_l1"]]
+    assert load_checkpoint(out / "last.pt")[1]["model_config"]["dropout"] == 0.2
+
+    crash = tmp_path / "ema-crash"
+    undo = crash_on_sample(monkeypatch, 15)  # state.pt holds step 10
+    with pytest.raises(KeyboardInterrupt):
+        run_train(data, crash, **cfg)
+    undo()
+    run_train(data, crash, **cfg)
+    assert losses_of(read_log(crash)) == losses_of(rows)
+    assert same_weights(weights(crash / "last.pt"), last)
+
+
+def test_ema_decay_is_validated():
+    for bad in (-0.5, 1.0):
+        with pytest.raises(ConfigError, match="ema_decay"):
+            TrainConfig.from_dict({**BASE, "ema_decay": bad})
+
+
 # -- 4. resume --------------------------------------------------------------------------------
 
 
 def test_interrupted_run_resumes_to_the_uninterrupted_result(run_a, data, tmp_path, monkeypatch, capsys):
     """Killed during step 26: state.pt holds step 20; rows 21-25 are dropped and redone."""
     out = tmp_path / "crash"
-    sample = train_module.SegmentSampler.sample
-    calls = {"n": 0}
-
-    def crashing(self, batch_size):
-        calls["n"] += 1
-        if calls["n"] == 26:
-            raise KeyboardInterrupt
-        return sample(self, batch_size)
-
-    monkeypatch.setattr(train_module.SegmentSampler, "sample", crashing)
+    undo = crash_on_sample(monkeypatch, 26)
     with pytest.raises(KeyboardInterrupt):
         run_train(data, out)
     assert len(read_log(out)) == 25 and torch.load(out / "state.pt", weights_only=False)["step"] == 20
-    monkeypatch.setattr(train_module.SegmentSampler, "sample", sample)
+    undo()
     run_train(data, out)
     assert "resuming from step 20" in capsys.readouterr().out
     assert losses_of(read_log(out)) == losses_of(read_log(run_a))

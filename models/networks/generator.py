@@ -48,6 +48,9 @@ class GeneratorConfig:
     causal: output frame t depends on input frames <= t only; any T accepted.
     residual / attention: identity paths and attention gates (False, False = plain U-Net).
     gate_ratio: attention gate inner width = c_L // gate_ratio.
+    dropout: training-only dropout probability on every encoder skip, the bottom and every
+        decoder block output (0 = none; not in the paper). Eval mode, and so streaming,
+        is unaffected.
     """
 
     feature_dim: int = 65
@@ -59,6 +62,7 @@ class GeneratorConfig:
     residual: bool = True
     attention: bool = True
     gate_ratio: int = 2
+    dropout: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "channels", tuple(int(c) for c in self.channels))
@@ -70,6 +74,8 @@ class GeneratorConfig:
             )
         if self.kernel < 1 or self.kernel % 2 == 0 or self.convs_per_block < 1 or self.gate_ratio < 1:
             raise ConfigError(f"kernel must be odd >= 1, convs_per_block and gate_ratio >= 1; got {self}")
+        if not 0.0 <= self.dropout < 1.0:
+            raise ConfigError(f"dropout must be in [0, 1), got {self.dropout}")
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
@@ -148,6 +154,11 @@ class UNetGenerator(nn.Module):
     def _gated(self, level: int, skip: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
         return self.gate[level](skip, u) if self.config.attention else skip
 
+    def _dropout(self, h: torch.Tensor) -> torch.Tensor:
+        """Training-mode dropout of ``config.dropout``; the identity otherwise (no RNG draw)."""
+        p = self.config.dropout
+        return F.dropout(h, p, training=True) if self.training and p > 0 else h
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         cfg = self.config
         if x.ndim != 3 or x.shape[1] != cfg.feature_dim:
@@ -158,16 +169,17 @@ class UNetGenerator(nn.Module):
             if not cfg.causal:
                 raise ConfigError(f"the offline generator needs T a multiple of {mult}, got T={t}")
             x = F.pad(x, (0, mult - t % mult))
+        drop = self._dropout
         skips = []
         h = x
         for enc in self.enc:
-            s = enc(h)
+            s = drop(enc(h))
             skips.append(s)
             h = F.max_pool1d(s, 2)
-        d = self.bottom(h)
+        d = drop(self.bottom(h))
         for level in reversed(range(LEVELS)):
             u = self.up[level](self._upsample(d))
-            d = self.dec[level](torch.cat((u, self._gated(level, skips[level], u)), dim=1))
+            d = drop(self.dec[level](torch.cat((u, self._gated(level, skips[level], u)), dim=1)))
         return normalize_pose(self.head(d))[..., :t]
 
 

@@ -51,6 +51,9 @@ class TrainConfig:
     w_vel: float = 0.0  # velocity L1 (rotations + end effectors); not in the paper, see docs/training.md
     w_acc: float = 0.0  # acceleration L1 (rotations + end effectors); not in the paper, see docs/training.md
     init_from: str | None = None  # start from this checkpoint's weights (fine-tuning)
+    # Exponential moving average of the generator's weights (and batch-norm statistics), per
+    # step; 0 = off. When on, validation, best.pt and last.pt use the averaged weights.
+    ema_decay: float = 0.0
     disc_width: int = 64
     tempos: list[float] = field(default_factory=lambda: [0.75, 0.875, 1.0, 1.125, 1.25])
     exclude_unverified: bool = True  # train only on dances whose audio alignment is verified
@@ -93,6 +96,8 @@ class TrainConfig:
             v = getattr(cfg, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < (0 if name in ("stage1_steps", "stage2_steps") else 1):
                 raise ConfigError(f"{name} must be a positive integer, got {v!r}", source=source)
+        if not 0.0 <= cfg.ema_decay < 1.0:
+            raise ConfigError(f"ema_decay must be in [0, 1), got {cfg.ema_decay!r}", source=source)
         if cfg.lr_schedule not in LR_SCHEDULES:
             raise ConfigError(f"lr_schedule must be one of {LR_SCHEDULES}, got {cfg.lr_schedule!r:.60}", source=source)
         from models.networks.checkpoint import MODELS  # the registry (imports torch); checked before any data work

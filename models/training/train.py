@@ -4,7 +4,8 @@ Read top to bottom: data (corpus + segment sampler), models, one step, evaluatio
 checkpoints. Everything the run writes goes to ``out_dir``:
 
 - ``last.pt`` / ``best.pt``: model checkpoints (:mod:`models.networks.checkpoint`);
-  ``best.pt`` has the lowest validation rotation L1 seen;
+  ``best.pt`` has the lowest validation rotation L1 seen (with ``ema_decay`` > 0, both
+  hold the exponential moving average of the weights, which is also what is validated);
 - ``state.pt``: optimiser, discriminator and RNG state, so that the same command
   resumes an interrupted run where it stopped (and gives the same result);
 - ``log.csv`` and ``losses.png``: losses per step, validation metrics per evaluation;
@@ -110,6 +111,32 @@ def evaluate_clips(model: torch.nn.Module, clips: list[Clip], offsets: torch.Ten
     return {"val_rot_l1": float(np.mean(rot)), "val_eff_l1_m": float(np.mean(eff)), "val_energy": energy}
 
 
+def averaged(model: torch.nn.Module, decay: float) -> torch.optim.swa_utils.AveragedModel | None:
+    """An exponential moving average of ``model``'s weights and buffers (batch-norm running
+    statistics), ``w_ema <- d * w_ema + (1 - d) * w`` after every step; None if decay is 0.
+
+    ``d = min(decay, (1 + n) / (10 + n))`` after n averaged steps (the warm-up of
+    TensorFlow's ExponentialMovingAverage), so a run from scratch does not drag its
+    random initial weights along for ~1 / (1 - decay) steps. Averaged weights sit
+    nearer the middle of the loss basin than the last step's, which can generalise
+    better on a small dataset such as this one (docs/training.md measures it).
+    """
+    if decay <= 0:
+        return None
+    from torch.optim.swa_utils import AveragedModel
+
+    @torch.no_grad()
+    def ema_update(avg: list[torch.Tensor], cur: list[torch.Tensor], n: torch.Tensor | int) -> None:
+        d = min(decay, (1.0 + int(n)) / (10.0 + int(n)))
+        for a, c in zip(avg, cur):
+            if a.is_floating_point():
+                a.lerp_(c, 1.0 - d)
+            else:  # batch norm's num_batches_tracked: a count, not averaged
+                a.copy_(c)
+
+    return AveragedModel(model, multi_avg_fn=ema_update, use_buffers=True)
+
+
 def _seed_all(seed: int) -> None:
     random.seed(seed)
     np.random.seed(seed)
@@ -159,6 +186,7 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
         init, _ = load_checkpoint(cfg.init_from, expect_feature_fingerprint=fcfg.fingerprint(), expect_bones=list(BONES))
         model.load_state_dict(init.state_dict())
     model_config = model.config if hasattr(model, "config") else model_cfg
+    ema = averaged(model, cfg.ema_decay)
     disc = MultiScaleDiscriminator(DiscriminatorConfig(feature_dim=fcfg.dim, pose_dim=POSE_DIM, width=cfg.disc_width))
     opt_g = torch.optim.Adam(model.parameters(), lr=cfg.lr, betas=(cfg.beta1, 0.999))
     opt_d = torch.optim.Adam(disc.parameters(), lr=cfg.lr, betas=(cfg.beta1, 0.999))
@@ -172,7 +200,8 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
 
     state_path = out / "state.pt"
     runlog = RunLog(out, LOG_FIELDS, LOSS_PANELS)
-    parts = {"model": model, "disc": disc, "opt_g": opt_g, "opt_d": opt_d}
+    parts = {"model": model, "disc": disc, "opt_g": opt_g, "opt_d": opt_d, **({"ema": ema} if ema is not None else {})}
+    kept = ema.module if ema is not None else model  # what is validated and saved
     st = resume_or_start(state_path, parts, rng, runlog)
     step, best = st["step"], st.get("best", float("inf"))
     (out / "config.json").write_text(json.dumps({"train": cfg.to_dict(), "data": str(data_root),
@@ -183,7 +212,7 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
                 rig={"bones": list(BONES), "pose_dim": POSE_DIM})
 
     def save(path: Path, extra: dict) -> None:
-        save_checkpoint(path, model, extra={"step": step, "val_dances": val_names, **extra}, **meta)
+        save_checkpoint(path, kept, extra={"step": step, "val_dances": val_names, **extra}, **meta)
 
     model.train()
     disc.train()
@@ -222,6 +251,8 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
             for group in opt_g.param_groups:
                 group["lr"] = learning_rate(cfg.lr_schedule, step + 1, cfg.lr, d_model, cfg.warmup_steps)
         opt_g.step()
+        if ema is not None:
+            ema.update_parameters(model)
         step += 1
         frames += cfg.batch_size * cfg.segment
         row.update(loss_rot=l_rot.item(), loss_fk=l_fk.item())
@@ -230,7 +261,7 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
             now = time.perf_counter()
             row["frames_per_s"] = frames / (now - t_last)
             t_last, frames = now, 0
-            row.update(evaluate_clips(model, val_clips, offsets))
+            row.update(evaluate_clips(kept, val_clips, offsets))
             save(out / "last.pt", {k: row[k] for k in ("val_rot_l1", "val_eff_l1_m", "val_energy")})
             if row["val_rot_l1"] < best:  # type: ignore[operator]
                 best = float(row["val_rot_l1"])  # type: ignore[arg-type]
