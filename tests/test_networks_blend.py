@@ -9,6 +9,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from models.errors import DataError
 from models.networks.blend import (
     align_sequence,
+    blend_frame,
     blend_poses,
     blend_track,
     crossfade_weights,
@@ -140,3 +141,27 @@ def test_seam_ratio_needs_frames_on_both_sides():
     with pytest.raises(DataError):
         seam_ratio(smooth_motion(4), 128, 64)
     assert POSE_DIM == smooth_motion(3).shape[1]
+
+
+def test_blend_frame_equals_blend_track_frame_by_frame():
+    """The engine's one-frame blend against the general one: sign flips, a zero weight,
+    a continuing stream, NaN and cancelling candidates, a non-finite root."""
+    rng = np.random.default_rng(3)
+    k, n = 2, 40
+    cand = np.stack([random_poses(n, rng), random_poses(n, rng)])
+    cand[1, ::3, 3:] *= -1.0  # q and -q mixed in
+    w = rng.uniform(0.0, 1.0, size=(k, n))
+    w[0, 5] = 0.0  # the reference becomes the second candidate
+    cand[:, 7, 3:7] = np.nan  # one bone NaN in both
+    cand[1, 9, 3:] = -cand[0, 9, 3:]
+    w[:, 9] = 0.5  # cancelling? no: sign-aligned first, so they agree
+    cand[0, 11, 3:] = 0.0
+    cand[1, 11, 3:] = 0.0  # zero quaternions -> identity
+    cand[:, 13, 0] = np.inf  # root blows up -> 0
+    want = blend_track(cand, w)
+    prev = None
+    for t in range(n):
+        got = blend_frame(cand[:, t], w[:, t], prev)
+        np.testing.assert_allclose(got, want[t], atol=2e-6, err_msg=f"frame {t}")
+        prev = got[3:].reshape(-1, 4)
+    assert np.isfinite(want).all()
