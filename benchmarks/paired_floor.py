@@ -48,6 +48,14 @@ def mean_pose(poses: np.ndarray) -> np.ndarray:
     return out
 
 
+def shift_profile(positions: list[np.ndarray], beats: list[np.ndarray], shifts=SHIFTS) -> list[float]:
+    """Pooled beat hit rate of motions ``positions`` ((T, J, 3) m each) with every music beat
+    (frame indices, one array per motion) moved by d frames, for each d in ``shifts``."""
+    from models.evaluation.evaluate import pooled_beats
+
+    return [pooled_beats(positions, [np.asarray(b) + d for b in beats])["beat_hit_rate"] for d in shifts]
+
+
 def style_of(name: str) -> str:
     """DWM dance names are DANCE_<style>_<id>."""
     return name.split("_")[1]
@@ -62,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     from models.evaluation.evaluate import (EvalOptions, _quats, clip_music_beats, load_clips, paired_metrics,
-                                            pooled_beats, positions, split_dances)
+                                            positions, split_dances)
     from models.features.spectral import FeatureConfig
     from models.generate import load_model, run_model
 
@@ -108,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     print("| motion | " + " | ".join(f"{d:+d}" for d in SHIFTS) + " |")
     print("| --- |" + " ---: |" * len(SHIFTS))
     for label, pos in [("real dances", real_pos)] + [(k, [positions(g) for g in v]) for k, v in generated.items()]:
-        hits = [pooled_beats(pos, [b + d for b in beats])["beat_hit_rate"] for d in SHIFTS]
+        hits = shift_profile(pos, beats)
         print(f"| {label} | " + " | ".join(f"{h:.3f}" for h in hits) + " |")
     return 0
 
