@@ -143,7 +143,7 @@ def test_seam_ratio_needs_frames_on_both_sides():
     assert POSE_DIM == smooth_motion(3).shape[1]
 
 
-def test_blend_frame_equals_blend_track_frame_by_frame():
+def test_one_frame_blend_equals_the_many_frame_blend_frame_by_frame():
     """The engine's one-frame blend against the general one: sign flips, a zero weight,
     a continuing stream, NaN and cancelling candidates, a non-finite root."""
     rng = np.random.default_rng(3)
@@ -158,10 +158,14 @@ def test_blend_frame_equals_blend_track_frame_by_frame():
     cand[0, 11, 3:] = 0.0
     cand[1, 11, 3:] = 0.0  # zero quaternions -> identity
     cand[:, 13, 0] = np.inf  # root blows up -> 0
-    want = blend_track(cand, w)
+    want = blend_poses(cand, w)
+    want[:, 3:] = align_sequence(quats(want)).reshape(n, -1)
+    want[:, :3] = np.nan_to_num(want[:, :3], nan=0.0, posinf=0.0, neginf=0.0)
+    np.testing.assert_array_equal(blend_track(cand, w), want)  # many frames: the general path
     prev = None
     for t in range(n):
         got = blend_frame(cand[:, t], w[:, t], prev)
         np.testing.assert_allclose(got, want[t], atol=2e-6, err_msg=f"frame {t}")
+        np.testing.assert_array_equal(blend_track(cand[:, t : t + 1], w[:, t : t + 1], prev)[0], got)
         prev = got[3:].reshape(-1, 4)
     assert np.isfinite(want).all()

@@ -113,7 +113,13 @@ def align_sequence(q: np.ndarray, prev: np.ndarray | None = None) -> np.ndarray:
 
 
 def blend_track(poses: np.ndarray, weights: np.ndarray, prev_quat: np.ndarray | None = None) -> np.ndarray:
-    """:func:`blend_poses` then :func:`align_sequence`; the engine's output for N frames (N, P)."""
+    """:func:`blend_poses` then :func:`align_sequence`; the engine's output for N frames (N, P).
+
+    One frame (N = 1, every push of the live stream) goes through :func:`blend_frame`,
+    the same blend without the frame-axis bookkeeping.
+    """
+    if poses.shape[1] == 1:
+        return blend_frame(poses[:, 0], weights[:, 0], prev_quat)[None]
     out = blend_poses(poses, weights)
     n = out.shape[0]
     q = align_sequence(out[:, 3:].reshape(n, -1, 4), prev_quat)
@@ -123,17 +129,18 @@ def blend_track(poses: np.ndarray, weights: np.ndarray, prev_quat: np.ndarray | 
 
 
 def blend_frame(poses: np.ndarray, weights: np.ndarray, prev_quat: np.ndarray | None = None) -> np.ndarray:
-    """:func:`blend_track` for ONE frame: poses (K, P) float32, weights (K,) -> (P,) float32.
+    """One frame of :func:`blend_track`: poses (K, P), weights (K,) -> (P,), in the poses' dtype.
 
-    The engine's streaming generator emits one frame per push; :func:`blend_track` then
-    spends most of its time on array bookkeeping for the frame axis (about 35 NumPy
-    calls). This is the same nlerp (sign-aligned to the first positive-weight candidate,
-    weighted sum, renormalised, non-finite or near-zero quaternions become the
+    The engine's streaming generator emits one frame per push, and for one frame the
+    general path spends most of its time on array bookkeeping for the frame axis (about
+    35 NumPy calls). This is the same nlerp (sign-aligned to the first positive-weight
+    candidate, weighted sum, renormalised, non-finite or near-zero quaternions become the
     identity, then sign-aligned to ``prev_quat`` (J, 4) if given; root = weighted mean,
-    non-finite -> 0) in about 15 calls, in float32: it agrees with :func:`blend_track`
-    to float32 rounding (tests/test_networks_blend.py).
+    non-finite -> 0) in about 15 calls, computed in the poses' dtype instead of float64:
+    for float32 poses it agrees with the many-frame path to float32 rounding
+    (tests/test_networks_blend.py).
     """
-    w = np.asarray(weights, dtype=np.float32)
+    w = np.asarray(weights, dtype=poses.dtype)
     q = poses[:, 3:].reshape(len(poses), -1, 4)
     ref = q[int(np.argmax(w > 0))]
     sw = np.where(np.einsum("kjc,jc->kj", q, ref) < 0.0, -w[:, None], w[:, None])
@@ -142,10 +149,10 @@ def blend_frame(poses: np.ndarray, weights: np.ndarray, prev_quat: np.ndarray | 
     if np.isfinite(norm).all() and norm.min() > 1e-8:
         qs /= norm[:, None]
     else:  # a candidate produced NaN or cancelling quaternions: the general path
-        qs = sanitize_quaternions(qs.astype(np.float64)).astype(np.float32)
+        qs = sanitize_quaternions(qs.astype(np.float64)).astype(poses.dtype)
     if prev_quat is not None:
         qs[np.einsum("jc,jc->j", qs, prev_quat) < 0.0] *= -1.0
-    out = np.empty(poses.shape[1], dtype=np.float32)
+    out = np.empty(poses.shape[1], dtype=poses.dtype)
     out[:3] = (w @ poses[:, :3]) / w.sum()
     if not np.isfinite(out[:3]).all():
         out[:3] = np.nan_to_num(out[:3], nan=0.0, posinf=0.0, neginf=0.0)

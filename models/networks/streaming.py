@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from models.errors import ConfigError
-from models.networks.blend import blend_frame, blend_track, num_slots, slot_weights
+from models.networks.blend import blend_track, num_slots, slot_weights
 from models.networks.causal import CausalGenerator
 from models.networks.generator import LEVELS, UNetGenerator
 from models.networks.numpy_step import NumpyStep
@@ -179,10 +179,7 @@ class StreamingGenerator:
         self.frame += k
         if k == 0:
             return np.zeros((0, self.pose_dim), dtype=np.float32)
-        if k == 1:  # the live case: one frame per push (same result, a third of the NumPy calls)
-            out = blend_frame(slots[:, 0], self._weights(frames)[:, 0], self._prev_quat)[None]
-        else:
-            out = blend_track(slots, self._weights(frames), self._prev_quat)
+        out = blend_track(slots, self._weights(frames), self._prev_quat)
         self._prev_quat = out[-1, 3:].reshape(-1, 4).copy()
         return out
 
