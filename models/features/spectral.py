@@ -72,6 +72,11 @@ class FeatureConfig:
     n_mels, fmin, fmax: mel filterbank (Hz; used by "logmel_onset" and "mfcc").
     amin: power floor before the log (1e-10 = -100 dB).
     sample_rate, hop: fixed by models.timebase; stored so fingerprints cover them.
+    context_s: time constant (s) of the running mean of the base columns appended
+        after them; 0 = off (models/features/context.py).
+    beat_phase: append the 4 beat-tracker columns (``logmel_onset`` only; context.py).
+    Both are off by default and then left out of :meth:`to_dict`, so configs without
+    them keep the fingerprints they had before the options existed.
     """
 
     kind: str = "logmel_onset"
@@ -82,6 +87,8 @@ class FeatureConfig:
     amin: float = 1e-10
     sample_rate: int = SAMPLE_RATE
     hop: int = HOP
+    context_s: float = 0.0
+    beat_phase: bool = False
 
     def __post_init__(self) -> None:
         # Canonical types, so that equal configs give equal fingerprints (JSON 0 vs 0.0).
@@ -90,7 +97,7 @@ class FeatureConfig:
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
                 raise ConfigError(f"feature config {name}={value!r} must be an integer")
             object.__setattr__(self, name, int(value))
-        for name in ("fmin", "fmax", "amin"):
+        for name in ("fmin", "fmax", "amin", "context_s"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
                 raise ConfigError(f"feature config {name}={value!r} must be a number")
@@ -112,6 +119,13 @@ class FeatureConfig:
             raise ConfigError(f"need 0 <= fmin < fmax <= {SAMPLE_RATE / 2} Hz; got fmin={self.fmin}, fmax={self.fmax}")
         if not 0.0 < self.amin < 1.0:
             raise ConfigError(f"amin={self.amin!r} must be in (0, 1)")
+        if not 0.0 <= self.context_s <= 3600.0:
+            raise ConfigError(f"context_s={self.context_s!r} must be in [0, 3600] seconds (0 = no context columns)")
+        if not isinstance(self.beat_phase, (bool, np.bool_)):
+            raise ConfigError(f"feature config beat_phase={self.beat_phase!r} must be true or false")
+        object.__setattr__(self, "beat_phase", bool(self.beat_phase))
+        if self.beat_phase and self.kind != "logmel_onset":
+            raise ConfigError(f"beat_phase needs the logmel_onset kind (it tracks the onset column), got {self.kind!r}")
 
     @classmethod
     def linear(cls, n_fft: int = 1024) -> FeatureConfig:
@@ -125,15 +139,30 @@ class FeatureConfig:
         return cls(kind="mfcc", n_fft=n_fft, n_mels=n_mels)
 
     @property
-    def dim(self) -> int:
-        """Feature dimension D of one frame."""
+    def base_dim(self) -> int:
+        """Columns of the kind itself, before any context/beat columns."""
         if self.kind == "mfcc":
             return 2 * (N_MFCC + 1)
         return self.n_mels + 1 if self.kind == "logmel_onset" else self.n_fft // 2 + 1
 
+    @property
+    def dim(self) -> int:
+        """Feature dimension D of one frame: base, + base again with context, + 4 with beat phase."""
+        from models.features.context import BEAT_COLUMNS
+
+        return self.base_dim * (2 if self.context_s > 0 else 1) + (BEAT_COLUMNS if self.beat_phase else 0)
+
+    def base(self) -> FeatureConfig:
+        """This config without the context/beat columns (its columns are a prefix of ours)."""
+        return dataclasses.replace(self, context_s=0.0, beat_phase=False)
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict, including the feature code version."""
-        return {"version": FEATURE_VERSION, **dataclasses.asdict(self)}
+        """JSON-ready dict, including the feature code version (options at their off value left out)."""
+        d = {"version": FEATURE_VERSION, **dataclasses.asdict(self)}
+        for name in ("context_s", "beat_phase"):
+            if not d[name]:
+                del d[name]
+        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FeatureConfig:
@@ -185,7 +214,7 @@ class SpectralKernel:
         frames: (k, n_fft) float64 windows of 22050 Hz audio (frame t = hop-ending window).
         prev_logmel: the state row of the frame before ``frames[0]``, None at stream start:
         its log-mel (n_mels,) for "logmel_onset", its 13 MFCC + log energy (14,) for "mfcc".
-        Returns ((k, D) float32 features, last state row to pass as the next prev_logmel).
+        Returns ((k, base_dim) float32 base features, last state row to pass as the next prev_logmel).
         """
         spec = np.fft.rfft(frames * self.window, axis=-1)
         power = spec.real**2 + spec.imag**2  # (k, n_fft//2+1)
@@ -198,14 +227,14 @@ class SpectralKernel:
             static[:, :N_MFCC] = logmel @ self.dct_t
             static[:, N_MFCC] = 10.0 * np.log10(np.maximum((frames * frames).mean(axis=-1), amin))
             first = static[:1] if prev_logmel is None else prev_logmel[None]
-            out = np.empty((static.shape[0], self.cfg.dim), np.float32)
+            out = np.empty((static.shape[0], self.cfg.base_dim), np.float32)
             out[:, : N_MFCC + 1] = static
             out[:, N_MFCC + 1 :] = static - np.concatenate([first, static[:-1]])
             return out, static[-1].copy()
         # Predecessor rows; frame 0 of a stream is its own predecessor (onset 0, as librosa pads).
         first = logmel[:1] if prev_logmel is None else prev_logmel[None]
         onset = np.maximum(logmel - np.concatenate([first, logmel[:-1]]), 0.0).mean(axis=1)
-        out = np.empty((logmel.shape[0], self.cfg.dim), np.float32)
+        out = np.empty((logmel.shape[0], self.cfg.base_dim), np.float32)
         out[:, :-1] = logmel
         out[:, -1] = onset
         return out, logmel[-1].copy()
@@ -245,10 +274,15 @@ def extract_features(audio: np.ndarray, cfg: FeatureConfig | None = None) -> np.
         raise AudioError(f"extract_features wants mono audio of shape (n,), got shape {audio.shape}")
     if not np.all(np.isfinite(audio)):
         raise AudioError(f"audio holds {int(np.sum(~np.isfinite(audio)))} non-finite samples (NaN/inf)")
+    from models.features.context import ContextTracker
+
     kernel = SpectralKernel(cfg)
+    extra = ContextTracker(cfg.base_dim, cfg.context_s, cfg.beat_phase)
     frames = causal_frames(audio, cfg.n_fft)
     out = np.empty((frames.shape[0], cfg.dim), np.float32)
     prev = None
     for lo in range(0, frames.shape[0], _OFFLINE_CHUNK):
-        out[lo : lo + _OFFLINE_CHUNK], prev = kernel(frames[lo : lo + _OFFLINE_CHUNK], prev)
+        base, prev = kernel(frames[lo : lo + _OFFLINE_CHUNK], prev)
+        out[lo : lo + base.shape[0], : cfg.base_dim] = base
+        out[lo : lo + base.shape[0], cfg.base_dim :] = extra(base)
     return out

@@ -3,8 +3,9 @@
 :class:`StreamingFeatureExtractor` runs the offline pipeline (``to_mono`` ->
 resample to 22050 Hz -> hop-ending STFT frames -> :class:`SpectralKernel`)
 incrementally: the resampler carries its filter state, the extractor keeps the last
-``n_fft - HOP`` resampled samples and the previous log-mel row, and every push
-computes only the frames completed by that push. Streamed frames equal
+``n_fft - HOP`` resampled samples, the previous log-mel row and (when the config adds
+context or beat columns) a :class:`~models.features.context.ContextTracker`, and every
+push computes only the frames completed by that push. Streamed frames equal
 :func:`extract_features` on the whole signal (tests/test_features_streaming.py).
 
 Latency: frame t's nominal time is the end of its hop, ``(t + 1) * HOP`` samples at
@@ -24,6 +25,7 @@ import numpy as np
 
 from models.errors import AudioError
 from models.features.audio_io import check_finite, to_mono
+from models.features.context import ContextTracker
 from models.features.resample import StreamingResampler, check_rate
 from models.features.spectral import FeatureConfig, SpectralKernel
 from models.timebase import HOP, SAMPLE_RATE
@@ -66,6 +68,7 @@ class StreamingFeatureExtractor:
         self.input_sr = check_rate(input_sr, source="stream")
         self._resampler = StreamingResampler(self.input_sr, SAMPLE_RATE)
         self._kernel = SpectralKernel(self.cfg)
+        self._extra = ContextTracker(self.cfg.base_dim, self.cfg.context_s, self.cfg.beat_phase)
         self.latency_samples: int = feature_latency_samples(self.input_sr)
         self.reset()
 
@@ -74,6 +77,7 @@ class StreamingFeatureExtractor:
         self._resampler.reset()
         self._history = np.zeros(self.cfg.n_fft - HOP)  # 22050 Hz samples before the next hop
         self._prev_logmel: np.ndarray | None = None
+        self._extra.reset()
         self._frames = 0
 
     @property
@@ -114,6 +118,8 @@ class StreamingFeatureExtractor:
             return np.zeros((0, self.cfg.dim), np.float32)
         frames = np.lib.stride_tricks.sliding_window_view(buf, self.cfg.n_fft)[::HOP][:k]
         out, self._prev_logmel = self._kernel(frames, self._prev_logmel)
+        if self._extra.extra_dim:
+            out = np.concatenate([out, self._extra(out)], axis=1)
         self._history = buf[k * HOP :]
         self._frames += k
         return out
