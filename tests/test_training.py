@@ -20,11 +20,11 @@ import torch
 from _dwm_synth import write_dance
 from scipy.spatial.transform import Rotation
 
-from models.errors import ConfigError
+from models.errors import ConfigError, PerformerError
 from models.features.audio_io import load_audio
 from models.features.spectral import FeatureConfig, extract_features
 from models.generate import load_model, run_model
-from models.networks.checkpoint import load_checkpoint
+from models.networks.checkpoint import build_model, load_checkpoint
 from models.rig.humanoid import BONE_INDEX, BONES, END_EFFECTORS, NUM_BONES
 from models.rig.joint_map import to_dwm_positions
 from models.rig.kinematics import fk
@@ -561,3 +561,73 @@ def test_canonical_poses_ignore_where_the_dancer_stands_and_faces():
     np.testing.assert_allclose(dots, 1.0, atol=1e-9)
     other = np.abs((a.rotations[:, 1:] * motion.rotations[:, 1:]).sum(-1))
     np.testing.assert_allclose(other, 1.0, atol=1e-9)  # bones below the Hips are untouched
+
+
+# -- init_from with appended context/beat columns ----------------------------------------------
+
+
+def test_widened_input_weights_leave_the_old_model_unchanged(run_a):
+    old, _ = load_checkpoint(run_a / "best.pt")
+    wide = FeatureConfig(**FEATURES, context_s=5.0, beat_phase=True)
+    new = build_model("causal", {**BASE["model_config"], "feature_dim": wide.dim, "pose_dim": POSE_DIM})
+    state, widened = train_module.widen_inputs(old.state_dict(), new.state_dict(), wide.base_dim)
+    assert widened and all(state[k].shape[1] == wide.dim for k in widened)
+    new.load_state_dict(state)
+    old.eval(), new.eval()
+    x = torch.randn(2, wide.base_dim, 64)
+    extra = torch.randn(2, wide.dim - wide.base_dim, 64)
+    with torch.no_grad():
+        torch.testing.assert_close(new(torch.cat([x, extra], dim=1)), old(x))
+    bigger = build_model("causal", {"channels": [8, 8, 8, 8, 16], "feature_dim": wide.dim, "pose_dim": POSE_DIM})
+    with pytest.raises(ConfigError, match="shape"):
+        train_module.widen_inputs(old.state_dict(), bigger.state_dict(), wide.base_dim)
+
+
+def test_fine_tune_onto_appended_columns_trains_and_refuses_other_features(run_a, data, tmp_path):
+    wide = {**FEATURES, "context_s": 5.0, "beat_phase": True}
+    out = run_train(data, tmp_path / "wide", features=wide, init_from=str(run_a / "best.pt"), stage1_steps=3,
+                    eval_every=3, w_beat=1.0)
+    assert all(float(r["loss_beat"]) >= 0 for r in read_log(out))
+    loaded = load_model(out / "best.pt")
+    assert loaded.features == FeatureConfig(**wide) and loaded.model.config.feature_dim == loaded.features.dim
+    with pytest.raises(PerformerError, match="feature"):
+        run_train(data, tmp_path / "other", features={"n_mels": 24, "beat_phase": True},
+                  init_from=str(run_a / "best.pt"), stage1_steps=3)
+
+
+def _beat_columns(T: int, period: float, clarity: float = 0.5) -> torch.Tensor:
+    theta = 2 * np.pi * np.arange(T) / period
+    cols = np.stack([clarity * np.cos(theta), clarity * np.sin(theta), np.full(T, clarity), np.zeros(T)])
+    return torch.tensor(cols, dtype=torch.float32)[None]
+
+
+def _root_walk(speed: np.ndarray) -> torch.Tensor:
+    """(1, POSE_DIM, T) poses: identity rotations, the root walking along x at ``speed`` m/frame."""
+    T = speed.size + 1
+    pose = np.zeros((POSE_DIM, T), np.float32)
+    pose[0] = np.concatenate([[0.0], np.cumsum(speed)])
+    pose[1] = 0.9
+    pose[6::4] = 1.0  # w of every bone quaternion
+    return torch.tensor(pose)[None]
+
+
+def test_beat_loss_is_below_one_when_the_motion_slows_on_the_beats(offsets):
+    T, P = 120, 15.0
+    t = np.arange(1, T)
+    beats = _beat_columns(T, P)
+    slow_on_beat = _root_walk(0.01 * (1.0 - 0.8 * np.cos(2 * np.pi * t / P)))
+    fast_on_beat = _root_walk(0.01 * (1.0 + 0.8 * np.cos(2 * np.pi * t / P)))
+    steady = _root_walk(np.full(T - 1, 0.01))
+    assert losses.beat_speed_ratio(slow_on_beat, beats, offsets).item() < 0.5
+    assert losses.beat_speed_ratio(fast_on_beat, beats, offsets).item() > 1.5
+    assert losses.beat_speed_ratio(steady, beats, offsets).item() == pytest.approx(1.0, abs=1e-4)
+    # No pulse (clarity 0): the weights vanish and the loss is 0, not NaN.
+    assert losses.beat_speed_ratio(steady, _beat_columns(T, P, clarity=0.0), offsets).item() == 0.0
+    pred = fast_on_beat.clone().requires_grad_(True)
+    losses.beat_speed_ratio(pred, beats, offsets).backward()
+    assert torch.isfinite(pred.grad).all() and pred.grad.abs().sum() > 0
+
+
+def test_beat_loss_needs_the_beat_columns(data, tmp_path):
+    with pytest.raises(ConfigError, match="beat_phase"):
+        run_train(data, tmp_path / "nobeat", w_beat=1.0)

@@ -50,6 +50,9 @@ class TrainConfig:
     w_gan: float = 1.0
     w_vel: float = 0.0  # velocity L1 (rotations + end effectors); not in the paper, see docs/training.md
     w_acc: float = 0.0  # acceleration L1 (rotations + end effectors); not in the paper, see docs/training.md
+    # Beat loss: mean joint speed on the beats the causal beat-phase feature columns predict,
+    # over the mean speed (losses.beat_speed_ratio); needs features.beat_phase. Not in the paper.
+    w_beat: float = 0.0
     init_from: str | None = None  # start from this checkpoint's weights (fine-tuning)
     # Exponential moving average of the generator's weights (and batch-norm statistics), per
     # step; 0 = off. When on, validation, best.pt and last.pt use the averaged weights.

@@ -26,6 +26,7 @@ import torch
 from models.data.alignment import UNVERIFIED_ALIGNMENT
 from models.data.dwm import dance_dirs
 from models.data.split import split_names
+from models.features.context import BEAT_COLUMNS
 from models.features.spectral import FeatureConfig
 from models.networks.checkpoint import build_model, save_checkpoint
 from models.errors import ConfigError
@@ -145,11 +146,58 @@ def _seed_all(seed: int) -> None:
 
 LOSS_PANELS = (("regression losses", ("loss_rot", "loss_fk", "loss_vel", "loss_acc"), True),
                ("GAN losses", ("loss_g_gan", "loss_d"), False),
+               ("beat loss (speed on beats / mean speed)", ("loss_beat",), False),
                ("validation", ("val_rot_l1", "val_energy"), False))
 
 
-LOG_FIELDS = ["step", "stage", "loss_rot", "loss_fk", "loss_vel", "loss_acc", "loss_g_gan", "loss_d", "frames_per_s",
+LOG_FIELDS = ["step", "stage", "loss_rot", "loss_fk", "loss_vel", "loss_acc", "loss_beat", "loss_g_gan", "loss_d", "frames_per_s",
               "val_rot_l1", "val_eff_l1_m", "val_energy"]
+
+
+def widen_inputs(init: dict, target: dict, base_dim: int) -> tuple[dict, list[str]]:
+    """State dict ``init`` of a network on ``base_dim`` input features, fitted to
+    ``target``'s shapes where only the input width grew: every weight whose dim 1 is
+    ``base_dim`` in ``init`` and larger in ``target`` (the convs that read the input)
+    keeps its old columns and gets zeros for the new ones, so the widened network
+    computes exactly what the old one did until training moves the new weights.
+    Returns (state dict, names of the widened tensors); ConfigError on any other
+    mismatch.
+    """
+    out, widened = {}, []
+    for name, t in target.items():
+        old = init.get(name)
+        if old is None:
+            raise ConfigError(f"init_from checkpoint has no tensor {name!r} (another architecture?)")
+        if old.shape == t.shape:
+            out[name] = old
+        elif old.dim() >= 2 and old.shape[1] == base_dim and old.shape[0] == t.shape[0] and \
+                old.shape[2:] == t.shape[2:] and t.shape[1] > base_dim:
+            new = torch.zeros_like(t)
+            new[:, :base_dim] = old
+            out[name], widened = new, widened + [name]
+        else:
+            raise ConfigError(f"init_from tensor {name!r} has shape {tuple(old.shape)}, this model {tuple(t.shape)}")
+    return out, widened
+
+
+def _init_state(path: str, fcfg: FeatureConfig, model: torch.nn.Module) -> dict:
+    """Weights to start from: the checkpoint's, widened with zero weights when this config
+    only appends context/beat columns to the checkpoint's features (:func:`widen_inputs`)."""
+    from models.networks.checkpoint import load_checkpoint
+
+    base = fcfg.base()
+    if base == fcfg:
+        init, _ = load_checkpoint(path, expect_feature_fingerprint=fcfg.fingerprint(), expect_bones=list(BONES))
+        return init.state_dict()
+    init, _ = load_checkpoint(path, expect_bones=list(BONES))
+    if init.config.feature_dim == fcfg.dim:
+        init, _ = load_checkpoint(path, expect_feature_fingerprint=fcfg.fingerprint(), expect_bones=list(BONES))
+        return init.state_dict()
+    init, _ = load_checkpoint(path, expect_feature_fingerprint=base.fingerprint(), expect_bones=list(BONES))
+    state, widened = widen_inputs(init.state_dict(), model.state_dict(), base.dim)
+    if not widened:
+        raise ConfigError(f"init_from {path}: no input weights to widen from {base.dim} to {fcfg.dim} features")
+    return state
 
 
 def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_dir: str | Path | None = None,
@@ -168,6 +216,8 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
     torch.set_num_threads(cfg.threads)
     _seed_all(cfg.seed)
     fcfg = FeatureConfig(**cfg.features)
+    if cfg.w_beat > 0 and not fcfg.beat_phase:
+        raise ConfigError("w_beat > 0 needs the beat-phase feature columns: set beat_phase = true under [features]")
 
     names = [d.name for d in dance_dirs(data_root)]
     train_names, val_names = split_names(names)
@@ -181,10 +231,7 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
     model_cfg = {**cfg.model_config, "feature_dim": fcfg.dim, "pose_dim": POSE_DIM}
     model = build_model(cfg.model, model_cfg)
     if cfg.init_from:
-        from models.networks.checkpoint import load_checkpoint
-
-        init, _ = load_checkpoint(cfg.init_from, expect_feature_fingerprint=fcfg.fingerprint(), expect_bones=list(BONES))
-        model.load_state_dict(init.state_dict())
+        model.load_state_dict(_init_state(cfg.init_from, fcfg, model))
     model_config = model.config if hasattr(model, "config") else model_cfg
     ema = averaged(model, cfg.ema_decay)
     disc = MultiScaleDiscriminator(DiscriminatorConfig(feature_dim=fcfg.dim, pose_dim=POSE_DIM, width=cfg.disc_width))
@@ -241,6 +288,10 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
             l_acc = losses.acceleration_l1(pred, target, offsets)
             loss = loss + cfg.w_acc * l_acc
             row["loss_acc"] = l_acc.item()
+        if cfg.w_beat > 0:  # the beat columns are the last BEAT_COLUMNS features (context.py)
+            l_beat = losses.beat_speed_ratio(pred, feats[:, -BEAT_COLUMNS:], offsets)
+            loss = loss + cfg.w_beat * l_beat
+            row["loss_beat"] = l_beat.item()
         if gan:
             l_gan = losses.g_gan_loss(disc(feats, pred))
             loss = loss + cfg.w_gan * l_gan
