@@ -157,3 +157,13 @@ def test_reset_starts_a_new_stream():
     first = ex.push(y)
     ex.reset()
     np.testing.assert_array_equal(ex.push(y), first)
+
+
+def test_streaming_bench_cli_takes_the_options(capsys):
+    from models.features import streaming
+
+    assert streaming.main(["--bench", "--seconds", "2", "--rate", "22050", "--context-s", "5", "--beat-phase"]) == 0
+    assert "logmel_onset-d134-" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exc:
+        streaming.main(["--bench", "--seconds", "2", "--kind", "mfcc", "--beat-phase"])
+    assert exc.value.code == 2 and "logmel_onset" in capsys.readouterr().err

@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from models.errors import AudioError
+from models.errors import AudioError, ConfigError
 from models.features.audio_io import check_finite, to_mono
 from models.features.context import ContextTracker
 from models.features.resample import StreamingResampler, check_rate
@@ -190,6 +190,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seconds", type=float, default=60.0, help="audio length for --bench/--compare (s)")
     p.add_argument("--kind", default="logmel_onset", choices=("logmel_onset", "linear", "mfcc"),
                    help="feature kind for --bench")
+    p.add_argument("--context-s", type=float, default=0.0,
+                   help="for --bench: add the running-mean context columns with this time constant (s)")
+    p.add_argument("--beat-phase", action="store_true", help="for --bench: add the beat-phase columns")
     args = p.parse_args(argv)
     if args.compare:
         _compare(args.seconds)
@@ -197,7 +200,13 @@ def main(argv: list[str] | None = None) -> int:
     if not args.bench:
         _latency_table()
         return 0
+    import dataclasses
+
     cfg = {"logmel_onset": FeatureConfig, "linear": FeatureConfig.linear, "mfcc": FeatureConfig.mfcc}[args.kind]()
+    try:
+        cfg = dataclasses.replace(cfg, context_s=args.context_s, beat_phase=args.beat_phase)
+    except ConfigError as exc:
+        p.error(str(exc))
     _bench(args.rate, args.block, args.seconds, cfg)
     return 0
 
