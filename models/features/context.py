@@ -26,14 +26,16 @@ that, both causal functions of the base feature frames ``<= t``:
   pulse clarity (0 in silence, so the phase columns fade out instead of jumping).
 
 Column order: ``[base | context | beat]``. The tracker is O(W log W) per
-frame (one 256-point FFT pair and a 180-term sum, tens of microseconds) and keeps ``base_dim + W`` numbers
-of state, so the live extractor carries it at no noticeable cost.
+frame (one 256-point FFT pair, 180 cosines and sines, about 15 NumPy calls) and keeps
+``base_dim + 2 W`` numbers of state. It runs frame by frame, offline too, so that the
+live and offline columns are the same arithmetic.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
-from scipy.signal import lfilter
 
 from models.timebase import FPS
 
@@ -66,57 +68,57 @@ class ContextTracker:
         self.beat_phase = bool(beat_phase)
         self.decay = float(np.exp(-1.0 / (FPS * self.context_s))) if self.context_s > 0 else 0.0
         self.extra_dim = (self.base_dim if self.context_s > 0 else 0) + (BEAT_COLUMNS if self.beat_phase else 0)
-        if self.beat_phase:
-            self._j = np.arange(TEMPO_WINDOW, dtype=np.float64)
-            self._w = 0.5 * (1.0 + np.cos(np.pi * self._j / TEMPO_WINDOW))
-            self._lag_prior = _prior(LAGS.astype(np.float64))
+        j = np.arange(TEMPO_WINDOW, dtype=np.float64)
+        self._w = 0.5 * (1.0 + np.cos(np.pi * j / TEMPO_WINDOW))
+        self._w_sum = float(self._w.sum())
+        self._two_pi_j = 2.0 * np.pi * j
+        self._lag_prior = _prior(LAGS.astype(np.float64))
         self.reset()
 
     def reset(self) -> None:
         """Start a new stream: no frames seen, running mean 0, onset history zeros."""
         self._frames = 0
         self._mean = np.zeros(self.base_dim)
-        self._onsets = np.zeros(TEMPO_WINDOW - 1)
+        # Onset history twice over, so the last W values are always one contiguous slice:
+        # value i of the stream sits at (i % W) and (i % W) + W.
+        self._ring = np.zeros(2 * TEMPO_WINDOW)
 
     def __call__(self, base: np.ndarray) -> np.ndarray:
-        """(k, base_dim) base frames -> (k, extra_dim) float32 extra columns."""
-        base = np.asarray(base, np.float64)
-        k = base.shape[0]
-        cols = []
-        if self.context_s > 0:
-            b = self.decay
-            y, zf = lfilter([1.0 - b], [1.0, -b], base, axis=0, zi=(b * self._mean)[None, :])
-            self._mean = y[-1].copy() if k else self._mean
-            n = np.arange(self._frames + 1, self._frames + k + 1, dtype=np.float64)
-            cols.append(y / (1.0 - b**n)[:, None])
-        if self.beat_phase:
-            cols.append(self._beats(base[:, -1]))
-        self._frames += k
-        if not cols:
-            return np.zeros((k, 0), np.float32)
-        return np.concatenate(cols, axis=1).astype(np.float32)
+        """(k, base_dim) base frames -> (k, extra_dim) float32 extra columns.
 
-    def _beats(self, onset: np.ndarray) -> np.ndarray:
-        env = np.concatenate([self._onsets, onset])
-        self._onsets = env[env.size - (TEMPO_WINDOW - 1) :]
-        # Row i: the W onsets ending at frame i of this chunk, newest first (j = frames ago).
-        win = np.lib.stride_tricks.sliding_window_view(env, TEMPO_WINDOW)[:, ::-1]
-        w = self._w
-        xw = (win - ((win @ w) / w.sum())[:, None]) * w  # weighted, mean removed
-        spec = np.fft.rfft(xw, _NFFT, axis=1)
-        ac = np.fft.irfft(spec.real**2 + spec.imag**2, _NFFT, axis=1)[:, : LAGS[-1] + 2]
-        score = ac[:, LAGS] * self._lag_prior
-        best = np.argmax(score, axis=1)
-        rows = np.arange(onset.size)
-        # Parabolic refinement of the best lag (clamped to half a frame).
-        lag = LAGS[best].astype(np.float64)
-        y0, y1, y2 = ac[rows, LAGS[best] - 1], ac[rows, LAGS[best]], ac[rows, LAGS[best] + 1]
-        den = y0 - 2.0 * y1 + y2
-        period = lag + np.clip(np.where(den < 0, 0.5 * (y0 - y2) / np.where(den < 0, den, -1.0), 0.0), -0.5, 0.5)
-        ang = 2.0 * np.pi * self._j[None, :] / period[:, None]
-        re, im = (xw * np.cos(ang)).sum(axis=1), (xw * np.sin(ang)).sum(axis=1)
-        m = np.hypot(re, im)
-        norm = np.abs(xw).sum(axis=1)
-        clarity = np.where(norm > 1e-9, m / np.maximum(norm, 1e-9), 0.0)
-        unit = np.where(m > 1e-12, 1.0 / np.maximum(m, 1e-12), 0.0)
-        return np.stack([clarity * re * unit, clarity * im * unit, clarity, np.log2(period / PRIOR_PERIOD)], axis=1)
+        One frame at a time, the same arithmetic offline and live, so any chunking of
+        a stream gives bit-identical columns (the live extractor calls it once per frame
+        with k = 1, where a per-frame loop is also the cheapest form).
+        """
+        base = np.asarray(base, np.float64)
+        out = np.empty((base.shape[0], self.extra_dim), np.float32)
+        ctx = self.base_dim if self.context_s > 0 else 0
+        for i, row in enumerate(base):
+            if ctx:
+                self._mean = self.decay * self._mean + (1.0 - self.decay) * row
+                out[i, :ctx] = self._mean / (1.0 - self.decay ** (self._frames + 1))
+            if self.beat_phase:
+                out[i, ctx:] = self._beat(float(row[-1]))
+            self._frames += 1
+        return out
+
+    def _beat(self, onset: float) -> tuple[float, float, float, float]:
+        """The 4 beat columns of the frame whose onset value is ``onset`` (module docstring)."""
+        W = TEMPO_WINDOW
+        pos = self._frames % W
+        self._ring[pos] = self._ring[pos + W] = onset
+        win = self._ring[pos + W : pos : -1]  # the last W onsets, newest first (j = frames ago)
+        xw = (win - float(win @ self._w) / self._w_sum) * self._w  # mean removed, weighted
+        spec = np.fft.rfft(xw, _NFFT)
+        ac = np.fft.irfft(spec.real * spec.real + spec.imag * spec.imag, _NFFT)
+        lag = int(LAGS[0] + np.argmax(ac[LAGS[0] : LAGS[-1] + 1] * self._lag_prior))
+        y0, y1, y2 = float(ac[lag - 1]), float(ac[lag]), float(ac[lag + 1])
+        den = y0 - 2.0 * y1 + y2  # parabola through the neighbours, vertex clamped to +-0.5
+        period = lag + (min(0.5, max(-0.5, 0.5 * (y0 - y2) / den)) if den < 0 else 0.0)
+        ang = self._two_pi_j / period
+        re, im = float(xw @ np.cos(ang)), float(xw @ np.sin(ang))
+        m = math.hypot(re, im)
+        norm = float(np.abs(xw).sum())
+        clarity = m / norm if norm > 1e-9 else 0.0
+        unit = 1.0 / m if m > 1e-12 else 0.0
+        return clarity * re * unit, clarity * im * unit, clarity, math.log2(period / PRIOR_PERIOD)
