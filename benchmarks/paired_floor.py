@@ -94,8 +94,9 @@ def main(argv: list[str] | None = None) -> int:
         "constant: the dance's own mean pose (oracle)": [np.tile(mean_pose(c.poses), (c.num_frames, 1)) for c in val],
     }
     generated: dict[str, list[np.ndarray]] = {}
-    for lm in models:
-        gen = [run_model(lm.model, c.features) for c in val]
+    for lm in models:  # each model on its own feature config (same dances, same frames)
+        own = val if lm.features == fcfg else load_clips(a.data, val_names, lm.features, opts)
+        gen = [run_model(lm.model, c.features)[: v.num_frames] for c, v in zip(own, val)]
         label = f"{lm.name} ({lm.path.name})"
         generated[label] = gen
         rows[label] = gen
