@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from test_engine import FlakySource, ListSink, TinyConvModel, UdpReceiver, extractor, noise, osc_messages
+from _proc import default_sigint
 from test_run_cli import PERFORMER, REPO, drain, one_line_error, run_main, tiny_checkpoint  # noqa: F401 (fixture)
 
 from models.errors import ConfigError
@@ -462,7 +463,7 @@ def test_sighup_reloads_the_config_of_a_running_performer(tmp_path, tiny_checkpo
     base = (f'audio = "{clip}"\nloop = true\nosc = ["127.0.0.1:{udp.port}"]\nosc_mode = "plain"\nno_ws = true\n'
             f'checkpoint = "{tiny_checkpoint}"\nwarmup = 0.2\n')
     conf.write_text(base + "offset_ms = 0\n")
-    proc = subprocess.Popen([*PERFORMER, "run", "--config", str(conf), "--quiet"], cwd=REPO,
+    proc = subprocess.Popen([*PERFORMER, "run", "--config", str(conf), "--quiet"], cwd=REPO, preexec_fn=default_sigint,
                             stderr=subprocess.PIPE, text=True)
 
     def shifts() -> np.ndarray:

@@ -25,6 +25,7 @@ from realtime.frame import PoseFrame
 from realtime.recorder import Recorder, record_paths
 from realtime.status import StatusLine, format_status
 from test_engine import osc_messages
+from _proc import default_sigint
 
 REPO = Path(__file__).resolve().parents[1]
 PERFORMER = [sys.executable, "-m", "realtime.cli"]
@@ -184,7 +185,7 @@ def test_ctrl_c_stops_cleanly_writes_recording_and_exits_130(tmp_path, clip, tin
     proc = subprocess.Popen(
         [*PERFORMER, "run", "--audio", str(clip), "--record", str(out), "--checkpoint", str(tiny_checkpoint),
          "--no-ws", "--no-osc", "--warmup", "0.5"],
-        cwd=REPO, stderr=subprocess.PIPE, text=True,
+        cwd=REPO, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint,
     )
     lines = []
     deadline = time.monotonic() + 60

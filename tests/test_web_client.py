@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 from test_run_cli import clip, free_port, tiny_checkpoint  # noqa: F401 - fixtures
+from _proc import default_sigint
 
 from models.rig.humanoid import BONES, NUM_BONES, PARENT_INDEX
 from models.rig.motion import POSE_DIM
@@ -160,7 +161,7 @@ def engine(tmp_path, clip, tiny_checkpoint) -> Iterator[str]:  # noqa: F811 - fi
     proc = subprocess.Popen(
         [sys.executable, "-m", "realtime.cli", "run", "--audio", str(clip), "--no-osc", "--ws", f"127.0.0.1:{port}",
          "--checkpoint", str(tiny_checkpoint), "--warmup", "0.5", "--quiet"],
-        cwd=REPO, stdout=log, stderr=subprocess.STDOUT,
+        cwd=REPO, stdout=log, stderr=subprocess.STDOUT, preexec_fn=default_sigint,
     )
     url = f"http://127.0.0.1:{port}/"
     deadline = time.monotonic() + 60
