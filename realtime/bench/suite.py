@@ -368,6 +368,7 @@ def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seco
 
     from models.features.audio_io import load_audio
     from models.features.spectral import extract_features
+    from models.generate import load_model
 
     audio = Path(audio)
     cores = pin_cores(cfg.cores)
@@ -401,7 +402,7 @@ def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seco
 
         torch.set_num_threads(cfg.threads)
         x, _ = load_audio(audio, SAMPLE_RATE)
-        feats = extract_features(x[: 60 * SAMPLE_RATE])
+        feats = extract_features(x[: 60 * SAMPLE_RATE], load_model(checkpoint).features)  # the model's own features
         result["model_step"] = model_step_costs(checkpoint, feats)
         result["components"] = component_costs(checkpoint, np.load(seg), cfg.sample_rate, cfg.block_size)
         if offline:
