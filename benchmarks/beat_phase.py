@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from models.features.audio_io import load_audio
-from models.features.context import TEMPO_WINDOW
+from models.features.context import PRIOR_PERIOD, TEMPO_WINDOW
 from models.features.spectral import FeatureConfig, extract_features
 from models.evaluation.beats import music_beats
 
@@ -42,7 +42,7 @@ def song_stats(audio: np.ndarray, rng: np.random.Generator) -> dict[str, float]:
         "r_beats": float(abs(unit[frames].mean())),
         "r_random": float(abs(unit[rand].mean())),
         "phase_deg": float(np.degrees(np.angle(unit[frames].mean()))),
-        "tracker_period": float(np.median(15.0 * 2.0 ** f[frames, -1])),
+        "tracker_period": float(np.median(PRIOR_PERIOD * 2.0 ** f[frames, -1])),
         "librosa_period": float(np.median(np.diff(beats))),
         "_unit": unit[frames],
         "_rand": unit[rand],

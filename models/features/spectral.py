@@ -53,6 +53,7 @@ from typing import Any
 import numpy as np
 
 from models.errors import AudioError, ConfigError
+from models.features.context import BEAT_COLUMNS, ContextTracker
 from models.timebase import HOP, SAMPLE_RATE
 
 # Bump when the numbers any config produces change (definitions, resampler, framing):
@@ -148,8 +149,6 @@ class FeatureConfig:
     @property
     def dim(self) -> int:
         """Feature dimension D of one frame: base, + base again with context, + 4 with beat phase."""
-        from models.features.context import BEAT_COLUMNS
-
         return self.base_dim * (2 if self.context_s > 0 else 1) + (BEAT_COLUMNS if self.beat_phase else 0)
 
     def base(self) -> FeatureConfig:
@@ -274,8 +273,6 @@ def extract_features(audio: np.ndarray, cfg: FeatureConfig | None = None) -> np.
         raise AudioError(f"extract_features wants mono audio of shape (n,), got shape {audio.shape}")
     if not np.all(np.isfinite(audio)):
         raise AudioError(f"audio holds {int(np.sum(~np.isfinite(audio)))} non-finite samples (NaN/inf)")
-    from models.features.context import ContextTracker
-
     kernel = SpectralKernel(cfg)
     extra = ContextTracker(cfg.base_dim, cfg.context_s, cfg.beat_phase)
     frames = causal_frames(audio, cfg.n_fft)

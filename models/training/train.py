@@ -172,28 +172,28 @@ def widen_inputs(init: dict, target: dict, base_dim: int) -> tuple[dict, list[st
             out[name] = old
         elif old.dim() >= 2 and old.shape[1] == base_dim and old.shape[0] == t.shape[0] and \
                 old.shape[2:] == t.shape[2:] and t.shape[1] > base_dim:
-            new = torch.zeros_like(t)
-            new[:, :base_dim] = old
-            out[name], widened = new, widened + [name]
+            out[name] = torch.zeros_like(t)
+            out[name][:, :base_dim] = old
+            widened.append(name)
         else:
             raise ConfigError(f"init_from tensor {name!r} has shape {tuple(old.shape)}, this model {tuple(t.shape)}")
     return out, widened
 
 
 def _init_state(path: str, fcfg: FeatureConfig, model: torch.nn.Module) -> dict:
-    """Weights to start from: the checkpoint's, widened with zero weights when this config
-    only appends context/beat columns to the checkpoint's features (:func:`widen_inputs`)."""
+    """Weights to start from: the checkpoint's on this config's features, or, when this
+    config only appends context/beat columns to the checkpoint's features, its weights
+    widened with zeros for the new inputs (:func:`widen_inputs`)."""
+    from models.errors import CheckpointError
     from models.networks.checkpoint import load_checkpoint
 
-    base = fcfg.base()
-    if base == fcfg:
-        init, _ = load_checkpoint(path, expect_feature_fingerprint=fcfg.fingerprint(), expect_bones=list(BONES))
+    init, meta = load_checkpoint(path, expect_bones=list(BONES))
+    stored, base = meta["feature_fingerprint"], fcfg.base()
+    if stored == fcfg.fingerprint():
         return init.state_dict()
-    init, _ = load_checkpoint(path, expect_bones=list(BONES))
-    if init.config.feature_dim == fcfg.dim:
-        init, _ = load_checkpoint(path, expect_feature_fingerprint=fcfg.fingerprint(), expect_bones=list(BONES))
-        return init.state_dict()
-    init, _ = load_checkpoint(path, expect_feature_fingerprint=base.fingerprint(), expect_bones=list(BONES))
+    if base == fcfg or stored != base.fingerprint():
+        raise CheckpointError(f"checkpoint was trained on features {stored!r}, expected {fcfg.fingerprint()!r}"
+                              + ("" if base == fcfg else f" or its base {base.fingerprint()!r}"), source=path)
     state, widened = widen_inputs(init.state_dict(), model.state_dict(), base.dim)
     if not widened:
         raise ConfigError(f"init_from {path}: no input weights to widen from {base.dim} to {fcfg.dim} features")
