@@ -440,6 +440,8 @@ def test_gan_losses_have_the_least_squares_optimum():
     ("batch_size = 0\n", "batch_size must be a positive integer"),
     ("lr_schedule = \"cosine\"\n", "lr_schedule must be one of"),
     ("model = \"casual\"\n", "model must be one of ["),
+    ("train_only = \"head\"\n", "train_only must be list"),
+    ("train_only = [\"head\", 3]\n", "train_only must be a list of parameter-name prefixes"),
     ("segment = [\n", "not valid TOML"),
 ])
 def test_bad_config_files_are_refused_naming_the_file(tmp_path, text, message):
@@ -631,3 +633,21 @@ def test_beat_loss_is_below_one_when_the_motion_slows_on_the_beats(offsets):
 def test_beat_loss_needs_the_beat_columns(data, tmp_path):
     with pytest.raises(ConfigError, match="beat_phase"):
         run_train(data, tmp_path / "nobeat", w_beat=1.0)
+
+
+def test_train_only_changes_just_the_named_parameters_and_keeps_batch_norm_statistics(run_a, data, tmp_path):
+    """A polish of the output layer's bias: every other tensor of the checkpoint, batch-norm
+    running statistics included, comes out bit-identical, and the bias does move."""
+    before = weights(run_a / "best.pt")
+    out = run_train(data, tmp_path / "bias", init_from=str(run_a / "best.pt"), train_only=["head.bias"],
+                    stage1_steps=6, eval_every=3, lr=1e-3)
+    after = weights(out / "last.pt")
+    assert after.keys() == before.keys()
+    changed = {k for k in before if not torch.equal(before[k], after[k])}
+    assert changed == {"head.bias"}
+    assert any("running_mean" in k for k in before)  # the model has batch norm to keep
+
+
+def test_train_only_matching_no_parameter_is_refused(data, tmp_path):
+    with pytest.raises(ConfigError, match="train_only .* matches no parameter.*head"):
+        run_train(data, tmp_path / "none", train_only=["decoder_nope"], stage1_steps=2)

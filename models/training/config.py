@@ -57,6 +57,11 @@ class TrainConfig:
     # Exponential moving average of the generator's weights (and batch-norm statistics), per
     # step; 0 = off. When on, validation, best.pt and last.pt use the averaged weights.
     ema_decay: float = 0.0
+    # Train only the generator parameters whose names start with one of these prefixes
+    # (e.g. ["head"] or ["head.bias"]); every other parameter stays frozen and every
+    # batch-norm layer with no trainable parameter runs in eval mode (its running
+    # statistics are kept). Empty = train everything.
+    train_only: list[str] = field(default_factory=list)
     disc_width: int = 64
     tempos: list[float] = field(default_factory=lambda: [0.75, 0.875, 1.0, 1.125, 1.25])
     exclude_unverified: bool = True  # train only on dances whose audio alignment is verified
@@ -94,6 +99,9 @@ class TrainConfig:
                                   source=source)
         if not all(isinstance(t, (int, float)) and not isinstance(t, bool) for t in d.get("tempos", [])):
             raise ConfigError(f"tempos must be a list of numbers, got {d['tempos']!r:.60}", source=source)
+        if not all(isinstance(t, str) and t for t in d.get("train_only", [])):
+            raise ConfigError(f"train_only must be a list of parameter-name prefixes, got {d['train_only']!r:.60}",
+                              source=source)
         cfg = cls(**d)
         for name in ("segment", "batch_size", "stage1_steps", "stage2_steps", "eval_every", "threads", "warmup_steps"):
             v = getattr(cfg, name)

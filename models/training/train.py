@@ -138,6 +138,31 @@ def averaged(model: torch.nn.Module, decay: float) -> torch.optim.swa_utils.Aver
     return AveragedModel(model, multi_avg_fn=ema_update, use_buffers=True)
 
 
+def freeze_except(model: torch.nn.Module, prefixes: list[str]) -> list[torch.nn.Module]:
+    """Leave trainable only the parameters named ``prefix...`` for a prefix in ``prefixes``.
+
+    Returns the batch-norm layers left with no trainable parameter: :func:`set_train`
+    keeps them in eval mode, so a partial fine-tune changes neither their running
+    statistics nor what the frozen part computes. ConfigError if no parameter matches.
+    """
+    names = [n for n, _ in model.named_parameters()]
+    hit = {n for n in names if any(n.startswith(p) for p in prefixes)}
+    if not hit:
+        raise ConfigError(f"train_only {prefixes} matches no parameter of this model; its parameters start with "
+                          f"{sorted({n.split('.')[0] for n in names})}")
+    for n, prm in model.named_parameters():
+        prm.requires_grad_(n in hit)
+    return [m for m in model.modules() if isinstance(m, torch.nn.modules.batchnorm._BatchNorm)
+            and not any(prm.requires_grad for prm in m.parameters())]
+
+
+def set_train(model: torch.nn.Module, frozen_norms: list[torch.nn.Module]) -> None:
+    """``model.train()``, except the frozen batch-norm layers of :func:`freeze_except`."""
+    model.train()
+    for m in frozen_norms:
+        m.eval()
+
+
 def _seed_all(seed: int) -> None:
     random.seed(seed)
     np.random.seed(seed)
@@ -233,9 +258,10 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
     if cfg.init_from:
         model.load_state_dict(_init_state(cfg.init_from, fcfg, model))
     model_config = model.config if hasattr(model, "config") else model_cfg
+    frozen_norms = freeze_except(model, cfg.train_only) if cfg.train_only else []
     ema = averaged(model, cfg.ema_decay)
     disc = MultiScaleDiscriminator(DiscriminatorConfig(feature_dim=fcfg.dim, pose_dim=POSE_DIM, width=cfg.disc_width))
-    opt_g = torch.optim.Adam(model.parameters(), lr=cfg.lr, betas=(cfg.beta1, 0.999))
+    opt_g = torch.optim.Adam([prm for prm in model.parameters() if prm.requires_grad], lr=cfg.lr, betas=(cfg.beta1, 0.999))
     opt_d = torch.optim.Adam(disc.parameters(), lr=cfg.lr, betas=(cfg.beta1, 0.999))
     d_model = getattr(getattr(model, "config", None), "d_model", None)  # for lr_schedule = "noam"
     learning_rate(cfg.lr_schedule, 1, cfg.lr, d_model, cfg.warmup_steps)  # a schedule the model cannot use fails now
@@ -261,7 +287,7 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
     def save(path: Path, extra: dict) -> None:
         save_checkpoint(path, kept, extra={"step": step, "val_dances": val_names, **extra}, **meta)
 
-    model.train()
+    set_train(model, frozen_norms)
     disc.train()
     bar = tqdm(total=cfg.total_steps, initial=step, desc="train", unit="step", disable=not progress)
     t_last, frames = time.perf_counter(), 0
@@ -313,6 +339,7 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
             row["frames_per_s"] = frames / (now - t_last)
             t_last, frames = now, 0
             row.update(evaluate_clips(kept, val_clips, offsets))
+            set_train(model, frozen_norms)  # evaluate_clips leaves every layer in train mode
             save(out / "last.pt", {k: row[k] for k in ("val_rot_l1", "val_eff_l1_m", "val_energy")})
             if row["val_rot_l1"] < best:  # type: ignore[operator]
                 best = float(row["val_rot_l1"])  # type: ignore[arg-type]
