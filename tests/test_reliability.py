@@ -342,7 +342,9 @@ def test_osc_receiver_disappears_and_comes_back(caplog):
     assert len(sink.frames) == 60 and eng.stats()["sink_errors"] == 0
     st = osc.stats()
     assert st["frames"] == 60 and st.get("errors.ECONNREFUSED", 0) >= 1
-    assert 10 <= len(before) and 10 <= len(after) <= 30
+    # The engine hands each frame to `sink` before `osc`, so when `sink` holds 30 frames the
+    # 30th may not have gone out yet: the restarted receiver gets at most frames 29..59 (31).
+    assert 10 <= len(before) and 10 <= len(after) <= 31
     assert warnings_with(caplog, "ECONNREFUSED") == 1
 
 
