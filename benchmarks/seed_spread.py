@@ -30,18 +30,18 @@ import numpy as np
 DEFAULT_METRICS = ("rot_l1", "dtw", "energy_ratio", "beat_hit_rate")
 
 
-def load_rows(eval_dir: Path) -> dict[str, tuple[str, dict[str, float]]]:
-    """Checkpoint path -> (row name, metrics) of one ``performer evaluate`` output directory."""
+def load_rows(eval_dir: Path) -> dict[str, dict[str, float]]:
+    """Checkpoint path -> metrics of one ``performer evaluate`` output directory."""
     for name in ("results.json", "per_dance.json"):
         if not (eval_dir / name).is_file():
             raise SystemExit(f"{eval_dir / name}: not found (the --out directory of performer evaluate?)")
     results = json.loads((eval_dir / "results.json").read_text())["results"]
     details = json.loads((eval_dir / "per_dance.json").read_text())
-    return {d["checkpoint"]: (row, results[row]) for row, d in details.items()
+    return {d["checkpoint"]: results[row] for row, d in details.items()
             if isinstance(d, dict) and d.get("checkpoint") and row in results}
 
 
-def group_rows(rows: dict[str, tuple[str, dict[str, float]]], patterns: list[str]) -> list[str]:
+def group_rows(rows: dict[str, dict[str, float]], patterns: list[str]) -> list[str]:
     """Checkpoint paths of ``rows`` that match any of the globs, in sorted order."""
     return sorted(p for p in rows if any(fnmatch.fnmatch(p, g) for g in patterns))
 
@@ -71,13 +71,19 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr)
             return 2
         groups.append((name, members))
+    grouped = [rows[c] for _, members in groups for c in members]
+    known = {k for k in grouped[0] if all(isinstance(r.get(k), (int, float)) for r in grouped)}
+    if unknown := [m for m in metrics if m not in known]:
+        print(f"--metrics: unknown key(s) {unknown} (or n/a for a grouped checkpoint); known: {sorted(known)}",
+              file=sys.stderr)
+        return 2
 
     print("| recipe | seeds | " + " | ".join(f"{m} mean ± std (min-max)" for m in metrics) + " |")
     print("| --- | ---: | " + " | ".join("---:" for _ in metrics) + " |")
     for name, members in groups:
         cells = []
         for m in metrics:
-            s = spread([rows[c][1][m] for c in members])
+            s = spread([rows[c][m] for c in members])
             cells.append(f"{s['mean']:.4g} ± {s['std']:.2g} ({s['min']:.4g}-{s['max']:.4g})")
         print(f"| {name} | {len(members)} | " + " | ".join(cells) + " |")
     print()
@@ -85,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     print("| --- | --- | " + " | ".join("---:" for _ in metrics) + " |")
     for name, members in groups:
         for c in members:
-            print(f"| {name} | {c} | " + " | ".join(f"{rows[c][1][m]:.4g}" for m in metrics) + " |")
+            print(f"| {name} | {c} | " + " | ".join(f"{rows[c][m]:.4g}" for m in metrics) + " |")
     return 0
 
 

@@ -54,5 +54,7 @@ def test_a_group_matching_nothing_or_a_missing_directory_is_a_clear_error(tmp_pa
     d = _write_eval(tmp_path / "eval", {"lstm (best.pt)": ("runs/lstm/best.pt", 0.057)})
     assert seed_spread.main([str(d), "--group", "x=runs/nope/*.pt"]) == 2
     assert "no evaluated checkpoint matches" in capsys.readouterr().err
+    assert seed_spread.main([str(d), "--group", "x=runs/lstm/*", "--metrics", "rot_l2"]) == 2
+    assert "unknown key(s) ['rot_l2']" in capsys.readouterr().err
     with pytest.raises(SystemExit, match="not found"):
         seed_spread.main([str(tmp_path / "missing"), "--group", "x=*"])

@@ -23,9 +23,9 @@ per_dance.json, and prints the table. Metric definitions: docs/metrics.md.
 
 EPILOG = """\
 examples:
-  performer evaluate --checkpoint models/assets/default.pt --data ../shared/data/dwm --out runs/eval
-  performer evaluate --checkpoint runs/causal/best.pt runs/unet_gan/best.pt --data ../shared/data/dwm
-  performer evaluate --checkpoint CKPT --data ../shared/data/dwm --dances 1 --max-frames 600   # quick look
+  performer evaluate --checkpoint models/assets/default.pt --data /path/to/dwm --out runs/eval
+  performer evaluate --checkpoint runs/causal/best.pt runs/unet_gan/best.pt --data /path/to/dwm
+  performer evaluate --checkpoint CKPT --data /path/to/dwm --dances 1 --max-frames 600   # quick look
 """
 
 

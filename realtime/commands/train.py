@@ -17,7 +17,7 @@ under --cache, so later runs start in seconds.
 
 EPILOG = """\
 example (the shipped default checkpoint, see docs/training.md):
-  performer train --config configs/default.toml --data ../shared/data/dwm --out runs/default
+  performer train --config configs/default.toml --data /path/to/dwm --out runs/default
 """
 
 
