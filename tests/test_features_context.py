@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _audio_blocks import stream_in_random_blocks
 
 from models.errors import ConfigError
 from models.features.context import BEAT_COLUMNS, TEMPO_WINDOW, ContextTracker
@@ -124,15 +125,7 @@ def test_streamed_columns_equal_offline_and_follow_the_music(sr):
     x = resample(y, SAMPLE_RATE, sr)
     y22 = resample(x, sr, SAMPLE_RATE)
     offline = extract_features(y22, FULL)
-    ex = StreamingFeatureExtractor(FULL, sr)
-    rng = np.random.default_rng(sr)
-    out, lo = [], 0
-    while lo < x.size:
-        n = int(rng.integers(1, 3000))
-        out.append(ex.push(x[lo : lo + n]))
-        lo += n
-    out.append(ex.flush())
-    streamed = np.concatenate(out)
+    streamed = stream_in_random_blocks(StreamingFeatureExtractor(FULL, sr), x, seed=sr)
     assert streamed.shape == offline.shape == (offline.shape[0], FULL.dim)
     np.testing.assert_allclose(streamed, offline, atol=1e-4, rtol=0)
     np.testing.assert_array_equal(offline[:, : FULL.base_dim], extract_features(y22, FeatureConfig()))

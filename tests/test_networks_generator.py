@@ -164,3 +164,46 @@ def test_dropout_acts_in_training_only_and_leaves_the_stream_unchanged():
     dropped.train()
     a, b = dropped(x), dropped(x)
     assert not torch.allclose(a, b)
+
+
+def test_input_norm_standardises_before_padding_and_streams_exactly():
+    """input_norm: eval mode is a fixed per-column (x - mean) / std before the first block, so
+    features with wildly different scales reach it standardised; the causal left padding and
+    the stream's zero history are both the mean frame, which keeps the step equal to forward."""
+    torch.manual_seed(3)
+    model = randomize_batchnorm(CausalGenerator(GeneratorConfig(channels=SMALL, feature_dim=6, input_norm=True)), 3)
+    scale = torch.tensor([1000.0, 1.0, 0.01, 50.0, 3.0, 0.5])
+    mean = torch.tensor([-300.0, 2.0, 0.0, 10.0, -1.0, 0.0])
+    model.train()
+    for _ in range(200):  # running statistics converge to the inputs' own
+        model(torch.randn(4, 6, 64) * scale[None, :, None] + mean[None, :, None])
+    model.eval()
+    n = model.in_norm
+    assert ((n.running_mean - mean).abs() < 0.1 * scale).all(), n.running_mean  # within a tenth of a std
+    assert ((n.running_var.sqrt() / scale - 1).abs() < 0.1).all(), n.running_var.sqrt()
+    x = torch.randn(1, 6, 70) * scale[None, :, None] + mean[None, :, None]
+    full = model(x)
+    # Output frame t only reads inputs <= t, whatever the scales.
+    x2 = x.clone()
+    x2[..., 40:] *= -5
+    torch.testing.assert_close(model(x2)[..., :40], full[..., :40])
+    # Same as a model without the option fed the standardised input by hand.
+    plain = CausalGenerator(GeneratorConfig(channels=SMALL, feature_dim=6))
+    plain.load_state_dict({k: v for k, v in model.state_dict().items() if not k.startswith("in_norm.")})
+    plain.eval()
+    z = (x - n.running_mean[None, :, None]) / torch.sqrt(n.running_var + n.eps)[None, :, None]
+    torch.testing.assert_close(plain(z), full, rtol=1e-4, atol=1e-5)
+    st = model.init_stream_state(1)
+    stepped = torch.stack([model.step(x[:, :, t], st).clone() for t in range(70)], dim=-1)
+    assert (stepped - full).abs().max() < 1e-4
+
+
+def test_input_norm_is_off_by_default_and_validated():
+    assert GeneratorConfig().input_norm is False
+    assert not any(k.startswith("in_norm") for k in CausalGenerator(GeneratorConfig(channels=SMALL)).state_dict())
+    assert CausalGenerator(GeneratorConfig(channels=SMALL)).input_affine() is None
+    with pytest.raises(ConfigError, match="input_norm"):
+        GeneratorConfig(input_norm=1)
+    # A config dict from before the option (an old checkpoint's) still builds, without it.
+    old = {k: v for k, v in GeneratorConfig().to_dict().items() if k != "input_norm"}
+    assert GeneratorConfig.from_dict(old).input_norm is False

@@ -29,7 +29,7 @@ def make_model(**kw) -> CausalGenerator:
     return m.eval()
 
 
-@pytest.mark.parametrize("kw", [{}, {"attention": False}, {"kernel": 5, "convs_per_block": 1}])
+@pytest.mark.parametrize("kw", [{}, {"attention": False}, {"kernel": 5, "convs_per_block": 1}, {"input_norm": True}])
 def test_numpy_step_equals_torch_step_frame_by_frame(kw):
     model = make_model(**kw)
     batch = 3

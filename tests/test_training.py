@@ -24,6 +24,7 @@ from models.errors import ConfigError, PerformerError
 from models.features.audio_io import load_audio
 from models.features.spectral import FeatureConfig, extract_features
 from models.generate import load_model, run_model
+from models.networks.blocks import randomize_batchnorm
 from models.networks.checkpoint import build_model, load_checkpoint
 from models.rig.humanoid import BONE_INDEX, BONES, END_EFFECTORS, NUM_BONES
 from models.rig.joint_map import to_dwm_positions
@@ -583,6 +584,24 @@ def test_widened_input_weights_leave_the_old_model_unchanged(run_a):
     bigger = build_model("causal", {"channels": [8, 8, 8, 8, 16], "feature_dim": wide.dim, "pose_dim": POSE_DIM})
     with pytest.raises(ConfigError, match="shape"):
         train_module.widen_inputs(old.state_dict(), bigger.state_dict(), wide.base_dim)
+
+
+def test_widening_keeps_an_input_standardisation_and_the_old_outputs():
+    base, wide = 6, 10
+    torch.manual_seed(0)
+    old = randomize_batchnorm(build_model("causal", {"channels": [8, 8, 8, 8, 16], "feature_dim": base,
+                                                     "pose_dim": POSE_DIM, "input_norm": True}), 1)
+    new = build_model("causal", {"channels": [8, 8, 8, 8, 16], "feature_dim": wide, "pose_dim": POSE_DIM,
+                                 "input_norm": True})
+    state, widened = train_module.widen_inputs(old.state_dict(), new.state_dict(), base)
+    assert widened
+    torch.testing.assert_close(state["in_norm.running_mean"][:base], old.in_norm.running_mean)
+    assert (state["in_norm.running_var"][base:] == 1).all() and (state["in_norm.running_mean"][base:] == 0).all()
+    new.load_state_dict(state)
+    old.eval(), new.eval()
+    x = torch.randn(2, base, 48) * 30 + 5
+    with torch.no_grad():
+        torch.testing.assert_close(new(torch.cat([x, torch.randn(2, wide - base, 48)], dim=1)), old(x))
 
 
 def test_fine_tune_onto_appended_columns_trains_and_refuses_other_features(run_a, data, tmp_path):

@@ -35,6 +35,10 @@ Feature kinds (:class:`FeatureConfig`):
   needs 4 future frames (133 ms); the backward difference keeps the kind causal and
   streamable. :meth:`FeatureConfig.mfcc` gives librosa's mfcc defaults (n_fft = 2048,
   n_mels = 128).
+* ``"mfcc_onset"`` (D = 29): the 28 ``"mfcc"`` columns, then the onset strength of
+  ``"logmel_onset"`` (same definition, on the same log-mel the MFCCs come from) as
+  column 28. The onset column is what the beat tracker (``beat_phase``) follows, so
+  this is the MFCC kind that can carry beat-phase columns.
 
 STFT: periodic Hann window (``scipy.signal.get_window('hann', n_fft)``, librosa's
 default), no normalisation; mel filterbank ``librosa.filters.mel`` (Slaney scale and
@@ -59,7 +63,8 @@ from models.timebase import HOP, SAMPLE_RATE
 # Bump when the numbers any config produces change (definitions, resampler, framing):
 # it is part of every fingerprint, so caches and checkpoints notice.
 FEATURE_VERSION: int = 1
-KINDS: tuple[str, ...] = ("logmel_onset", "linear", "mfcc")
+KINDS: tuple[str, ...] = ("logmel_onset", "linear", "mfcc", "mfcc_onset")
+ONSET_KINDS: tuple[str, ...] = ("logmel_onset", "mfcc_onset")  # last base column = onset strength
 N_MFCC: int = 13  # MFCCs of the "mfcc" kind (fixed: a config field would change every fingerprint)
 _OFFLINE_CHUNK = 1024  # frames per batch in extract_features (bounds memory)
 
@@ -68,14 +73,15 @@ _OFFLINE_CHUNK = 1024  # frames per batch in extract_features (bounds memory)
 class FeatureConfig:
     """What the audio features are. Frozen; compare with :meth:`fingerprint`.
 
-    kind: "logmel_onset", "linear" or "mfcc" (see module docstring).
+    kind: "logmel_onset", "linear", "mfcc" or "mfcc_onset" (see module docstring).
     n_fft: STFT window length in samples at 22050 Hz (>= HOP = 735).
-    n_mels, fmin, fmax: mel filterbank (Hz; used by "logmel_onset" and "mfcc").
+    n_mels, fmin, fmax: mel filterbank (Hz; used by every kind but "linear").
     amin: power floor before the log (1e-10 = -100 dB).
     sample_rate, hop: fixed by models.timebase; stored so fingerprints cover them.
     context_s: time constant (s) of the running mean of the base columns appended
         after them; 0 = off (models/features/context.py).
-    beat_phase: append the 4 beat-tracker columns (``logmel_onset`` only; context.py).
+    beat_phase: append the 4 beat-tracker columns (kinds with an onset column:
+        ``logmel_onset``, ``mfcc_onset``; context.py).
     Both are off by default and then left out of :meth:`to_dict`, so configs without
     them keep the fingerprints they had before the options existed.
     """
@@ -114,8 +120,8 @@ class FeatureConfig:
             raise ConfigError(f"n_fft={self.n_fft!r} must be an int in [{HOP}, 16384] (window >= one hop)")
         if not 1 <= self.n_mels <= 512:
             raise ConfigError(f"n_mels={self.n_mels!r} must be an int in [1, 512]")
-        if self.kind == "mfcc" and self.n_mels < N_MFCC:
-            raise ConfigError(f"the mfcc kind needs n_mels >= {N_MFCC} (it keeps {N_MFCC} coefficients), got {self.n_mels}")
+        if self.kind in ("mfcc", "mfcc_onset") and self.n_mels < N_MFCC:
+            raise ConfigError(f"the {self.kind} kind needs n_mels >= {N_MFCC} (it keeps {N_MFCC} coefficients), got {self.n_mels}")
         if not 0.0 <= self.fmin < self.fmax <= SAMPLE_RATE / 2:
             raise ConfigError(f"need 0 <= fmin < fmax <= {SAMPLE_RATE / 2} Hz; got fmin={self.fmin}, fmax={self.fmax}")
         if not 0.0 < self.amin < 1.0:
@@ -125,8 +131,10 @@ class FeatureConfig:
         if not isinstance(self.beat_phase, (bool, np.bool_)):
             raise ConfigError(f"feature config beat_phase={self.beat_phase!r} must be true or false")
         object.__setattr__(self, "beat_phase", bool(self.beat_phase))
-        if self.beat_phase and self.kind != "logmel_onset":
-            raise ConfigError(f"beat_phase needs the logmel_onset kind (it tracks the onset column), got {self.kind!r}")
+        if self.beat_phase and self.kind not in ONSET_KINDS:
+            raise ConfigError(
+                f"beat_phase needs a kind with an onset column ({', '.join(ONSET_KINDS)}), got {self.kind!r}"
+            )
 
     @classmethod
     def linear(cls, n_fft: int = 1024) -> FeatureConfig:
@@ -144,6 +152,8 @@ class FeatureConfig:
         """Columns of the kind itself, before any context/beat columns."""
         if self.kind == "mfcc":
             return 2 * (N_MFCC + 1)
+        if self.kind == "mfcc_onset":
+            return 2 * (N_MFCC + 1) + 1
         return self.n_mels + 1 if self.kind == "logmel_onset" else self.n_fft // 2 + 1
 
     @property
@@ -196,12 +206,12 @@ class SpectralKernel:
         self.window = get_window("hann", cfg.n_fft, fftbins=True).astype(np.float64)
         self.mel_t = None
         self.dct_t = None
-        if cfg.kind in ("logmel_onset", "mfcc"):
+        if cfg.kind != "linear":
             mel = librosa.filters.mel(
                 sr=cfg.sample_rate, n_fft=cfg.n_fft, n_mels=cfg.n_mels, fmin=cfg.fmin, fmax=cfg.fmax, dtype=np.float64
             )
             self.mel_t = np.ascontiguousarray(mel.T)  # (n_fft//2+1, n_mels)
-        if cfg.kind == "mfcc":
+        if cfg.kind in ("mfcc", "mfcc_onset"):
             from scipy.fft import dct
 
             # Columns of the orthonormal DCT-II (librosa.feature.mfcc's dct_type=2, norm="ortho").
@@ -212,7 +222,8 @@ class SpectralKernel:
 
         frames: (k, n_fft) float64 windows of 22050 Hz audio (frame t = hop-ending window).
         prev_logmel: the state row of the frame before ``frames[0]``, None at stream start:
-        its log-mel (n_mels,) for "logmel_onset", its 13 MFCC + log energy (14,) for "mfcc".
+        its log-mel (n_mels,) for "logmel_onset", its 13 MFCC + log energy (14,) for "mfcc",
+        both of those (14 + n_mels,) for "mfcc_onset".
         Returns ((k, base_dim) float32 base features, last state row to pass as the next prev_logmel).
         """
         spec = np.fft.rfft(frames * self.window, axis=-1)
@@ -221,22 +232,27 @@ class SpectralKernel:
         if self.mel_t is None:
             return (10.0 * np.log10(np.maximum(power, amin))).astype(np.float32), None
         logmel = 10.0 * np.log10(np.maximum(power @ self.mel_t, amin))  # (k, n_mels)
-        if self.dct_t is not None:  # "mfcc": static 14 + backward differences
-            static = np.empty((logmel.shape[0], N_MFCC + 1))
+        out = np.empty((logmel.shape[0], self.cfg.base_dim), np.float32)
+        state = []
+        if self.dct_t is not None:  # "mfcc", "mfcc_onset": static 14 + backward differences
+            n = N_MFCC + 1
+            static = np.empty((logmel.shape[0], n))
             static[:, :N_MFCC] = logmel @ self.dct_t
             static[:, N_MFCC] = 10.0 * np.log10(np.maximum((frames * frames).mean(axis=-1), amin))
-            first = static[:1] if prev_logmel is None else prev_logmel[None]
-            out = np.empty((static.shape[0], self.cfg.base_dim), np.float32)
-            out[:, : N_MFCC + 1] = static
-            out[:, N_MFCC + 1 :] = static - np.concatenate([first, static[:-1]])
-            return out, static[-1].copy()
+            first = static[:1] if prev_logmel is None else prev_logmel[None, :n]
+            out[:, :n] = static
+            out[:, n : 2 * n] = static - np.concatenate([first, static[:-1]])
+            state.append(static[-1])
+            if self.cfg.kind == "mfcc":
+                return out, state[0].copy()
+            prev_logmel = None if prev_logmel is None else prev_logmel[n:]
+        else:
+            out[:, :-1] = logmel
         # Predecessor rows; frame 0 of a stream is its own predecessor (onset 0, as librosa pads).
         first = logmel[:1] if prev_logmel is None else prev_logmel[None]
-        onset = np.maximum(logmel - np.concatenate([first, logmel[:-1]]), 0.0).mean(axis=1)
-        out = np.empty((logmel.shape[0], self.cfg.base_dim), np.float32)
-        out[:, :-1] = logmel
-        out[:, -1] = onset
-        return out, logmel[-1].copy()
+        out[:, -1] = np.maximum(logmel - np.concatenate([first, logmel[:-1]]), 0.0).mean(axis=1)
+        state.append(logmel[-1])
+        return out, np.concatenate(state)
 
 
 def frame_time_s(t: int | np.ndarray) -> float | np.ndarray:

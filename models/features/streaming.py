@@ -188,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rate", type=int, default=48000, help="input sample rate for --bench (Hz)")
     p.add_argument("--block", type=int, default=None, help="samples per push for --bench (default: one frame)")
     p.add_argument("--seconds", type=float, default=60.0, help="audio length for --bench/--compare (s)")
-    p.add_argument("--kind", default="logmel_onset", choices=("logmel_onset", "linear", "mfcc"),
+    p.add_argument("--kind", default="logmel_onset", choices=("logmel_onset", "linear", "mfcc", "mfcc_onset"),
                    help="feature kind for --bench")
     p.add_argument("--context-s", type=float, default=0.0,
                    help="for --bench: add the running-mean context columns with this time constant (s)")
@@ -202,7 +202,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     import dataclasses
 
-    cfg = {"logmel_onset": FeatureConfig, "linear": FeatureConfig.linear, "mfcc": FeatureConfig.mfcc}[args.kind]()
+    cfg = {"logmel_onset": FeatureConfig, "linear": FeatureConfig.linear, "mfcc": FeatureConfig.mfcc,
+           "mfcc_onset": lambda: FeatureConfig(kind="mfcc_onset", n_mels=128)}[args.kind]()
     try:
         cfg = dataclasses.replace(cfg, context_s=args.context_s, beat_phase=args.beat_phase)
     except ConfigError as exc:

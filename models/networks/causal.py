@@ -34,7 +34,8 @@ class StreamState:
     share the pooling phase). enc/dec/up_conv/bottom: conv history ring buffers;
     pool_even[L]: level-L frame waiting for its odd partner before the max pool;
     ups[L]: last two frames of level L+1 for upsampling into level L; skips[L]:
-    the newest level-L encoder frame.
+    the newest level-L encoder frame. in_affine: the input standardisation as
+    (scale, shift), None when the model has none.
     """
 
     frame: int
@@ -49,6 +50,7 @@ class StreamState:
     skips: list[torch.Tensor]
     scratch: list[torch.Tensor]
     buffers: list[torch.Tensor] = field(default_factory=list)
+    in_affine: tuple[torch.Tensor, torch.Tensor] | None = None
 
     def zero_rows(self, rows: slice | int | list[int]) -> None:
         """Reset the given streams to the zero state (buffers only; ``frame`` is shared)."""
@@ -91,6 +93,7 @@ class CausalGenerator(UNetGenerator):
             ups=[UpState(prev=torch.zeros(batch, c[i + 1]), last=torch.zeros(batch, c[i + 1])) for i in range(LEVELS)],
             skips=z[:LEVELS],
             scratch=[torch.zeros(batch, c[i + 1]) for i in range(LEVELS)],
+            in_affine=self.input_affine(),
         )
         convs = [cs for r in (*st.enc, st.bottom, *st.dec) for cs in r.convs] + st.up_conv
         st.buffers = [cs.buf for cs in convs if cs.buf is not None] + st.pool_even
@@ -103,7 +106,7 @@ class CausalGenerator(UNetGenerator):
         n = st.frame
         st.frame = n + 1
         depth = _level_depth(n)
-        h = x
+        h = x if st.in_affine is None else torch.addcmul(st.in_affine[1], x, st.in_affine[0])
         for level in range(LEVELS):
             s = self.enc[level].step(h, st.enc[level])
             st.skips[level] = s

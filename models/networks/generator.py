@@ -51,6 +51,13 @@ class GeneratorConfig:
     dropout: training-only dropout probability on every encoder skip, the bottom and every
         decoder block output (0 = none; not in the paper). Eval mode, and so streaming,
         is unaffected.
+    input_norm: standardise every input feature before the first block (not in the
+        paper): a BatchNorm1d without affine parameters, batch statistics while
+        training, its running mean/variance in eval mode, where it is a fixed
+        per-feature ``(x - mean) / sqrt(var + eps)``. It is applied before any padding,
+        so the causal convs' left zero padding and the streaming state's zero history
+        both stand for the mean feature frame. Needed for inputs with wildly different
+        column scales (MFCC c0 spans O(1000), its deltas O(1)).
     """
 
     feature_dim: int = 65
@@ -63,6 +70,7 @@ class GeneratorConfig:
     attention: bool = True
     gate_ratio: int = 2
     dropout: float = 0.0
+    input_norm: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "channels", tuple(int(c) for c in self.channels))
@@ -76,6 +84,8 @@ class GeneratorConfig:
             raise ConfigError(f"kernel must be odd >= 1, convs_per_block and gate_ratio >= 1; got {self}")
         if not 0.0 <= self.dropout < 1.0:
             raise ConfigError(f"dropout must be in [0, 1), got {self.dropout}")
+        if not isinstance(self.input_norm, bool):
+            raise ConfigError(f"input_norm must be true or false, got {self.input_norm!r}")
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
@@ -135,6 +145,7 @@ class UNetGenerator(nn.Module):
         def res(a: int, b: int) -> ResBlock:
             return ResBlock(a, b, k, causal=causal, n_convs=cfg.convs_per_block, residual=cfg.residual)
 
+        self.in_norm = nn.BatchNorm1d(cfg.feature_dim, affine=False) if cfg.input_norm else None
         ins = [cfg.feature_dim, *c[: LEVELS - 1]]
         self.enc = nn.ModuleList(res(ins[i], c[i]) for i in range(LEVELS))
         self.bottom = res(c[LEVELS - 1], c[LEVELS])
@@ -147,6 +158,14 @@ class UNetGenerator(nn.Module):
         self.dec = nn.ModuleList(res(2 * c[i], c[i]) for i in range(LEVELS))
         self.head = nn.Conv1d(c[0], cfg.pose_dim, 1)
         init_pose_head(self.head)
+
+    def input_affine(self) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """Eval-mode input standardisation as ``x * scale + shift`` (each (D,)), None without it."""
+        if self.in_norm is None:
+            return None
+        n = self.in_norm
+        scale = torch.rsqrt(n.running_var.detach() + n.eps)
+        return scale, -n.running_mean.detach() * scale
 
     def _upsample(self, u: torch.Tensor) -> torch.Tensor:
         return causal_upsample(u) if self.config.causal else offline_upsample(u)
@@ -163,6 +182,8 @@ class UNetGenerator(nn.Module):
         cfg = self.config
         if x.ndim != 3 or x.shape[1] != cfg.feature_dim:
             raise ConfigError(f"generator input must be (B, {cfg.feature_dim}, T), got {tuple(x.shape)}")
+        if self.in_norm is not None:
+            x = self.in_norm(x)
         t = x.shape[-1]
         mult = 2**LEVELS
         if t % mult:

@@ -125,6 +125,10 @@ class NumpyStep:
         self.batch = batch
         self.frame = 0
         self.attention = model.config.attention
+        aff = st.in_affine
+        self.in_scale = None if aff is None else _np(aff[0])
+        self.in_shift = None if aff is None else _np(aff[1])
+        self.x_norm = np.zeros((batch, model.config.feature_dim), np.float32)
         self.enc = [_Res(m, s, batch) for m, s in zip(model.enc, st.enc)]
         self.bottom = _Res(model.bottom, st.bottom, batch)
         self.up = [_Conv(s, m.act, m.conv.dilation[0], batch) for m, s in zip(model.up, st.up_conv)]
@@ -175,6 +179,9 @@ class NumpyStep:
         m = n + 1
         depth = min(LEVELS, (m & -m).bit_length() - 1)
         h = x
+        if self.in_scale is not None:  # input standardisation (GeneratorConfig.input_norm)
+            h = np.multiply(x, self.in_scale, out=self.x_norm)
+            h += self.in_shift
         for level in range(LEVELS):
             s = self.enc[level].step(h)
             self.skips[level] = s

@@ -184,7 +184,10 @@ def widen_inputs(init: dict, target: dict, base_dim: int) -> tuple[dict, list[st
     ``target``'s shapes where only the input width grew: every weight whose dim 1 is
     ``base_dim`` in ``init`` and larger in ``target`` (the convs that read the input)
     keeps its old columns and gets zeros for the new ones, so the widened network
-    computes exactly what the old one did until training moves the new weights.
+    computes exactly what the old one did until training moves the new weights. An input
+    standardisation's running statistics (``in_norm.running_mean`` / ``running_var``,
+    ``GeneratorConfig.input_norm``) keep the old columns' values and start the new ones
+    at mean 0, variance 1; training mode standardises with batch statistics anyway.
     Returns (state dict, names of the widened tensors); ConfigError on any other
     mismatch.
     """
@@ -200,6 +203,10 @@ def widen_inputs(init: dict, target: dict, base_dim: int) -> tuple[dict, list[st
             out[name] = torch.zeros_like(t)
             out[name][:, :base_dim] = old
             widened.append(name)
+        elif name in ("in_norm.running_mean", "in_norm.running_var") and old.shape == (base_dim,) and \
+                t.dim() == 1 and t.shape[0] > base_dim:
+            out[name] = torch.zeros_like(t) if name.endswith("mean") else torch.ones_like(t)
+            out[name][:base_dim] = old
         else:
             raise ConfigError(f"init_from tensor {name!r} has shape {tuple(old.shape)}, this model {tuple(t.shape)}")
     return out, widened
