@@ -586,6 +586,30 @@ def test_widened_input_weights_leave_the_old_model_unchanged(run_a):
         train_module.widen_inputs(old.state_dict(), bigger.state_dict(), wide.base_dim)
 
 
+def test_input_standardised_mfcc_model_trains_loads_and_streams_like_offline(data, tmp_path):
+    """The recipe of configs/mfcc_norm.toml in small: input_norm on mfcc_onset features, through
+    the real loop; the saved model's running statistics are the corpus's, and the engine's
+    streaming path (NumPy step) gives the offline windowed output."""
+    from models.networks.streaming import StreamingGenerator, offline_windowed
+
+    feats = {"kind": "mfcc_onset", "n_mels": 16}
+    out = run_train(data, tmp_path / "mfcc", features=feats, stage1_steps=20, eval_every=10,
+                    model_config={"channels": [8, 8, 8, 8, 8], "input_norm": True})
+    rows = read_log(out)
+    assert float(rows[-1]["loss_rot"]) < float(rows[0]["loss_rot"])
+    loaded = load_model(out / "best.pt")
+    assert loaded.features == FeatureConfig(**feats) and loaded.model.config.input_norm
+    root, cache = data
+    x = extract_features(load_audio(next(root.glob("DANCE_*")) / "audio.mp3")[0], loaded.features)[:200]
+    norm = loaded.model.in_norm
+    assert abs(float(norm.running_mean[0]) - float(x[:, 0].mean())) < 3 * float(x[:, 0].std())  # c0, O(100) dB units
+    assert float(norm.running_var[0]) > 10.0  # a real variance, not the initial 1
+    ref = offline_windowed(loaded.model, x)
+    gen = StreamingGenerator(loaded.model)
+    streamed = np.concatenate([gen.push(x[i : i + 9]) for i in range(0, len(x), 9)])
+    assert np.abs(streamed - ref).max() < 1e-4
+
+
 def test_widening_keeps_an_input_standardisation_and_the_old_outputs():
     base, wide = 6, 10
     torch.manual_seed(0)
