@@ -10,6 +10,9 @@ Each model kind runs the way it is meant to run (:func:`run_model`):
   the output cropped back;
 * ``lstm``: one forward over the features padded at the end with ``output_delay``
   repeated frames; output frame ``t + delay`` is pose ``t``;
+* ``dance_vq`` (the dancing performer, docs/training.md): :meth:`DanceVQ.generate`, the
+  live stream (:class:`models.networks.dance_stream.DanceStream`) run over the whole song
+  with a seed (default 0) and a style (default: the music decides);
 * ``gcn``: :meth:`models.networks.gcn.GCNDancer.generate_poses` on the whole song: its
   music classifier hears the raw audio (passed as ``audio``), seeded GP noise, one
   generator forward, cubic-spline smoothing (offline only, docs/gcn.md).
@@ -118,7 +121,7 @@ def _pad_end(x: np.ndarray, n: int) -> np.ndarray:
 
 
 def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, seed: int | None = None,
-              audio: np.ndarray | None = None) -> np.ndarray:
+              audio: np.ndarray | None = None, style: str | None = None) -> np.ndarray:
     """Poses ``(T, POSE_DIM)`` float32 for features ``(T, D)`` at 30 fps, one per frame.
 
     ``window``/``hop`` (frames) apply to causal U-Nets only (see the module docstring
@@ -131,6 +134,9 @@ def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, see
     ``audio``: the song (n,) at 22050 Hz with frame t ending at sample (t + 1) * HOP, for
     models that listen to the waveform themselves (``model.needs_audio``: ``gcn``'s
     music style classifier); they raise ConfigError without it.
+
+    ``style``: for models that take one (``dance_vq``): None/"auto" (the music decides),
+    "chacha", "rumba" or "waltz"; ConfigError for any other model given a style.
     """
     import torch
 
@@ -147,8 +153,13 @@ def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, see
     x, _ = sanitize_features(x)
     if getattr(model, "needs_audio", False):  # gcn: style from the raw waveform, whole song at once
         return model.generate_poses(x, audio, seed=seed)
-    if callable(getattr(model, "generate", None)):  # a whole-song procedure of its own (dtm)
+    takes_style = getattr(model, "takes_style", False)
+    if style not in (None, "auto") and not takes_style:
+        raise ConfigError(f"model {type(model).__name__} takes no style; --style works with dance_vq models")
+    if callable(getattr(model, "generate", None)):  # a whole-song procedure of its own (dtm, dance_vq)
         kw = {"seed": int(seed or 0)} if getattr(model, "stochastic", False) else {}
+        if takes_style:
+            kw["style"] = style
         return model.generate(x, **kw)
     t = len(x)
     delay = int(getattr(model, "output_delay", 0))
@@ -227,6 +238,8 @@ def generate(
     loaded: LoadedModel,
     window: int = 128,
     hop: int = 64,
+    seed: int | None = None,
+    style: str | None = None,
 ) -> Generation:
     """Generate motion for a whole audio file with a loaded model and write it to ``out``.
 
@@ -252,7 +265,7 @@ def generate(
     feats = extract_features(audio, loaded.features)
     timings["features"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    poses = run_model(loaded.model, feats, window=window, hop=hop, audio=audio)
+    poses = run_model(loaded.model, feats, window=window, hop=hop, audio=audio, seed=seed, style=style)
     timings["model"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     export_motion(poses, out, source_audio=str(audio_path), checkpoint=str(loaded.path), model_name=loaded.name)

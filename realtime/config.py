@@ -32,6 +32,8 @@ from models.errors import ConfigError
 DEFAULT_OSC = "127.0.0.1:39539"  # VMC protocol's usual receiver port (VSeeFace, VMC receivers)
 DEFAULT_WS = "127.0.0.1:8765"
 OSC_MODES = ("vmc", "plain")
+#: --style values: "auto" lets the music decide (dance_vq models; models.networks.dance_vq.STYLES)
+STYLE_CHOICES = ("auto", "chacha", "rumba", "waltz")
 #: Environment variable read for the WebSocket token when neither flag nor file sets one
 #: (unlike a flag, it does not show in the process list).
 TOKEN_ENV = "PERFORMER_WS_TOKEN"
@@ -55,6 +57,8 @@ class RunConfig:
     ws: str = DEFAULT_WS
     no_ws: bool = False
     checkpoint: Path | None = None
+    style: str = "auto"
+    seed: int = 0
     record: Path | None = None
     threads: int = 1
     offset_ms: float = 0.0
@@ -77,6 +81,8 @@ class RunConfig:
             raise ConfigError("--loop replays a file in real time (--audio FILE without --fast)")
         if self.monitor and (self.audio is None or self.fast):
             raise ConfigError("--monitor plays a file replayed in real time (--audio FILE without --fast)")
+        if self.style not in STYLE_CHOICES:
+            raise ConfigError(f"style must be one of {STYLE_CHOICES}, got {self.style!r}")
         if self.osc_mode not in OSC_MODES:
             raise ConfigError(f"osc_mode must be one of {OSC_MODES}, got {self.osc_mode!r}")
         checks = [
@@ -116,7 +122,7 @@ _PATHS = {"audio", "checkpoint", "record", "fallback_audio"}
 _TYPES: dict[str, tuple[type, ...]] = {
     "audio": (str,), "input_device": (str, int), "sample_rate": (int,), "block_size": (int,),
     "monitor": (bool,), "loop": (bool,), "fast": (bool,), "duration": (int, float), "osc": (list, str),
-    "osc_mode": (str,), "no_osc": (bool,), "ws": (str,), "no_ws": (bool,), "checkpoint": (str,),
+    "osc_mode": (str,), "no_osc": (bool,), "ws": (str,), "no_ws": (bool,), "checkpoint": (str,), "style": (str,), "seed": (int,),
     "record": (str,), "threads": (int,), "offset_ms": (int, float), "smoothing": (int, float),
     "warmup": (int, float), "fallback_audio": (str,), "fallback_after": (int, float), "ws_token": (str,),
     "ws_viewers_open": (bool,), "ws_max_clients": (int,), "ws_origin": (list, str),

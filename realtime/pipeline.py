@@ -36,13 +36,16 @@ class Pipeline:
     meta: dict = field(default_factory=dict)
 
 
-def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, hop: int = 64) -> Pipeline:
+def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, hop: int = 64, seed: int = 0,
+                   style: str | None = None) -> Pipeline:
     """Load ``checkpoint`` (default: the packaged one) into an extractor factory and a pose model.
 
     Raises :class:`CheckpointError` naming the file if it is missing, unreadable, not a
     causal model, or made for another rig or feature code. A model that declares
     ``offline_only`` (``violin``, ``dtm``: they read future frames) is refused with one
     line saying so and why (its ``offline_reason``), before any streaming state is built.
+    A ``dance_vq`` model streams as a :class:`~models.networks.dance_stream.DanceStream`
+    with ``seed`` and ``style`` (None: the music decides); a style for another model is refused.
     """
     from models.features.streaming import StreamingFeatureExtractor
     from models.networks.streaming import StreamingGenerator
@@ -54,7 +57,17 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
         raise CheckpointError(f"model {loaded.name!r} is offline-only ({reason}); it cannot run live: "
                               "use `performer generate` or `performer evaluate`", source=path)
     try:
-        generator = StreamingGenerator(loaded.model, window=window, hop=hop)
+        if getattr(loaded.model, "takes_style", False):
+            from models.networks.dance_stream import DanceStream
+
+            generator = DanceStream(loaded.model, seed=seed, style=style)
+        else:
+            if style not in (None, "auto"):
+                raise CheckpointError(f"model {loaded.name!r} takes no style (--style needs a dance_vq model)",
+                                      source=path)
+            generator = StreamingGenerator(loaded.model, window=window, hop=hop)
+    except CheckpointError:
+        raise
     except PerformerError as exc:
         raise CheckpointError(f"model {meta.get('model_name')!r} cannot stream: {exc}", source=path) from None
 

@@ -35,6 +35,7 @@ from models.networks.generator import GeneratorConfig
 from models.networks.violin import ViolinConfig, ViolinNet
 from models.networks.gcn import GCNConfig, GCNDancer
 from models.networks.dtm import DanceToMusic, DTMConfig
+from models.networks.dance_vq import DanceVQ, DanceVQConfig
 
 FORMAT = "live-performer-checkpoint"
 FORMAT_VERSION = 1
@@ -48,6 +49,7 @@ MODELS: dict[str, tuple[type, dict[str, Any]]] = {
     "violin": (ViolinConfig, {}),  # Kao & Su 2020, offline only (models/networks/violin.py)
     "gcn": (GCNConfig, {}),
     "dtm": (DTMConfig, {}),
+    "dance_vq": (DanceVQConfig, {}),  # the dancing performer: motion codebook + causal code predictor
 }
 
 
@@ -74,6 +76,8 @@ def build_model(name: str = "causal", config: Any = None) -> nn.Module:
         return DanceToMusic(config)
     if name == "gcn":
         return GCNDancer(config)
+    if name == "dance_vq":
+        return DanceVQ(config)
     return LSTMRegressor(config) if name == "lstm" else make_unet(config)
 
 

@@ -37,6 +37,9 @@ SUB_LAYERS: tuple[tuple[tuple[int, int], ...], ...] = (
     ((4, 2), (3, 2), (3, 2), (5, 2), (6, 1)),
 )
 RECEPTIVE_FIELDS: tuple[int, ...] = (1, 12, 48, 128)
+#: Scales of the velocity and acceleration channels (config ``motion``): per-frame differences
+#: of the pose vector are ~0.01-0.05, so these bring them to the poses' order of magnitude.
+MOTION_SCALES: tuple[float, float] = (10.0, 30.0)
 
 
 def receptive_field(layers: tuple[tuple[int, int], ...]) -> int:
@@ -50,11 +53,17 @@ def receptive_field(layers: tuple[tuple[int, int], ...]) -> int:
 
 @dataclass(frozen=True)
 class DiscriminatorConfig:
-    """feature_dim: D; pose_dim: POSE_DIM; width: channels of every hidden layer."""
+    """feature_dim: D; pose_dim: POSE_DIM; width: channels of every hidden layer.
+
+    motion: also feed the pose's velocity and acceleration (first and second differences
+    per frame, scaled by :data:`MOTION_SCALES`, the first frame's repeated), so every
+    patch judges how the pose moves as well as where it is (not in the paper; issue 18).
+    """
 
     feature_dim: int = 65
     pose_dim: int = POSE_DIM
     width: int = 64
+    motion: bool = False
 
 
 class SubDiscriminator(nn.Module):
@@ -80,7 +89,7 @@ class MultiScaleDiscriminator(nn.Module):
     def __init__(self, config: DiscriminatorConfig | None = None) -> None:
         super().__init__()
         self.config = cfg = config or DiscriminatorConfig()
-        c_in = cfg.feature_dim + cfg.pose_dim
+        c_in = cfg.feature_dim + cfg.pose_dim * (3 if cfg.motion else 1)
         self.subs = nn.ModuleList(SubDiscriminator(c_in, cfg.width, layers) for layers in SUB_LAYERS)
 
     def forward(self, features: torch.Tensor, motion: torch.Tensor) -> list[torch.Tensor]:
@@ -96,6 +105,10 @@ class MultiScaleDiscriminator(nn.Module):
                 f"discriminator needs equal lengths >= {max(RECEPTIVE_FIELDS)} frames; "
                 f"got {features.shape[-1]} and {motion.shape[-1]}"
             )
+        if cfg.motion:
+            v = torch.diff(motion, dim=-1, prepend=motion[..., :1])
+            a = torch.diff(v, dim=-1, prepend=v[..., :1])
+            motion = torch.cat((motion, MOTION_SCALES[0] * v, MOTION_SCALES[1] * a), dim=1)
         x = torch.cat((features, motion), dim=1)
         return [sub(x) for sub in self.subs]
 

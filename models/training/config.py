@@ -63,11 +63,14 @@ class TrainConfig:
     # statistics are kept). Empty = train everything.
     train_only: list[str] = field(default_factory=list)
     disc_width: int = 64
+    # The discriminator also sees velocities and accelerations of the poses (DiscriminatorConfig.motion)
+    disc_motion: bool = False
     tempos: list[float] = field(default_factory=lambda: [0.75, 0.875, 1.0, 1.125, 1.25])
     exclude_unverified: bool = True  # train only on dances whose audio alignment is verified
     eval_every: int = 250
     threads: int = 2
     dtm: dict[str, Any] = field(default_factory=dict)  # model "dtm": loss weights etc. (models.training.dtm)
+    dance: dict[str, Any] = field(default_factory=dict)  # model "dance_vq": options (models.training.dance_vq)
 
     @property
     def total_steps(self) -> int:

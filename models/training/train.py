@@ -238,6 +238,9 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
     if cfg.model == "dtm":  # two phases of its own (decomposition, composition)
         from models.training.dtm import train_dtm
         return train_dtm(cfg, data_root, out_dir, cache_dir, progress)
+    if cfg.model == "dance_vq":  # codebook, then code predictor (models/training/dance_vq.py)
+        from models.training.dance_vq import train_dance_vq
+        return train_dance_vq(cfg, data_root, out_dir, cache_dir, progress)
     if cfg.model == "gcn":  # its own losses, discriminator and music classifier (models/training/gcn_train.py)
         from models.training.gcn_train import train_gcn
         return train_gcn(cfg, data_root, out_dir, cache_dir, progress)
@@ -267,7 +270,8 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
     model_config = model.config if hasattr(model, "config") else model_cfg
     frozen_norms = freeze_except(model, cfg.train_only) if cfg.train_only else []
     ema = averaged(model, cfg.ema_decay)
-    disc = MultiScaleDiscriminator(DiscriminatorConfig(feature_dim=fcfg.dim, pose_dim=POSE_DIM, width=cfg.disc_width))
+    disc = MultiScaleDiscriminator(DiscriminatorConfig(feature_dim=fcfg.dim, pose_dim=POSE_DIM, width=cfg.disc_width,
+                                                   motion=cfg.disc_motion))
     opt_g = torch.optim.Adam([prm for prm in model.parameters() if prm.requires_grad], lr=cfg.lr, betas=(cfg.beta1, 0.999))
     opt_d = torch.optim.Adam(disc.parameters(), lr=cfg.lr, betas=(cfg.beta1, 0.999))
     d_model = getattr(getattr(model, "config", None), "d_model", None)  # for lr_schedule = "noam"

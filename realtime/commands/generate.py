@@ -31,6 +31,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--checkpoint", metavar="CKPT", help="model checkpoint (default: the packaged models/assets/default.pt)")
     p.add_argument("--window", type=int, default=128, help="causal model: window length in frames (default 128)")
     p.add_argument("--hop", type=int, default=64, help="causal model: hop between windows in frames, a multiple of 16 (default 64)")
+    p.add_argument("--style", choices=("auto", "chacha", "rumba", "waltz"), default="auto",
+                   help="dance_vq models: dance this style (default auto: the style the music suggests)")
+    p.add_argument("--seed", type=int, default=0, metavar="N",
+                   help="seed of a stochastic model's random choices (default 0)")
     p.add_argument("--threads", type=int, default=1, metavar="N",
                    help="torch intra-op threads (default 1: far faster than 2 when the cores are busy; "
                         "see docs/training.md)")
@@ -48,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
     check_output_path(args.out)  # fail before loading anything
     loaded = load_model(args.checkpoint)
     with torch_threads(args.threads):
-        g = generate(args.audio, args.out, loaded, window=args.window, hop=args.hop)
+        g = generate(args.audio, args.out, loaded, window=args.window, hop=args.hop, seed=args.seed,
+                     style=None if args.style == "auto" else args.style)
     t = g.timings
     print(f"{args.out}: {g.num_frames} frames ({g.num_frames / 30:.2f} s at 30 fps) from {g.audio_s:.2f} s of audio, "
           f"model {loaded.name} ({loaded.path})")

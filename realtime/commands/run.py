@@ -78,6 +78,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     o.add_argument("--record", metavar="FILE", help="write what was streamed to FILE.npz and FILE.bvh when the run stops")
     m = p.add_argument_group("model and timing")
     m.add_argument("--checkpoint", metavar="CKPT", help="model checkpoint (default: the packaged one)")
+    m.add_argument("--style", choices=("auto", "chacha", "rumba", "waltz"),
+                   help="dance this style to any music (default auto: the style the music suggests); "
+                        "dance_vq models only")
+    m.add_argument("--seed", type=int, metavar="N",
+                   help="seed of the dance's random choices (default 0: the same music gives the same dance)")
     m.add_argument("--threads", type=int, metavar="N", help="torch threads (default 1: fastest for per-frame work)")
     m.add_argument("--smoothing", type=float, metavar="X",
                    help="exponential pose smoothing in [0, 1): weight of the previous pose (default 0 = off)")
@@ -151,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
 
         fallback = FileSource.open(cfg.fallback_audio, sample_rate=cfg.sample_rate, block_size=cfg.block_size,
                                    realtime=True, loop=True)
-    pipeline = build_pipeline(cfg.checkpoint)
+    pipeline = build_pipeline(cfg.checkpoint, seed=cfg.seed, style=None if cfg.style == "auto" else cfg.style)
     sinks = _open_sinks(cfg, source.sample_rate)
     engine = Engine(
         source, pipeline.extractor_factory, pipeline.model, sinks,

@@ -1,0 +1,244 @@
+"""The dancing performer (dance_vq): codebook, predictor, live stream, idle gate, pipeline."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from models.errors import CheckpointError, ConfigError
+from models.networks.checkpoint import build_model, load_checkpoint, save_checkpoint
+from models.networks.dance_stream import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, DanceStream, idle_pose
+from models.networks.dance_vq import DanceVQ, DanceVQConfig, style_token
+from models.rig.humanoid import BONES
+from models.rig.motion import POSE_DIM
+from models.training.dance_vq import (DanceVQTrainOptions, codebook_step, encode_clips, predictor_batch,
+                                      predictor_loss, synthetic_noise)
+
+TINY = DanceVQConfig(feature_dim=10, codebook=16, code_dim=8, enc_width=16, dec_width=16, d_model=16, layers=1,
+                     heads=2, window_codes=4, energy_col=0, clarity_col=-1)
+
+
+def tiny_model(seed: int = 0) -> DanceVQ:
+    torch.manual_seed(seed)
+    m = DanceVQ(TINY).eval()
+    with torch.no_grad():
+        m.gate[0] = -50.0  # silence below -50 in column 0
+        for p in m.decoder.out.parameters():  # visible motion from a random decoder
+            p.mul_(20.0)
+    return m
+
+
+def music(n: int, seed: int = 0) -> np.ndarray:
+    x = np.random.default_rng(seed).normal(size=(n, TINY.feature_dim)).astype(np.float32)
+    x[:, 0] = -10.0  # loud
+    return x
+
+
+def quat_angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per-bone rotation angle (deg) between two poses' quaternions (…, P)."""
+    qa, qb = a[..., 3:].reshape(*a.shape[:-1], -1, 4), b[..., 3:].reshape(*b.shape[:-1], -1, 4)
+    dot = np.clip(np.abs((qa * qb).sum(-1)), 0, 1)
+    return np.degrees(2 * np.arccos(dot))
+
+
+def test_live_stream_equals_the_whole_song_in_any_chunking():
+    m = tiny_model()
+    x = music(300)
+    whole = m.generate(x, seed=5)
+    assert whole.shape == (300, POSE_DIM) and whole.dtype == np.float32 and np.isfinite(whole).all()
+    np.testing.assert_allclose(np.linalg.norm(whole[:, 3:].reshape(300, -1, 4), axis=-1), 1.0, atol=1e-5)
+    rng = np.random.default_rng(0)
+    s = DanceStream(m, seed=5)
+    parts, i = [], 0
+    while i < len(x):
+        k = int(rng.integers(0, 20))
+        parts.append(s.push(x[i: i + k]))
+        i += k
+    # the same codes, so the same poses to float32 rounding (the output's renormalisation runs per push)
+    np.testing.assert_allclose(np.concatenate(parts), whole, atol=1e-6, rtol=0)
+    s.reset()  # same seed again: the same dance
+    np.testing.assert_array_equal(s.push(x), whole)
+    assert np.all(whole[:, [0, 2]] == 0)  # in place
+
+
+def test_seed_and_style_change_the_dance_and_bad_styles_are_refused():
+    m = tiny_model()
+    x = music(200)
+    a, b = m.generate(x, seed=1), m.generate(x, seed=2)
+    assert np.abs(a - b).max() > 1e-3
+    c = m.generate(x, seed=1, style="waltz")
+    assert np.abs(a - c).max() > 1e-3
+    np.testing.assert_array_equal(m.generate(x, seed=1, style="auto"), a)
+    assert style_token(None) == 0 and style_token("W") == 3
+    with pytest.raises(ConfigError, match="unknown style 'tango'"):
+        m.generate(x, style="tango")
+    with pytest.raises(ConfigError, match="unknown style"):
+        DanceStream(m).set_style("salsa")
+
+
+def test_silence_settles_to_a_calm_idle_and_music_brings_the_dance_back_without_a_jump():
+    m = tiny_model()
+    x = music(600)
+    x[200:400, 0] = -100.0  # 6.7 s of silence
+    s = DanceStream(m, seed=0)
+    weights, poses = [], []
+    for row in x:
+        poses.append(s.push(row[None])[0])
+        weights.append(s.idle_weight)
+    w, p = np.array(weights), np.array(poses)
+    # a stream starts at rest and fades in on music
+    assert w[0] == pytest.approx(1.0 - 1 / FADE_FRAMES) or w[0] == 1.0
+    assert w[PRESENT_FRAMES + FADE_FRAMES + 2] == 0.0
+    # silence: idle within ABSENT + FADE frames (< 2 s) and held
+    settle = 200 + ABSENT_FRAMES + FADE_FRAMES
+    assert settle - 200 < 60 and np.all(w[settle:400] == 1.0)
+    idle = idle_pose(s._idle_base, np.arange(settle, 400))
+    assert quat_angles_deg(p[settle:400], idle).max() < 0.01
+    # the idle is calm: a small sway, far less than the dance moves
+    sway = quat_angles_deg(p[settle + 1:400], p[settle:399]).max()
+    dance = quat_angles_deg(p[60:199], p[59:198]).max()
+    assert sway < 0.5 < dance
+    # music again: dancing within PRESENT + FADE frames (< 1 s)
+    back = 400 + PRESENT_FRAMES + FADE_FRAMES
+    assert back - 400 < 30 and np.all(w[back:] == 0.0)
+    # no snap: no frame-to-frame step during the fades is larger than the dance's own
+    fades = np.r_[200:settle + 1, 400:back + 1]
+    assert quat_angles_deg(p[fades], p[fades - 1]).max() <= dance + 1e-3
+
+
+def test_forced_idle_holds_whatever_the_music():
+    m = tiny_model()
+    s = DanceStream(m, seed=0)
+    s.push(music(100))
+    assert s.idle_weight == 0.0
+    s.set_idle(True)
+    s.push(music(FADE_FRAMES + 5, seed=1))
+    assert s.idle_weight == 1.0
+    s.set_idle(False)
+    s.push(music(FADE_FRAMES + 5, seed=2))
+    assert s.idle_weight == 0.0
+
+
+def test_non_finite_features_are_counted_and_poses_stay_valid():
+    m = tiny_model()
+    x = music(50)
+    x[10, 3] = np.nan
+    x[11, :] = np.inf
+    s = DanceStream(m)
+    y = s.push(x)
+    assert s.nonfinite_frames == 2 and np.isfinite(y).all()
+    with pytest.raises(ConfigError, match=r"shape \(frames, 10\)"):
+        s.push(np.zeros((3, 9), np.float32))
+
+
+def test_decoder_is_causal_over_codes():
+    m = tiny_model()
+    zq = torch.randn(1, TINY.code_dim, 12)
+    y = m.decoder(zq)
+    zq2 = zq.clone()
+    zq2[..., 7:] += 1.0  # change codes from 7 on
+    y2 = m.decoder(zq2)
+    seg = TINY.seg
+    torch.testing.assert_close(y[:, : 7 * seg], y2[:, : 7 * seg])
+    assert (y[:, 7 * seg:] - y2[:, 7 * seg:]).abs().max() > 1e-4
+    # the last segment of a window of decoder_context codes equals the full pass (streaming decode)
+    full = m.decoder(zq)[0, 11 * seg:]
+    win = m.decoder(zq[..., 12 - TINY.decoder_context:])[0, -seg:]
+    torch.testing.assert_close(full, win)
+
+
+def _poses(t: int, rng: np.random.Generator) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    phase = 2 * np.pi * np.arange(t) / 30.0
+    rot = np.zeros((t, len(BONES), 3))
+    rot[:, :, 2] = 0.4 * np.sin(phase[:, None] + rng.uniform(0, 6, len(BONES)))
+    q = Rotation.from_rotvec(rot.reshape(-1, 3)).as_quat().reshape(t, -1).astype(np.float32)
+    root = np.zeros((t, 3), np.float32)
+    root[:, 1] = 1.0
+    return np.concatenate([root, q], 1)
+
+
+class _Clip:
+    def __init__(self, poses, features, style):
+        self.poses, self.features, self.style = poses, features, style
+        self.valid = np.ones(len(poses), bool)
+        self.num_frames = len(poses)
+        self.tempo = 1.0
+
+
+def test_codebook_and_predictor_learn_on_a_toy_dance():
+    from models.rig.skeleton import load_default_skeleton
+
+    rng = np.random.default_rng(0)
+    torch.manual_seed(0)
+    m = DanceVQ(TINY)
+    poses = _poses(512, rng)
+    m.pose_mean.copy_(torch.from_numpy(poses.mean(0)))
+    m.pose_std.copy_(torch.from_numpy(np.maximum(poses.std(0), 0.02)))
+    offsets = torch.from_numpy(load_default_skeleton().offsets).float()
+    opts = DanceVQTrainOptions(vq_segment=64)
+    opt = torch.optim.Adam([*m.encoder.parameters(), *m.decoder.parameters()], lr=3e-3)
+    m.train()
+    rows = []
+    for _ in range(60):
+        s = rng.integers(0, 512 - 64, 8)
+        rows.append(codebook_step(m, torch.from_numpy(np.stack([poses[i: i + 64] for i in s])), offsets, opts, opt))
+    assert np.mean([r["loss_pose"] for r in rows[-5:]]) < 0.9 * np.mean([r["loss_pose"] for r in rows[:5]])
+    feats = rng.normal(size=(512, TINY.feature_dim)).astype(np.float32)
+    codes = encode_clips(m, [_Clip(poses, feats, "W")], range(2))
+    assert len(codes.codes) == 2 and codes.tokens[0].shape == (64, TINY.seg * TINY.feature_dim)
+    assert codes.style == [3, 3]
+    popt = torch.optim.Adam(m.predictor.parameters(), lr=3e-3)
+    ce = []
+    for _ in range(40):
+        loss, _ = predictor_loss(m, predictor_batch(codes, TINY.window_codes, 16, TINY.codebook, opts, rng))
+        popt.zero_grad()
+        loss.backward()
+        popt.step()
+        ce.append(loss.item())
+    assert np.mean(ce[-5:]) < np.mean(ce[:5])
+
+
+def test_checkpoint_round_trip_and_the_engine_pipeline(tmp_path):
+    from models.features.spectral import FeatureConfig
+
+    from realtime.pipeline import build_pipeline
+
+    fcfg = FeatureConfig(kind="mfcc_onset", n_mels=32, context_s=60.0, beat_phase=True)
+    cfg = DanceVQConfig(feature_dim=fcfg.dim, codebook=16, code_dim=8, enc_width=16, dec_width=16, d_model=16,
+                        layers=1, heads=2, clarity_col=fcfg.dim - 2)
+    torch.manual_seed(0)
+    m = build_model("dance_vq", cfg)
+    path = save_checkpoint(tmp_path / "d.pt", m, model_name="dance_vq", generator_config=m.config,
+                           feature_config={**fcfg.to_dict(), "fingerprint": fcfg.fingerprint()},
+                           rig={"bones": list(BONES), "pose_dim": POSE_DIM})
+    m2, meta = load_checkpoint(path)
+    assert isinstance(m2, DanceVQ) and meta["model_name"] == "dance_vq" and m2.config == cfg
+    pipe = build_pipeline(path, seed=3, style="rumba")
+    assert isinstance(pipe.model, DanceStream) and pipe.model.style == 2 and pipe.model.seed == 3
+    ext = pipe.extractor_factory(44100)
+    feats = ext.push(np.random.default_rng(0).normal(scale=0.1, size=44100).astype(np.float32))
+    assert pipe.model.push(feats).shape == (len(feats), POSE_DIM)
+    with pytest.raises(CheckpointError, match="takes no style"):
+        from models.generate import default_checkpoint_path
+
+        causal = tmp_path / "c.pt"
+        from models.networks.causal import CausalGenerator
+
+        c = build_model("causal", {"feature_dim": fcfg.dim, "channels": [8, 8, 8, 8, 8]})
+        assert isinstance(c, CausalGenerator)
+        save_checkpoint(causal, c, model_name="causal", generator_config=c.config,
+                        feature_config={**fcfg.to_dict(), "fingerprint": fcfg.fingerprint()},
+                        rig={"bones": list(BONES), "pose_dim": POSE_DIM})
+        assert default_checkpoint_path().name == "default.pt"
+        build_pipeline(causal, style="waltz")
+
+
+@pytest.mark.parametrize("kind", ["white", "pink", "brown", "applause", "crowd", "room"])
+def test_synthetic_noise_is_finite_and_bounded(kind):
+    x = synthetic_noise(kind, 1.0, np.random.default_rng(0))
+    assert x.shape == (22050,) and x.dtype == np.float32 and np.isfinite(x).all() and 0 < np.abs(x).max() <= 1.0
+    with pytest.raises(ConfigError):
+        synthetic_noise("jazz", 1.0, np.random.default_rng(0))
