@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/soak.py --minutes 60                 # the full soak (make soak)
     .venv/bin/python benchmarks/soak.py --minutes 2 --json out.json  # the short one tests/test_soak.py runs
+    .venv/bin/python benchmarks/soak.py --minutes 60 --data ../shared/data/dwm   # + the stability check
     .venv/bin/python benchmarks/soak.py load --clients 200 --max-clients 16 --seconds 8 --repeat 2
     .venv/bin/python benchmarks/soak.py crowd --url ws://127.0.0.1:8765/ws --clients 200 --seconds 3
 
