@@ -98,7 +98,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--data", required=True, metavar="DIR", help="the DWM dataset directory (holds DANCE_* dirs)")
     p.add_argument("--dance", default="DANCE_W_5", metavar="NAME",
                    help="the dance (default DANCE_W_5, a validation dance)")
-    p.add_argument("--start", type=float, default=0.0, metavar="S", help="first plotted second of the dance (default 0)")
+    p.add_argument("--start", type=float, default=0.0, metavar="S",
+                   help="first plotted second of the dance (default 0)")
     p.add_argument("--seconds", type=float, default=20.0, metavar="S", help="plotted seconds (default 20)")
     p.add_argument("--cache", default=".cache/corpus", metavar="DIR", help="corpus cache (default .cache/corpus)")
     p.add_argument("--window", type=int, default=128, help="causal models: window in frames (default 128)")

@@ -566,7 +566,8 @@ def _print_soak(r: dict) -> None:
 
 def _print_stability(st: dict) -> None:
     rows = [s for s in st["stretches"] if s["amp_ratio"] is not None]
-    line = f"  stability: {len(st['stretches'])} stretches of {st['stretch_s']:g} s, {len(st['failures']) if not st['ok'] else 0} failing"
+    failing = sum(bool(s["reasons"]) for s in st["stretches"])
+    line = f"  stability: {len(st['stretches'])} stretches of {st['stretch_s']:g} s, {failing} failing"
     if rows:
         amps = [s["amp_ratio"] for s in rows]
         line += (f"; amplitude {min(amps):.2f}-{max(amps):.2f}x the real {st['ref_m'] * 100:.2f} cm (0.5-1.5x), "
