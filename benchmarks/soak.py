@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/soak.py --minutes 60                 # the full soak (make soak)
     .venv/bin/python benchmarks/soak.py --minutes 2 --json out.json  # the short one tests/test_soak.py runs
+    .venv/bin/python benchmarks/soak.py --minutes 60 --data ../shared/data/dwm   # + the stability check
     .venv/bin/python benchmarks/soak.py load --clients 200 --max-clients 16 --seconds 8 --repeat 2
     .venv/bin/python benchmarks/soak.py crowd --url ws://127.0.0.1:8765/ws --clients 200 --seconds 3
 
@@ -12,7 +13,11 @@ WebSocket clients attached, each in another process. Checks: no non-finite pose 
 (engine, every frame handed to the outputs, every frame the receivers decoded), the exact
 frame count (``minutes * 1800``), resident memory growth under 5 % from the end of the
 warm-up (the first 10 % of the audio, at least 30 s) to the end, and no growth in open file
-descriptors. Exit status 1 if a check fails.
+descriptors. Optional (``--stability-ref-m M`` or ``--data DIR``): the stability check of
+issue 18 (:mod:`models.evaluation.stability`) on every frame handed to the outputs: in every
+30-s stretch the dance-scale amplitude between 0.5x and 1.5x the real dances' (``M`` metres,
+or computed from the validation dances under ``DIR``), the root within 0.5 m of its start,
+no freeze, no explosion. Exit status 1 if a check fails.
 
 *load*: the engine paced in real time (the clip, looped) with a WebSocket server, first
 with no client, then while ``--clients`` clients (another process) connect at once to a
@@ -41,7 +46,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -109,6 +114,61 @@ class FrameCheck:
 
     def stats(self) -> dict[str, float]:
         return {"frames": self.frames, "nonfinite": self.nonfinite}
+
+
+class PoseTap:
+    """A sink that hands the poses it is sent to another thread in chunks of ``chunk`` frames.
+
+    ``send`` (engine thread) only copies the pose; full chunks wait in ``ready`` until
+    :meth:`drain` (another thread) feeds them to a consumer, so slow analysis (the
+    stability check's forward kinematics) never counts as engine compute time, and
+    memory stays at the chunks in flight.
+    """
+
+    name = "stability"
+
+    def __init__(self, chunk: int = 900) -> None:
+        from models.rig.motion import POSE_DIM
+
+        self._buf = np.empty((chunk, POSE_DIM), np.float32)
+        self._fill = 0
+        self.frames = 0
+        self.ready: deque[np.ndarray] = deque()
+
+    def send(self, frame) -> None:
+        self._buf[self._fill] = frame.pose
+        self._fill += 1
+        self.frames += 1
+        if self._fill == len(self._buf):
+            self.ready.append(self._buf)
+            self._buf = np.empty_like(self._buf)
+            self._fill = 0
+
+    def drain(self, consume, final: bool = False) -> None:
+        """``consume(poses (n, POSE_DIM))`` every full chunk; with ``final`` (engine stopped) the rest too."""
+        while self.ready:
+            consume(self.ready.popleft())
+        if final and self._fill:
+            consume(self._buf[: self._fill].copy())
+            self._fill = 0
+
+    def close(self) -> None:
+        pass
+
+    def stats(self) -> dict[str, float]:
+        return {"frames": self.frames}
+
+
+def stability_reference_m(data_root: str, cache_dir: str | None, checkpoint: str | None = None) -> float:
+    """The real validation dances' dance-band RMS, m (:func:`models.evaluation.stability.real_reference_m`);
+    the corpus cache entries of ``checkpoint``'s (default: the packaged one's) features are used."""
+    from models.evaluation.stability import real_reference_m
+    from models.generate import load_model
+    from realtime.pipeline import default_checkpoint_path
+
+    path = checkpoint or default_checkpoint_path()
+    features = load_model(path).features if Path(path).is_file() else None
+    return real_reference_m(data_root, cache_dir, features)
 
 
 def default_pipeline(checkpoint: str | None = None):
@@ -390,8 +450,15 @@ def measure_load(clients: int, max_clients: int, seconds: float, repeat: int = 1
     }
 
 
-def soak(minutes: float, checkpoint: str | None = None, progress: bool = True) -> dict:
-    """The soak (module docstring); returns the figures and ``ok``/``failures``."""
+def soak(minutes: float, checkpoint: str | None = None, progress: bool = True,
+         stability_ref_m: float | None = None) -> dict:
+    """The soak (module docstring); returns the figures and ``ok``/``failures``.
+
+    ``stability_ref_m``: the real dances' dance-band RMS in metres; when given, every frame
+    sent goes through :class:`models.evaluation.stability.StabilityMonitor` (result under
+    ``"stability"``, a failing stretch fails the soak).
+    """
+    from models.evaluation.stability import StabilityMonitor
     from realtime.audio_input import FileSource
     from realtime.engine import Engine, EngineConfig
     from realtime.osc_out import OscSink
@@ -406,8 +473,10 @@ def soak(minutes: float, checkpoint: str | None = None, progress: bool = True) -
     ws = WebSocketSink("127.0.0.1", 0)
     osc = OscSink("127.0.0.1", udp.port, "vmc")
     check = FrameCheck()
+    monitor = None if stability_ref_m is None else StabilityMonitor(stability_ref_m)
+    tap = None if monitor is None else PoseTap()
     src = FileSource(audio, sr, realtime=False, loop=True, name="clip (looped)")
-    eng = Engine(src, pipeline.extractor_factory, pipeline.model, [osc, ws, check],
+    eng = Engine(src, pipeline.extractor_factory, pipeline.model, [osc, ws, check] + ([tap] if tap else []),
                  EngineConfig(warmup_s=3.0, duration_s=seconds))
     crowd = Crowd(ws.ws_url, 2, seconds=0)  # until the server closes
     samples: list[tuple[float, float, int, int]] = []  # (wall s, audio s, rss, fds)
@@ -417,6 +486,8 @@ def soak(minutes: float, checkpoint: str | None = None, progress: bool = True) -
         eng.start()
         next_print = 0.0
         while not eng.wait(1.0):
+            if tap is not None:
+                tap.drain(monitor.add)
             a = eng.stats()["audio_seconds"]
             samples.append((time.monotonic() - t0, a, rss_bytes(), open_fds()))
             if progress and a >= next_print:
@@ -425,6 +496,8 @@ def soak(minutes: float, checkpoint: str | None = None, progress: bool = True) -
                 next_print = a + max(30.0, seconds / 20)
         samples.append((time.monotonic() - t0, eng.stats()["audio_seconds"], rss_bytes(), open_fds()))
         wall = time.monotonic() - t0
+        if tap is not None:
+            tap.drain(monitor.add, final=True)
         st = eng.stats()
         eng.close()  # closes the WebSocket clients: the crowd reports
         crowd_out = crowd.result()
@@ -461,6 +534,11 @@ def soak(minutes: float, checkpoint: str | None = None, progress: bool = True) -
         failures.append(f"RSS grew {out['rss_growth_pct']:.2f} % after warm-up")
     if out["fds_end"] > out["fds_warm"]:
         failures.append(f"open file descriptors grew from {out['fds_warm']} to {out['fds_end']}")
+    if monitor is not None:
+        report = monitor.result()
+        out["stability"] = report.to_dict()
+        if not report.ok:
+            failures.append("stability: " + report.summary())
     out["failures"] = failures
     out["ok"] = not failures
     return out
@@ -481,7 +559,22 @@ def _print_soak(r: dict) -> None:
     print(f"  WebSocket: {r['ws']['frames']:.0f} frames, {r['ws']['drops']:.0f} dropped for slow clients; "
           f"clients got {c['frames']} ({c['nonfinite']} non-finite), closes {c['closes']}")
     print(f"  largest frame-to-frame rotation change {r['max_rotation_step_deg']:.1f} deg")
+    if "stability" in r:
+        _print_stability(r["stability"])
     print("  OK" if r["ok"] else "  FAILED: " + "; ".join(r["failures"]))
+
+
+def _print_stability(st: dict) -> None:
+    rows = [s for s in st["stretches"] if s["amp_ratio"] is not None]
+    failing = sum(bool(s["reasons"]) for s in st["stretches"])
+    line = f"  stability: {len(st['stretches'])} stretches of {st['stretch_s']:g} s, {failing} failing"
+    if rows:
+        amps = [s["amp_ratio"] for s in rows]
+        line += (f"; amplitude {min(amps):.2f}-{max(amps):.2f}x the real {st['ref_m'] * 100:.2f} cm (0.5-1.5x), "
+                 f"root within {max(s['root_horizontal_m'] for s in rows):.2f} m horizontally and "
+                 f"{max(s['root_vertical_m'] for s in rows):.2f} m vertically (0.5), longest still "
+                 f"{max(s['still_s'] for s in rows):.1f} s, fastest point {max(s['max_speed'] for s in rows):.1f} m/s")
+    print(line)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -524,8 +617,31 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--checkpoint", help="checkpoint (default: the packaged one, else random weights)")
     p.add_argument("--json", help="also write the figures to this JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    g = p.add_argument_group("stability check (issue 18; off unless one of these is given)")
+    g.add_argument("--stability-ref-m", type=float, metavar="M",
+                   help="the real dances' dance-scale amplitude (band RMS 0.25-3 Hz, metres) every 30-s stretch "
+                        "is judged against")
+    g.add_argument("--data", metavar="DIR", help="compute that amplitude from the validation dances of the DWM "
+                                                 "dataset under DIR")
+    g.add_argument("--cache", metavar="DIR", default=".cache/corpus",
+                   help="corpus cache for --data (default .cache/corpus)")
     a = p.parse_args(argv)
-    r = soak(a.minutes, a.checkpoint, progress=not a.quiet)
+    ref = a.stability_ref_m
+    if ref is not None and a.data:
+        p.error("give --stability-ref-m or --data, not both")
+    if ref is not None and not (math.isfinite(ref) and ref > 0):
+        p.error(f"--stability-ref-m must be a positive number of metres, got {ref}")
+    if a.data:
+        from models.errors import PerformerError
+
+        try:
+            ref = stability_reference_m(a.data, a.cache, a.checkpoint)
+        except PerformerError as exc:
+            p.error(f"--data: {exc}")
+        if not a.quiet:
+            print(f"  stability reference: {ref * 100:.2f} cm band RMS (0.25-3 Hz) of the validation dances under "
+                  f"{a.data}", file=sys.stderr)
+    r = soak(a.minutes, a.checkpoint, progress=not a.quiet, stability_ref_m=ref)
     if a.json:
         Path(a.json).write_text(json.dumps(r, indent=1))
     _print_soak(r)

@@ -230,3 +230,83 @@ def test_sequence_metrics_keys_are_reported_metrics(pos):
     assert same["jerk"] == pytest.approx(M.jerk(pos))
     worse = M.sequence_metrics(oscillation(delay=6), pos, hands=[0, 1])
     assert worse["pos_l1"] > 0 and worse["pck@0.1"] < 1 and worse["cosine"] < 1 and "rot_l1" not in worse
+
+
+# -- band amplitude and jitter (issue 18) ----------------------------------------------------
+
+
+def sine(T: int, freq: float, amp: float, J: int = 5, axis: int = 1, phase: float = 0.0) -> np.ndarray:
+    """(T, J, 3) m: every joint at a rest position plus ``amp * sin(2 pi freq t)`` on ``axis``."""
+    rest = np.linspace(-0.5, 0.5, J * 3).reshape(1, J, 3) + [0.0, 1.0, 0.0]
+    x = np.zeros((T, J, 3))
+    x[:, :, axis] = amp * np.sin(2 * np.pi * freq * np.arange(T)[:, None] / FPS + phase)
+    return rest + x
+
+
+def test_band_rms_of_a_sinusoid_is_its_rms_over_values():
+    # 1 Hz on y of every joint, 10 s (a whole number of periods): A / sqrt(2) on y, 0 on x and z
+    assert M.band_rms(sine(300, 1.0, 0.2), M.DANCE_BAND) == pytest.approx(0.2 / np.sqrt(6))
+    assert M.band_rms(sine(300, 1.0, 0.2), M.JITTER_BAND) == pytest.approx(0.0, abs=1e-12)
+    assert M.band_rms(sine(300, 10.0, 0.01), M.JITTER_BAND) == pytest.approx(0.01 / np.sqrt(6))
+    assert M.band_rms(sine(300, 10.0, 0.01), M.DANCE_BAND) == pytest.approx(0.0, abs=1e-12)
+    # the Nyquist bin (15 Hz, even T) counts once: cos(pi t) has RMS A on its axis
+    nyq = sine(300, 15.0, 0.01, phase=np.pi / 2)
+    assert M.band_rms(nyq, M.JITTER_BAND) == pytest.approx(0.01 / np.sqrt(3))
+
+
+def dance(T: int, freq: float, amp: float, tremble: float = 0.002) -> np.ndarray:
+    """:func:`sine` plus a small 8 Hz motion (real dances have a little high-frequency motion too)."""
+    return sine(T, freq, amp) + sine(T, 8.0, tremble) - sine(T, 8.0, 0.0)
+
+
+def test_band_ratios_read_amplitude_and_jitter():
+    real = dance(600, 1.0, 0.2)
+    same = M.band_ratios(real, real)
+    assert same["band_amp"] == pytest.approx(1.0) and same["jitter"] == pytest.approx(1.0)
+    half = M.band_ratios(dance(600, 1.0, 0.1), real)
+    assert half["band_amp"] == pytest.approx(0.5) and half["jitter"] == pytest.approx(1.0)
+    assert half["band_amp_gen_m"] == pytest.approx(0.1 / np.sqrt(6))
+    assert half["band_amp_real_m"] == pytest.approx(0.2 / np.sqrt(6))
+    assert half["jitter_real_m"] == pytest.approx(0.002 / np.sqrt(6))
+    # a 10 Hz tremble only in the generated motion: jitter ratio large, band amplitude unchanged
+    shaky = real + sine(600, 10.0, 0.02) - sine(600, 10.0, 0.0)
+    r = M.band_ratios(shaky, real)
+    assert r["band_amp"] == pytest.approx(1.0)
+    assert r["jitter"] == pytest.approx(np.hypot(0.002, 0.02) / 0.002)  # powers add: sqrt(1 + 10²) ≈ 10.05
+
+
+def test_band_rms_removes_each_dances_mean_and_horizontal_travel():
+    a, b = sine(300, 1.0, 0.2), sine(300, 1.0, 0.2)
+    b_far = b + [3.0, 0.5, -2.0]  # another dance, elsewhere on the stage and higher up
+    both = M.band_rms([a, b], M.DANCE_BAND)
+    assert M.band_rms([a, b_far], M.DANCE_BAND) == pytest.approx(both)
+    assert M.band_rms([a, b_far], (0.0, 15.0)) == pytest.approx(both)  # the mean is not motion, even at 0 Hz
+    # concatenated, the jump between the two dances would leak into every band
+    assert M.band_rms(np.concatenate([a, b_far]), M.DANCE_BAND) > 1.1 * both
+    # travel of the root (joint 0) over the floor is removed from every joint: in place
+    walk = a.copy()
+    walk[:, :, 0] += 0.05 * np.sin(2 * np.pi * 0.5 * np.arange(300) / FPS)[:, None]
+    assert M.band_rms(walk, M.DANCE_BAND) == pytest.approx(M.band_rms(a, M.DANCE_BAND))
+    assert M.band_rms(walk, M.DANCE_BAND, root=None) > M.band_rms(a, M.DANCE_BAND)
+    bounce = a.copy()  # the root's height is kept
+    bounce[:, :, 1] += 0.05 * np.sin(2 * np.pi * 0.5 * np.arange(300) / FPS)[:, None]
+    assert M.band_rms(bounce, M.DANCE_BAND) == pytest.approx(M.band_rms(walk, M.DANCE_BAND, root=None))
+
+
+def test_band_power_is_pooled_over_dances_of_different_lengths():
+    # 10 s at 0.2 m and 30 s at 0.1 m: pooled mean square = (300 * 0.2² + 900 * 0.1²) / 1200 / 6
+    short, long = sine(300, 1.0, 0.2), sine(900, 2.0, 0.1)
+    expect = np.sqrt((300 * 0.2**2 + 900 * 0.1**2) / 1200 / 6)
+    assert M.band_rms([short, long], M.DANCE_BAND) == pytest.approx(expect)
+    # a ratio pools power too: not the mean of the per-dance ratios (0.5 and 1)
+    r = M.band_ratios([dance(300, 1.0, 0.1), dance(900, 2.0, 0.1)], [dance(300, 1.0, 0.2), dance(900, 2.0, 0.1)])
+    assert r["band_amp"] == pytest.approx(np.sqrt((300 * 0.1**2 + 900 * 0.1**2) / (300 * 0.2**2 + 900 * 0.1**2)))
+
+
+def test_band_ratio_errors_name_the_argument():
+    with pytest.raises(DataError, match="pos_real"):
+        M.band_ratios(sine(300, 1.0, 0.1), sine(300, 1.0, 0.0))  # a frozen reference
+    with pytest.raises(DataError, match="band"):
+        M.band_rms(sine(300, 1.0, 0.1), (3.0, 1.0))
+    with pytest.raises(DataError, match=r"pos\[1\]"):
+        M.band_rms([sine(300, 1.0, 0.1), np.full((300, 5, 3), np.nan)], M.DANCE_BAND)

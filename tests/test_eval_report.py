@@ -54,3 +54,10 @@ def test_no_chart_without_chart_metrics(tmp_path):
 def test_bad_results_are_data_errors(tmp_path, bad):
     with pytest.raises(DataError, match="results"):
         write_report(bad, tmp_path, "t", [])
+
+
+def test_band_columns_show_their_targets(tmp_path):
+    header = markdown_table({"m": {"jerk": 1.0, "band_amp": 0.16, "jitter": 3.9}}).splitlines()[0]
+    assert header == "| model | Jerk (m/s³) ≈real | Dance amp 0.25-3 Hz →1 | Jitter >6 Hz ≤1.5 |"
+    md = write_report({"m": {"band_amp": 0.16, "jitter": 3.9}}, tmp_path, "t", [])["md"].read_text(encoding="utf-8")
+    assert "≤1.5 at most 1.5 is the target" in md

@@ -132,11 +132,16 @@ def test_evaluate_writes_every_metric_for_model_and_real_rows(eval_run, capsys):
         assert all(v is not None and math.isfinite(v) for v in row.values()), (name, row)
     model, real = rows["causal (tiny.pt)"], rows[REAL_ROW]
     assert real["rot_l1"] == 0 and real["pos_l1"] == 0 and real["pck@0.2"] == 1 and real["energy_ratio"] == 1
+    assert real["band_amp"] == 1 and real["jitter"] == 1
     assert model["pos_l1"] > 0.01 and model["fd"] > real["fd"]  # random weights are not a dancer
     assert doc["commands"][0].startswith("performer evaluate --checkpoint ") and "--max-frames 300" in doc["commands"][0]
     md = (out / "results.md").read_text()
     assert "| real data |" in md and "performer evaluate" in md
     details = json.loads((out / "per_dance.json").read_text())
+    real_m = details[REAL_ROW]["band_rms_m"]
+    assert 0.01 < real_m["band_amp"] < 0.5 and 0 < real_m["jitter"] < real_m["band_amp"]  # dancers move cm, not mm or m
+    for name in rows:
+        assert set(details[name]["per_dance"]["DANCE_W_5"]) >= {"band_amp", "jitter", "rot_l1"}
     assert details["_run"]["dances"] == ["DANCE_C_2", "DANCE_R_5", "DANCE_W_5"]
     assert details["_run"]["frames"] == [300, 300, 300]
     assert len(list(cache.glob("style-classifier-*.pt"))) == 1  # trained once, cached

@@ -14,13 +14,14 @@ scored with :mod:`models.evaluation`:
   than warping whole songs;
 * beat coverage / hit rate (:func:`~models.evaluation.beats.beat_scores`) against
   music beats of the clip's own audio span, pooled over dances;
-* energy ratio and jerk pooled over dances;
+* energy ratio, jerk, and the dance-scale amplitude (0.25-3 Hz) and jitter (above
+  6 Hz) band ratios (:func:`~models.evaluation.metrics.band_ratios`) pooled over dances;
 * Fréchet distance and diversity in the feature space of a style classifier
   trained on the TRAIN split's real motion (cached, trained once).
 
 A reference row ``real data`` scores the real validation motion against itself
 (identity values for the paired metrics; beats, jerk and diversity of real motion;
-energy ratio 1; FD of real validation vs real training windows).
+energy ratio and band ratios 1; FD of real validation vs real training windows).
 
 Frame alignment: clip frame ``t`` ends at audio time ``(first_frame + t + 1) / 30`` s,
 so the clip's audio is samples ``[(first_frame + 1) * HOP, (first_frame + T + 1) * HOP)``
@@ -50,6 +51,7 @@ SPLITS = ("val", "train")
 ROW_KEYS: tuple[str, ...] = (
     "rot_l1", "pos_l1", "hand_l1", "dtw", "lcss", "pck@0.1", "pck@0.2", "dir_f1", "cosine",
     "beat_coverage", "beat_hit_rate", "beat_hit_chance", "fd", "diversity", "energy_ratio", "jerk",
+    "band_amp", "jitter",
 )
 
 
@@ -288,12 +290,15 @@ def score(gen_pos: list[np.ndarray], gen_poses: list[np.ndarray], real: RealSet,
           classifier, segment: int = SEGMENT, desc: str | None = None) -> tuple[dict[str, float], dict[str, dict[str, float]]]:
     """One row: metrics of generated sequences against the real ones (same order).
 
-    Returns (row, per-dance paired metrics). ``desc``: show a progress bar with this label.
+    Returns (row, per-dance metrics: the paired ones plus each dance's own ``band_amp``
+    and ``jitter``). The row's ``band_amp``/``jitter`` pool power over all dances
+    (:func:`~models.evaluation.metrics.band_ratios`); the band RMS values in metres
+    are left to :func:`band_rms_m`. ``desc``: show a progress bar with this label.
     """
     from tqdm import tqdm
 
     from models.evaluation.classifier import embed
-    from models.evaluation.metrics import diversity, energy_ratio, frechet_distance, jerk
+    from models.evaluation.metrics import band_ratios, diversity, energy_ratio, frechet_distance, jerk
 
     per_dance: dict[str, dict[str, float]] = {}
     weighted: dict[str, float] = {}
@@ -302,20 +307,33 @@ def score(gen_pos: list[np.ndarray], gen_poses: list[np.ndarray], real: RealSet,
     for c, pg, qg, pr in tqdm(pairs, desc=desc, total=len(gen_pos), unit="dance", disable=desc is None):
         t = len(pg)
         m = paired_metrics(pg, pr, _quats(qg), _quats(c.poses), segment)
-        per_dance[c.name] = m
         for k, v in m.items():
             weighted[k] = weighted.get(k, 0.0) + t * v
         frames += t
+        bands = band_ratios(pg, pr)
+        per_dance[c.name] = {**m, "band_amp": bands["band_amp"], "jitter": bands["jitter"]}
     row = {k: v / frames for k, v in weighted.items()}
     row.update(pooled_beats(gen_pos, real.beats))
     emb = embed(classifier, _windows_or_fail(gen_pos))
+    bands = band_ratios(gen_pos, real.positions)
     row.update(
         fd=frechet_distance(emb, real_emb),
         diversity=diversity(emb),
         energy_ratio=energy_ratio(gen_pos, real.positions),
         jerk=jerk(gen_pos),
+        band_amp=bands["band_amp"],
+        jitter=bands["jitter"],
     )
     return row, per_dance
+
+
+def band_rms_m(pos: Sequence[np.ndarray]) -> dict[str, float]:
+    """``{"band_amp": m, "jitter": m}``: :func:`~models.evaluation.metrics.band_rms` of FK
+    positions ``(T, 30, 3)`` m at 30 fps in the dance band (0.25-3 Hz) and the jitter
+    band (6 Hz and up), power pooled over the sequences."""
+    from models.evaluation.metrics import DANCE_BAND, JITTER_BAND, band_rms
+
+    return {"band_amp": band_rms(pos, DANCE_BAND), "jitter": band_rms(pos, JITTER_BAND)}
 
 
 def _quats(poses: np.ndarray) -> np.ndarray:
@@ -437,7 +455,8 @@ def evaluate(checkpoints: Sequence[str | Path], data_root: str | Path, opts: Eva
                                   opts.classifier_epochs, opts.seed))
         name = _row_name(lm.path, lm.name, set(results))
         results[name] = row
-        details[name] = {"checkpoint": str(lm.path), "model_name": lm.name, "per_dance": per_dance}
+        details[name] = {"checkpoint": str(lm.path), "model_name": lm.name, "per_dance": per_dance,
+                         "band_rms_m": band_rms_m(gen_pos)}
 
     row, per_dance = score(real.positions, [c.poses for c in real.clips], real, real_emb, classifier, opts.segment,
                            "score real data" if opts.progress else None)
@@ -448,7 +467,8 @@ def evaluate(checkpoints: Sequence[str | Path], data_root: str | Path, opts: Eva
 
         row.update(real_reference(real, classifier))
     results[REAL_ROW] = row
-    details[REAL_ROW] = {"per_dance": per_dance, "fd_against": "real training-split windows"}
+    details[REAL_ROW] = {"per_dance": per_dance, "fd_against": "real training-split windows",
+                         "band_rms_m": band_rms_m(real.positions)}
     details["_run"] = {
         "options": {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(opts).items()},
         "dances": eval_names,

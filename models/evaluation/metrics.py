@@ -9,9 +9,9 @@ Conventions shared by every function here:
 - A "generated" array and its "reference" (ground truth for the same music) must
   have the same shape unless a docstring says otherwise (DTW and LCSS accept
   different lengths).
-- Functions that summarise a set of sequences (:func:`energy_ratio`, :func:`jerk`)
-  take one array or a list of arrays, so sequence boundaries never create fake
-  velocities.
+- Functions that summarise a set of sequences (:func:`energy_ratio`, :func:`jerk`,
+  :func:`band_rms`, :func:`band_ratios`) take one array or a list of arrays, so
+  sequence boundaries never create fake velocities or spectra.
 
 Bad input raises :class:`models.errors.DataError` naming the argument.
 See docs/metrics.md for one paragraph per metric.
@@ -19,6 +19,7 @@ See docs/metrics.md for one paragraph per metric.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -39,6 +40,10 @@ DIRECTION_TOLERANCE: int = 3
 DIRECTION_DEADBAND: float = 0.05
 #: Default LCSS match threshold: mean per-joint distance, metres.
 LCSS_EPSILON: float = 0.1
+#: Dance-scale band of :func:`band_ratios`, Hz (both edges included; issue 18).
+DANCE_BAND: tuple[float, float] = (0.25, 3.0)
+#: Jitter band of :func:`band_ratios`, Hz: 6 Hz up to the Nyquist frequency (15 Hz at 30 fps).
+JITTER_BAND: tuple[float, float] = (6.0, math.inf)
 
 
 # --------------------------------------------------------------------------- checks
@@ -432,6 +437,109 @@ def jerk(pos: Positions, fps: float = FPS) -> float:
         total += float(j.sum())
         count += j.size
     return total / count
+
+
+# --------------------------------------------------------------------------- band power
+
+
+def in_place(pos: np.ndarray, root: int = 0) -> np.ndarray:
+    """Positions ``(T, J, 3)`` m with joint ``root``'s horizontal (x, z) path subtracted.
+
+    Y is up, so this keeps every height (hip bounce included) and removes travel over
+    the floor: the frame the models are trained in (``models.training.canonical``),
+    where the real dances' root x and z are already 0.
+    """
+    pos = _positions(pos, "pos")
+    _joints([root], pos.shape[1], "root")
+    out = pos.copy()
+    out[:, :, [0, 2]] -= pos[:, root : root + 1, [0, 2]]
+    return out
+
+
+def _band_energy(x: np.ndarray, band: tuple[float, float], fps: float) -> float:
+    """Sum over frames, joints and axes of the squared band part of ``x (T, J, 3)``, m²·frames.
+
+    ``x`` minus its mean over time, real FFT along time; by Parseval the energy of
+    the band-passed signal is ``sum_k w_k |X_k|² / T`` over the bins ``k`` with
+    ``lo <= f_k <= hi``, ``w_k = 2`` except 1 for the DC and (even ``T``) Nyquist bins.
+    """
+    t = x.shape[0]
+    spec = np.fft.rfft(x - x.mean(axis=0), axis=0)
+    freq = np.fft.rfftfreq(t, 1.0 / fps)
+    weight = np.full(freq.shape, 2.0)
+    weight[0] = 1.0
+    if t % 2 == 0:
+        weight[-1] = 1.0
+    keep = (freq >= band[0]) & (freq <= band[1])
+    power = np.sum(spec[keep].real ** 2 + spec[keep].imag ** 2, axis=(1, 2))
+    return float(np.sum(weight[keep] * power) / t)
+
+
+def _band(band: tuple[float, float], name: str = "band") -> tuple[float, float]:
+    lo, hi = float(band[0]), float(band[1])
+    if not (lo >= 0.0 and hi > lo) or math.isnan(hi):
+        raise DataError(f"expected (low, high) Hz with 0 <= low < high, got {band}", source=name)
+    return lo, hi
+
+
+def band_rms(pos: Positions, band: tuple[float, float], fps: float = FPS, root: int | None = 0) -> float:
+    """RMS in metres of the part of the motion in a frequency band, pooled over sequences.
+
+    ``pos``: one ``(T, J, 3)`` array of FK positions (m, at ``fps``) or a list of them
+    (lengths may differ). Each sequence is put :func:`in_place` (joint ``root``'s
+    horizontal path removed; ``root=None``: as given), its mean over time removed,
+    and its band energy taken from its own FFT (no windowing) over the bins with
+    ``band[0] <= f <= band[1]`` Hz. The energies of all sequences are summed and
+    divided by the total number of values (frames x joints x 3), so the result is
+    the RMS over frames, joints and axes of the band-passed motion: a sinusoid of
+    amplitude ``A`` m on one axis of every joint, at a frequency inside the band,
+    gives ``A / sqrt(6)`` (``A / sqrt(2)`` on that axis, 0 on the other two).
+    """
+    seqs = _sequence_list(pos, "pos", min_frames=2)
+    lo_hi = _band(band)
+    energy, count = 0.0, 0
+    for s in seqs:
+        if root is not None:
+            s = in_place(s, root)
+        energy += _band_energy(s, lo_hi, fps)
+        count += s.size
+    return math.sqrt(energy / count)
+
+
+def band_ratios(
+    pos_gen: Positions,
+    pos_real: Positions,
+    fps: float = FPS,
+    root: int | None = 0,
+    dance_band: tuple[float, float] = DANCE_BAND,
+    jitter_band: tuple[float, float] = JITTER_BAND,
+) -> dict[str, float]:
+    """Dance-scale amplitude and jitter of generated motion relative to real motion.
+
+    ``pos_gen``, ``pos_real``: FK positions ``(T, J, 3)`` m at ``fps`` (30), one array
+    or a list (the real dances for the same music, or any real set). With
+    :func:`band_rms` of each set in each band (power pooled over sequences),
+
+    - ``band_amp`` = ``band_rms(gen, dance_band) / band_rms(real, dance_band)``:
+      1 moves at the dancers' scale, below 1 smaller (0.25-3 Hz by default);
+    - ``jitter`` = the same in ``jitter_band`` (6 Hz up to Nyquist): above 1 the
+      generated motion trembles more than the real dances (issue 18's target: ≤ 1.5);
+    - ``band_amp_gen_m``, ``band_amp_real_m``, ``jitter_gen_m``, ``jitter_real_m``:
+      the four RMS values in metres.
+
+    Raises :class:`DataError` when the real motion has no power in a band (RMS below
+    1 nm, rounding error: the ratio is undefined).
+    """
+    out: dict[str, float] = {}
+    for key, band in (("band_amp", dance_band), ("jitter", jitter_band)):
+        gen = band_rms(pos_gen, band, fps, root)
+        real = band_rms(pos_real, band, fps, root)
+        if real < 1e-9:
+            raise DataError(f"real motion has no power in {band} Hz; the {key} ratio is undefined", source="pos_real")
+        out[key] = gen / real
+        out[f"{key}_gen_m"] = gen
+        out[f"{key}_real_m"] = real
+    return out
 
 
 # --------------------------------------------------------------------------- feature-space statistics

@@ -23,7 +23,8 @@ class MetricInfo:
 
     label: str
     unit: str
-    better: str  # "higher" | "lower" | "one" (closer to 1) | "real" (closer to the real-motion row) | "none"
+    better: str  # "higher" | "lower" | "one" (closer to 1) | "real" (closer to the real-motion row)
+    #              | "max1.5" (at most 1.5: lower is better up to that target, issue 18) | "none"
     source: str
 
 
@@ -47,15 +48,17 @@ METRICS: dict[str, MetricInfo] = {
                                 "Lee et al., NeurIPS 2019 (distinct generations per song; n/a: deterministic)"),
     "energy_ratio": MetricInfo("Energy ratio", "", "one", "velocity spread generated / real"),
     "jerk": MetricInfo("Jerk", "m/s³", "real", "third derivative of positions"),
+    "band_amp": MetricInfo("Dance amp 0.25-3 Hz", "", "one", "band RMS of FK positions generated / real (issue 18)"),
+    "jitter": MetricInfo("Jitter >6 Hz", "", "max1.5", "band RMS of FK positions generated / real (issue 18)"),
     "gan_train": MetricInfo("GAN-train", "", "higher", "Shmelkov et al., ECCV 2018 (optional, --gan-scores)"),
     "gan_test": MetricInfo("GAN-test", "", "higher", "Shmelkov et al., ECCV 2018 (optional, --gan-scores)"),
 }
 
-ARROWS: dict[str, str] = {"higher": "↑", "lower": "↓", "one": "→1", "real": "≈real", "none": ""}
+ARROWS: dict[str, str] = {"higher": "↑", "lower": "↓", "one": "→1", "real": "≈real", "max1.5": "≤1.5", "none": ""}
 
 #: Metrics drawn in the bar chart when present.
 CHART_METRICS: tuple[str, ...] = (
-    "pos_l1", "dtw", "pck@0.2", "dir_f1", "beat_hit_rate", "fd", "diversity", "energy_ratio",
+    "pos_l1", "dtw", "pck@0.2", "dir_f1", "beat_hit_rate", "fd", "diversity", "energy_ratio", "band_amp", "jitter",
 )
 
 
@@ -132,6 +135,8 @@ def _bar_chart(rows: dict[str, dict[str, float | None]], path: Path, title: str)
         ax.set_title(_header(key), fontsize=9)
         if METRICS[key].better == "one":
             ax.axhline(1.0, color="k", lw=0.8, ls="--")
+        elif METRICS[key].better == "max1.5":
+            ax.axhline(1.5, color="k", lw=0.8, ls="--")
     fig.savefig(path, dpi=110)
     return True
 
@@ -166,7 +171,7 @@ def write_report(
 
     legend = ", ".join(f"{a} {d}" for d, a in (
         ("higher is better", "↑"), ("lower is better", "↓"), ("closer to 1 is better", "→1"),
-        ("closer to the real-motion row is better", "≈real"),
+        ("closer to the real-motion row is better", "≈real"), ("at most 1.5 is the target", "≤1.5"),
     ))
     md = [f"# {title}", "", markdown_table(rows), "", f"{legend}. Definitions: docs/metrics.md.", ""]
     if commands:

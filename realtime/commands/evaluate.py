@@ -14,7 +14,9 @@ the captured motion after forward kinematics on the default skeleton:
   direction-change F1 and cosine of the hands (±3 frames), beat coverage, beat hit
   rate (and its chance level) against music beats of the same audio span, Fréchet
   distance and diversity in the features of a style classifier trained on the
-  training split's real motion, motion-energy ratio and jerk.
+  training split's real motion, motion-energy ratio, jerk, and the dance-scale
+  amplitude (0.25-3 Hz) and jitter (above 6 Hz) ratios of FK positions to the real
+  dances' (band RMS, power pooled over dances).
 
 A "real data" row scores the real validation motion itself (FD: real validation vs
 real training motion). Writes OUT/results.json, results.md, results.png and
