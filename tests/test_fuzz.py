@@ -112,7 +112,8 @@ messages = st.one_of(
     st.fixed_dictionaries({"type": st.sampled_from(TYPES)}, optional={
         "format": st.sampled_from(["binary", "json", "xml"]) | json_values,
         "id": json_values, "token": st.sampled_from(["s3cret", "wrong"]) | json_values,
-        "action": st.sampled_from(["reset", "set_offset", "set_smoothing", "stop"]) | json_values,
+        "action": st.sampled_from(["reset", "set_offset", "set_smoothing", "idle", "style", "energy", "stop"])
+        | json_values,
         "value": st.floats() | st.integers(-20000, 20000) | json_values,
     }).map(json.dumps),
 )
@@ -188,7 +189,7 @@ def test_server_on_a_real_socket(server, batch):
 
 
 @FAST
-@given(action=st.sampled_from(["reset", "set_offset", "set_smoothing"]) | json_values,
+@given(action=st.sampled_from(["reset", "set_offset", "set_smoothing", "idle", "style", "energy"]) | json_values,
        value=json_values | st.floats() | st.integers())
 def test_control_commands(server, action, value):
     _, eng = server
@@ -198,6 +199,7 @@ def test_control_commands(server, action, value):
         assert len(str(exc)) < 300
     assert math.isfinite(eng.config.offset_ms) and -10000 <= eng.config.offset_ms <= 10000
     assert 0.0 <= eng.config.smoothing < 1.0
+    assert isinstance(eng.idle, bool)
 
 
 # -- configuration files ---------------------------------------------------------------------------------
