@@ -105,8 +105,7 @@ class _Client:
     aborted: bool = False
     sending: bool = False  # the writer task is inside ws.send (a direct write now would reorder)
     controller: bool = False  # authenticated with the token: may send control messages
-    allowance: float = 0.0  # message-rate token bucket (messages)
-    last_message: float = 0.0  # loop time of the bucket's last update
+    rate: TokenBucket | None = None  # message-rate limit, set when the client is served
 
 
 def parse_client_message(message: str | bytes) -> dict:
@@ -454,14 +453,14 @@ class WebSocketSink:
         await ws.send(hello)
         self._messages += 1
         self._bytes += len(hello)
-        client.progress = client.last_message = self._loop.time()
-        client.allowance = 2.0 * self.max_messages_per_s
+        client.progress = self._loop.time()
+        client.rate = TokenBucket(self.max_messages_per_s, client.progress)
         with self._lock:
             self._clients[ws] = client
         writer = asyncio.create_task(self._write(client))
         try:
             async for message in ws:
-                if not self._within_rate(client):
+                if not client.rate.take(self._loop.time()):
                     self._rate_limited += 1
                     log.info("WebSocket client %s sent more than %g messages/s; closing it", client.peer,
                              self.max_messages_per_s)
@@ -496,17 +495,6 @@ class WebSocketSink:
                 c.sent += 1
                 self._messages += 1
                 self._bytes += len(message)
-
-    def _within_rate(self, c: _Client) -> bool:
-        """Token bucket: ``max_messages_per_s`` per second, bursts up to twice that."""
-        now = self._loop.time()
-        rate = self.max_messages_per_s
-        c.allowance = min(2.0 * rate, c.allowance + (now - c.last_message) * rate)
-        c.last_message = now
-        if c.allowance < 1.0:
-            return False
-        c.allowance -= 1.0
-        return True
 
     def _reply(self, c: _Client, message: str | bytes) -> dict | None:
         """Answer one client message (docs/protocol.md); errors become an error message.
@@ -593,6 +581,28 @@ class WebSocketSink:
 def _error(text: str) -> dict:
     return {"type": "error", "error": text}
 
+
+
+class TokenBucket:
+    """A rate limit: ``rate`` tokens per second, holding at most ``2 * rate`` (the burst).
+
+    ``take(now, cost)`` (``now`` in seconds of any monotonic clock) refills the bucket for
+    the time since the last call, then takes ``cost`` tokens if at least one is there
+    (True) or nothing (False); a cost above 1 may overdraw, delaying what comes next.
+    """
+
+    def __init__(self, rate: float, now: float) -> None:
+        self.rate = float(rate)
+        self.tokens = 2.0 * self.rate
+        self._last = now
+
+    def take(self, now: float, cost: float = 1.0) -> bool:
+        self.tokens = min(2.0 * self.rate, self.tokens + (now - self._last) * self.rate)
+        self._last = now
+        if self.tokens < 1.0:
+            return False
+        self.tokens -= cost
+        return True
 
 
 def is_loopback(host: str) -> bool:

@@ -202,6 +202,48 @@ def test_control_commands(server, action, value):
     assert isinstance(eng.idle, bool)
 
 
+# -- OSC control datagrams ----------------------------------------------------------------------------
+
+osc_texts = st.text(max_size=24).filter(lambda t: "\x00" not in t)
+osc_args = st.lists(st.integers(-(2**31), 2**31 - 1) | st.floats(width=32) | osc_texts
+                    | st.sampled_from([0, 1, 0.0, 1.0, 40, "calm"]), max_size=3)
+
+
+@pytest.fixture(scope="module")
+def osc_control(server):
+    """An OSC control input on loopback driving the same real (stopped) engine."""
+    from realtime.osc_control import OscControl
+
+    _, eng = server
+    with OscControl("127.0.0.1", 0, control=eng.control, max_messages_per_s=1e9) as ctl:
+        yield ctl, eng
+
+
+@FAST
+@given(address=st.sampled_from(["/performer/reset", "/performer/offset", "/performer/smoothing",
+                                "/performer/idle", "/performer/style", "/performer/energy", "/x", "/"])
+       | osc_texts.map(lambda t: "/" + t), args=osc_args, cut=st.integers(0, 64), junk=st.binary(max_size=12),
+       bundle=st.booleans())
+def test_osc_control_any_datagram(osc_control, address, args, cut, junk, bundle):
+    """Any datagram (messages, bundles, cut or with junk added): counted as applied, bad or
+    nothing asked; never an exception; the engine's settings stay valid."""
+    from realtime.vmc import osc_message
+
+    ctl, eng = osc_control
+    data = osc_message(address, *args)
+    if bundle:
+        data = b"#bundle\x00" + bytes(8) + len(data).to_bytes(4, "big") + data
+    data = data[: len(data) - cut % (len(data) + 1)] + junk
+    before = ctl.stats()
+    ctl.handle(data, ("127.0.0.1", 9))
+    after = ctl.stats()
+    new = {k: after[k] - before[k] for k in after}
+    assert new["refused"] == new["rate_limited"] == 0
+    assert new["applied"] + new["bad"] <= new["messages"]  # an empty bundle holds no message
+    assert math.isfinite(eng.config.offset_ms) and -10000 <= eng.config.offset_ms <= 10000
+    assert 0.0 <= eng.config.smoothing < 1.0 and isinstance(eng.idle, bool)
+
+
 # -- configuration files ---------------------------------------------------------------------------------
 
 RUN_KEYS = [f.name for f in dataclasses.fields(__import__("realtime.config", fromlist=["RunConfig"]).RunConfig)]
