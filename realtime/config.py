@@ -8,6 +8,8 @@ The TOML file is flat and uses the long flag names with ``_`` (or ``-``) for key
     ws = "0.0.0.0:8765"
     smoothing = 0.3
     offset_ms = 80
+    control_osc = "0.0.0.0:9000"   # OSC show control (docs/show.md)
+    control_allow = ["192.168.1.0/24"]
 
 Relative paths in the file are taken relative to the file's directory. An unknown
 key or a value of the wrong type is a :class:`ConfigError` naming the file and key.
@@ -70,6 +72,8 @@ class RunConfig:
     ws_viewers_open: bool = False
     ws_max_clients: int = 16
     ws_origin: list[str] = field(default_factory=list)
+    control_osc: str | None = None
+    control_allow: list[str] = field(default_factory=list)
 
     def validate(self) -> "RunConfig":
         """Check ranges and combinations; raise ConfigError naming the option."""
@@ -106,6 +110,10 @@ class RunConfig:
                               "without one every client is a viewer already")
         self.osc_targets()  # raise ConfigError now if an address is malformed
         self.ws_endpoint()
+        if self.control_allow and self.control_osc is None:
+            raise ConfigError("--control-allow limits the OSC control input: it needs --control-osc [HOST:]PORT")
+        self.control_endpoint()
+        self.control_networks()
         return self
 
     def osc_targets(self) -> list[tuple[str, int]]:
@@ -115,6 +123,18 @@ class RunConfig:
     def ws_endpoint(self) -> tuple[str, int] | None:
         """(host, port) the WebSocket server binds, or None with no_ws."""
         return None if self.no_ws else parse_endpoint(self.ws, "ws")
+
+    def control_endpoint(self) -> tuple[str, int] | None:
+        """(host, port) the OSC control input binds (a bare port: 127.0.0.1), or None (off)."""
+        from realtime.osc_control import parse_control_endpoint
+
+        return None if self.control_osc is None else parse_control_endpoint(self.control_osc)
+
+    def control_networks(self) -> list | None:
+        """The ``control_allow`` networks (ipaddress objects), or None when none are given (any sender)."""
+        from realtime.osc_control import parse_networks
+
+        return parse_networks(self.control_allow) if self.control_allow else None
 
 
 _FIELDS = {f.name: f for f in dataclasses.fields(RunConfig)}
@@ -126,6 +146,7 @@ _TYPES: dict[str, tuple[type, ...]] = {
     "record": (str,), "threads": (int,), "offset_ms": (int, float), "smoothing": (int, float),
     "warmup": (int, float), "fallback_audio": (str,), "fallback_after": (int, float), "ws_token": (str,),
     "ws_viewers_open": (bool,), "ws_max_clients": (int,), "ws_origin": (list, str),
+    "control_osc": (str, int), "control_allow": (list, str),
 }
 assert set(_TYPES) == set(_FIELDS)
 
@@ -161,13 +182,15 @@ def load_run_config(path: str | Path) -> dict[str, Any]:
         if isinstance(value, bool) and bool not in types or not isinstance(value, types):
             want = " or ".join(t.__name__ for t in types)
             raise ConfigError(f"key {key!r} must be {want}, got {type(value).__name__} {value!r}", source=p)
-        if name in ("osc", "ws_origin"):
+        if name in ("osc", "ws_origin", "control_allow"):
             value = [value] if isinstance(value, str) else value
             if not all(isinstance(v, str) for v in value):
-                what = '"HOST:PORT"' if name == "osc" else "origin"
+                what = {"osc": '"HOST:PORT"', "ws_origin": "origin", "control_allow": "network"}[name]
                 raise ConfigError(f"key {key!r} must be a list of {what} strings", source=p)
         if name in _PATHS:
             value = (p.parent / value) if not Path(value).is_absolute() else Path(value)
+        if name == "control_osc":
+            value = str(value)
         out[name] = value
     return out
 

@@ -38,7 +38,7 @@ import numpy as np
 from models.errors import ConfigError, short_repr
 from models.rig.humanoid import NUM_BONES
 from models.rig.motion import POSE_DIM
-from models.timebase import HOP, SAMPLE_RATE
+from models.timebase import FPS, HOP, SAMPLE_RATE
 from realtime.audio_input import AudioSource, RingBuffer
 from realtime.frame import PoseFrame, Sink
 
@@ -68,6 +68,15 @@ class PoseModel(Protocol):
 
     ``push(features)`` takes (k, feature_dim) float32 and returns (k, POSE_DIM)
     float32 in the :mod:`models.rig.motion` flat layout, causally.
+
+    Optional show controls, used by :meth:`Engine.control` when present (looked up with
+    ``getattr``, so a model without them still fits): ``set_idle(bool)`` (True: settle
+    into the model's idle pose and hold it, False: dance again; the model does the
+    transition, without a jump), ``set_style(name: str)`` and ``set_energy(x: float)``.
+    Each validates its value and raises :class:`~models.errors.ConfigError` (one line
+    naming it) for a bad one without changing anything. They are called on a control
+    thread (OSC or WebSocket), not the engine's worker, so they must be cheap, must not
+    block, and should only record the setting for the next ``push`` to use.
     """
 
     feature_dim: int
@@ -86,6 +95,86 @@ def rest_pose() -> np.ndarray:
     pose = np.zeros(POSE_DIM, dtype=np.float32)
     pose[6::4] = 1.0  # w of every quaternion (layout: root xyz, then x y z w per bone)
     return pose
+
+
+def idle_pose() -> np.ndarray:
+    """(POSE_DIM,) float32 idle pose of the engine's own idle control: :func:`rest_pose`
+    standing up, i.e. identity rotations (the T-pose) with the root (Hips) at the shipped
+    rest skeleton's hips position (0, 0.93, 0) m instead of on the floor. Falls back to
+    :func:`rest_pose` when that skeleton cannot be read."""
+    pose = rest_pose()
+    try:
+        from models.rig.skeleton import load_default_skeleton
+
+        hips = load_default_skeleton().offsets[0]
+    except Exception as exc:  # noqa: BLE001 - a missing asset must not stop the engine
+        log.warning("rest skeleton unavailable (%s); the idle pose stands at the origin", exc)
+        return pose
+    pose[:3] = hips
+    return pose
+
+
+class IdleFader:
+    """Crossfades flat poses towards a fixed idle pose and back, in place, no allocation.
+
+    ``idle`` (settable any time, from any thread) is the target: each call moves the
+    blend weight ``w`` one step of ``1 / frames`` towards 1 (idle) or 0 (dance), so a
+    full fade takes ``frames`` frames (30 = 1 s at 30 fps) and a reversal mid-fade
+    continues from where it is. The blend uses ``e = smoothstep(w) = w^2 (3 - 2w)``
+    (no jolt at either end; at most ``1.5 / frames`` per frame): the root moves linearly
+    ``(1 - e) * root + e * idle_root`` (metres), each quaternion by hemisphere-aligned
+    nlerp towards the idle one. At ``w == 0`` the pose is left untouched (bit-exact); at
+    ``w == 1`` it becomes the idle pose exactly.
+    """
+
+    def __init__(self, idle: np.ndarray, frames: int = 30) -> None:
+        idle = np.asarray(idle, dtype=np.float32)
+        if idle.shape != (POSE_DIM,) or not np.isfinite(idle).all():
+            raise ValueError(f"idle pose must be finite with shape ({POSE_DIM},), got {idle.shape}")
+        if frames < 1:
+            raise ValueError(f"fade frames must be >= 1, got {frames}")
+        self.pose = idle.copy()
+        self.frames = int(frames)
+        self.idle = False
+        self._k = 0  # weight w = _k / frames, an integer count so both ends are exact
+        self._tmp = np.zeros(POSE_DIM, dtype=np.float32)
+        self._dot = np.zeros(NUM_BONES, dtype=np.float32)
+        self._norm = np.zeros(NUM_BONES, dtype=np.float32)
+
+    @property
+    def weight(self) -> float:
+        """Current blend weight w in [0, 1] (0: the dance as is, 1: the idle pose)."""
+        return self._k / self.frames
+
+    @property
+    def active(self) -> bool:
+        """True while the output is not the dance untouched (idle, or fading back)."""
+        return self.idle or self._k > 0
+
+    def __call__(self, pose: np.ndarray) -> np.ndarray:
+        """Step the weight, blend ``pose`` ((POSE_DIM,) float32, unit quaternions) in place, return it."""
+        if self.idle:
+            self._k = min(self._k + 1, self.frames)
+        else:
+            self._k = max(self._k - 1, 0)
+        if self._k == 0:
+            return pose
+        if self._k == self.frames:
+            pose[:] = self.pose
+            return pose
+        w = self._k / self.frames
+        e = w * w * (3.0 - 2.0 * w)
+        q = pose[3:].reshape(NUM_BONES, 4)
+        np.einsum("ij,ij->i", q, self.pose[3:].reshape(NUM_BONES, 4), out=self._dot)
+        q[self._dot < 0] *= -1.0
+        pose *= 1.0 - e
+        np.multiply(self.pose, e, out=self._tmp)
+        pose += self._tmp
+        # after the alignment the blend's norm is >= sqrt((1-e)^2 + e^2) >= 0.7: no zero
+        np.einsum("ij,ij->i", q, q, out=self._norm)
+        np.sqrt(self._norm, out=self._norm)
+        q /= self._norm[:, None]
+        return pose
 
 
 class PoseSmoother:
@@ -178,6 +267,7 @@ class EngineConfig:
     retry_s: float = 1.0  # after a source error, retry start() this often
     stats_size: int = 2048  # frames kept for p50/p99
     fallback_after_s: float = 2.0  # no audio from the source this long -> switch to the fallback source
+    idle_fade_s: float = 1.0  # the engine's own idle crossfade, each way (models without set_idle)
 
 
 #: Input samples beyond +-MAX_SAMPLE (full scale = 1; 12 dB of headroom) are treated like NaN
@@ -187,22 +277,52 @@ MAX_SAMPLE: float = 4.0
 #: Settings :meth:`Engine.update` can change while running.
 LIVE_SETTINGS: tuple[str, ...] = ("offset_ms", "smoothing")
 
+#: Actions of :meth:`Engine.control` (the WebSocket and OSC control inputs use these).
+CONTROL_ACTIONS: tuple[str, ...] = ("reset", "set_offset", "set_smoothing", "idle", "style", "energy")
+
+#: Longest style name :meth:`Engine.control` passes to a model, characters.
+MAX_STYLE_CHARS: int = 64
+
+
+def check_finite(name: str, value: object) -> float:
+    """A finite real number (not a bool) as a float; :class:`ConfigError` naming ``name`` otherwise."""
+    try:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise OverflowError
+    except OverflowError:  # also an int too large for a float
+        raise ConfigError(f"{name} must be a finite number, got {short_repr(value)}") from None
+    return float(value)
+
 
 def check_live_setting(name: str, value: object) -> float:
     """Validate one live setting; return it as a float or raise :class:`ConfigError` naming it."""
     if name not in LIVE_SETTINGS:
         raise ConfigError(f"{short_repr(name)} cannot be changed while running "
                           f"(live settings: {', '.join(LIVE_SETTINGS)})")
-    try:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise OverflowError
-    except OverflowError:  # also an int too large for a float
-        raise ConfigError(f"{name} must be a finite number, got {short_repr(value)}") from None
+    value = check_finite(name, value)
     if name == "offset_ms" and not -10000 <= value <= 10000:
         raise ConfigError(f"offset_ms must be -10000..10000 ms, got {value!r}")
     if name == "smoothing" and not 0.0 <= value < 1.0:
         raise ConfigError(f"smoothing must be in [0, 1), got {value!r}")
-    return float(value)
+    return value
+
+
+def check_switch(name: str, value: object) -> bool:
+    """An on/off control value: ``True``/``False``, or a number equal to 0 or 1 (an OSC
+    ``i`` 0/1, or a TouchOSC toggle's ``f`` 0.0/1.0). :class:`ConfigError` naming ``name`` otherwise."""
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, (int, float)) and value in (0, 1):  # NaN is neither
+        return bool(value)
+    raise ConfigError(f"{name} must be 0 or 1, got {short_repr(value)}")
+
+
+def check_style_name(value: object) -> str:
+    """A style name: a non-empty string of at most :data:`MAX_STYLE_CHARS` printable characters."""
+    if not isinstance(value, str) or not value or len(value) > MAX_STYLE_CHARS or not value.isprintable():
+        raise ConfigError(f"style must be a style name (1..{MAX_STYLE_CHARS} printable characters), "
+                          f"got {short_repr(value)}")
+    return value
 
 
 @dataclass
@@ -257,6 +377,10 @@ class Engine:
         if self.config.offset_ms is None or not math.isfinite(self.config.offset_ms):
             raise ValueError(f"offset_ms must be a finite number, got {self.config.offset_ms}")
         self.smoother = PoseSmoother(self.config.smoothing)
+        if not 0.0 < self.config.idle_fade_s <= 60.0:
+            raise ValueError(f"idle_fade_s must be in (0, 60] seconds, got {self.config.idle_fade_s}")
+        self.idle = False  # the last idle state set through control("idle", ...)
+        self._fader = IdleFader(idle_pose(), max(1, round(self.config.idle_fade_s * FPS)))
         self._states: dict[int, _SourceState] = {}
         self._active: AudioSource = source
         self.ring = self._state(source).ring
@@ -395,16 +519,57 @@ class Engine:
             self.ring.wake()
 
     def control(self, action: str, value: object = None) -> None:
-        """A control command (the WebSocket control channel): ``reset``, ``set_offset`` (ms)
-        or ``set_smoothing``. Raises :class:`ConfigError` for an unknown action or bad value."""
+        """One control command, as the WebSocket and OSC control inputs send them.
+
+        Actions (:data:`CONTROL_ACTIONS`): ``reset``; ``set_offset`` (ms) and
+        ``set_smoothing`` (through :meth:`update`); ``idle`` (0/1, see :meth:`set_idle`);
+        ``style`` (a name) and ``energy`` (a number), passed to the pose model's
+        ``set_style`` / ``set_energy`` when it has them and refused otherwise. Every value
+        is checked before anything changes; a bad one, an unknown action or a control the
+        model does not offer raises :class:`ConfigError` (one line) and changes nothing.
+        Thread-safe; never waits on the worker.
+        """
         if action == "reset":
             self.reset()
         elif action == "set_offset":
             self.update(offset_ms=value)
         elif action == "set_smoothing":
             self.update(smoothing=value)
+        elif action == "idle":
+            self.set_idle(check_switch("idle", value))
+        elif action == "style":
+            set_style = self._model_control("set_style", "style")
+            set_style(check_style_name(value))
+        elif action == "energy":
+            set_energy = self._model_control("set_energy", "energy")
+            set_energy(check_finite("energy", value))
         else:
-            raise ConfigError(f"unknown control action {short_repr(action)}; use reset, set_offset or set_smoothing")
+            raise ConfigError(f"unknown control action {short_repr(action)}; use {', '.join(CONTROL_ACTIONS)}")
+
+    def set_idle(self, idle: bool) -> None:
+        """Settle into the idle pose and hold it (True), or dance again (False), without a jump.
+
+        A pose model with ``set_idle`` does it itself; otherwise the engine crossfades its
+        output over ``idle_fade_s`` (1 s) towards :func:`idle_pose` and holds that while
+        idle, and crossfades back to the live dance afterwards (:class:`IdleFader`; the
+        model keeps listening meanwhile, so it comes back in time with the music). The
+        state survives :meth:`reset`. Thread-safe.
+        """
+        set_model_idle = getattr(self.model, "set_idle", None)
+        if callable(set_model_idle):
+            set_model_idle(bool(idle))
+        else:
+            self._fader.idle = bool(idle)
+        if self.idle != bool(idle):
+            log.info("idle %s", "on" if idle else "off")
+        self.idle = bool(idle)
+
+    def _model_control(self, method: str, what: str) -> Callable:
+        """The pose model's ``method`` or :class:`ConfigError` "this model offers no ``what`` control"."""
+        fn = getattr(self.model, method, None)
+        if not callable(fn):
+            raise ConfigError(f"this model offers no {what} control")
+        return fn
 
     @property
     def active_source(self) -> AudioSource:
@@ -424,7 +589,8 @@ class Engine:
 
     # -- statistics --------------------------------------------------------------------
     def stats(self) -> dict:
-        """Counters for the status line: frames, compute/latency p50/p99 (ms), faults, sinks."""
+        """Counters for the status line: frames, idle, the live settings (offset_ms, smoothing),
+        compute/latency p50/p99 (ms), faults, sinks."""
         sinks = {}
         for s in self.sinks:
             try:
@@ -440,6 +606,9 @@ class Engine:
         return {
             "state": self.state,
             "frames": self.frames_out,
+            "idle": self.idle,
+            "offset_ms": self.config.offset_ms,
+            "smoothing": self.config.smoothing,
             "audio_seconds": self._time0 + (self._consumed - self._origin) / self._active.sample_rate,
             "uptime_s": time.monotonic() - self._started_at,
             "compute_ms_p50": self.compute_ms.percentile(50),
@@ -624,6 +793,8 @@ class Engine:
             else:
                 pose = self.smoother(row.copy())
                 self._last_good[:] = pose
+            if self._fader.active:  # after _last_good: smoothing and the NaN guard keep the dance
+                pose = self._fader(pose)
             i = self._index
             self._index += 1
             j = i - self._seg_index0  # frame number within the current extractor segment
@@ -752,6 +923,7 @@ class Engine:
 
 
 __all__ = [
-    "Engine", "EngineConfig", "FeatureStream", "PoseModel", "ExtractorFactory", "PoseSmoother",
-    "RollingStats", "rest_pose", "LIVE_SETTINGS", "MAX_SAMPLE", "check_live_setting",
+    "Engine", "EngineConfig", "FeatureStream", "PoseModel", "ExtractorFactory", "PoseSmoother", "IdleFader",
+    "RollingStats", "rest_pose", "idle_pose", "LIVE_SETTINGS", "CONTROL_ACTIONS", "MAX_SAMPLE", "MAX_STYLE_CHARS",
+    "check_live_setting", "check_switch", "check_finite", "check_style_name",
 ]

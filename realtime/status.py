@@ -11,7 +11,10 @@ send time minus the release time of the audio block that completed it; *drops*:
 frames the outputs dropped (slow peers) plus output errors; *clients*: WebSocket
 clients connected; *overruns*: audio blocks that lost samples because the worker fell
 behind, plus input overflows the device reported (*underruns*, shown when not 0:
-input underflows the device reported).
+input underflows the device reported). Shown only when they apply: *idle* (the
+performer holds its idle pose), *offset* (ms) and *smoothing* when not 0, and with
+``--control-osc`` *control N ok M bad* (OSC control messages applied / rejected), plus
+*refused* (senders outside ``--control-allow``) and *rate-limited* when not 0.
 """
 
 from __future__ import annotations
@@ -36,6 +39,14 @@ def format_status(stats: dict, fps: float | None = None) -> str:
     parts = [
         f"{stats.get('state', '?'):<8} {stats.get('frames', 0):>6} frames"
         + (f" {fps:4.1f} fps" if fps is not None else ""),
+    ]
+    if stats.get("idle"):
+        parts.append("idle")
+    if stats.get("offset_ms"):
+        parts.append(f"offset {stats['offset_ms']:g} ms")
+    if stats.get("smoothing"):
+        parts.append(f"smoothing {stats['smoothing']:g}")
+    parts += [
         f"hop p50 {stats.get('compute_ms_p50', float('nan')):.1f} p99 {stats.get('compute_ms_p99', float('nan')):.1f} ms",
         f"latency p50 {stats.get('latency_ms_p50', float('nan')):.1f} p99 {stats.get('latency_ms_p99', float('nan')):.1f} ms",
         f"drops {int(drops)}",
@@ -48,6 +59,14 @@ def format_status(stats: dict, fps: float | None = None) -> str:
     parts.append(f"nan {int(stats.get('nan_frames', 0))}")
     if stats.get("source_errors"):
         parts.append(f"source errors {int(stats['source_errors'])}")
+    control = stats.get("control")
+    if control is not None:
+        text = f"control {int(control.get('applied', 0))} ok {int(control.get('bad', 0))} bad"
+        if control.get("refused"):
+            text += f" {int(control['refused'])} refused"
+        if control.get("rate_limited"):
+            text += f" {int(control['rate_limited'])} rate-limited"
+        parts.append(text)
     return " | ".join(parts)
 
 

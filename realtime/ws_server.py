@@ -40,6 +40,7 @@ from websockets.http11 import Request, Response
 from models.errors import ConfigError, NetworkError, PerformerError
 from models.errors import short_repr as _short
 from models.timebase import FPS
+from realtime.engine import CONTROL_ACTIONS as ENGINE_CONTROL_ACTIONS
 from realtime.frame import PoseFrame
 from realtime.wire import decode_frame, encode_frame, frame_json, hello_message, rest_offsets
 
@@ -52,8 +53,9 @@ WS_PATHS: tuple[str, ...] = ("/", "/ws")
 #: Close codes (RFC 6455) sent to refused clients.
 CLOSE_POLICY = 1008  # bad or missing token, unknown format, message rate exceeded
 CLOSE_FULL = 1013  # client cap reached ("try again later")
-#: Control actions a token-authenticated client may send (docs/protocol.md).
-CONTROL_ACTIONS: tuple[str, ...] = ("reset", "set_offset", "set_smoothing")
+#: Control actions a token-authenticated client may send (docs/protocol.md): the engine's,
+#: :data:`realtime.engine.CONTROL_ACTIONS` (the OSC control input sends the same).
+CONTROL_ACTIONS: tuple[str, ...] = ENGINE_CONTROL_ACTIONS
 ControlHandler = Callable[[str, object], None]
 """Applies one control action (e.g. :meth:`realtime.engine.Engine.control`); raises
 :class:`PerformerError` for a bad value. Called on the server thread: must not block."""
@@ -103,8 +105,7 @@ class _Client:
     aborted: bool = False
     sending: bool = False  # the writer task is inside ws.send (a direct write now would reorder)
     controller: bool = False  # authenticated with the token: may send control messages
-    allowance: float = 0.0  # message-rate token bucket (messages)
-    last_message: float = 0.0  # loop time of the bucket's last update
+    rate: TokenBucket | None = None  # message-rate limit, set when the client is served
 
 
 def parse_client_message(message: str | bytes) -> dict:
@@ -452,14 +453,14 @@ class WebSocketSink:
         await ws.send(hello)
         self._messages += 1
         self._bytes += len(hello)
-        client.progress = client.last_message = self._loop.time()
-        client.allowance = 2.0 * self.max_messages_per_s
+        client.progress = self._loop.time()
+        client.rate = TokenBucket(self.max_messages_per_s, client.progress)
         with self._lock:
             self._clients[ws] = client
         writer = asyncio.create_task(self._write(client))
         try:
             async for message in ws:
-                if not self._within_rate(client):
+                if not client.rate.take(self._loop.time()):
                     self._rate_limited += 1
                     log.info("WebSocket client %s sent more than %g messages/s; closing it", client.peer,
                              self.max_messages_per_s)
@@ -494,17 +495,6 @@ class WebSocketSink:
                 c.sent += 1
                 self._messages += 1
                 self._bytes += len(message)
-
-    def _within_rate(self, c: _Client) -> bool:
-        """Token bucket: ``max_messages_per_s`` per second, bursts up to twice that."""
-        now = self._loop.time()
-        rate = self.max_messages_per_s
-        c.allowance = min(2.0 * rate, c.allowance + (now - c.last_message) * rate)
-        c.last_message = now
-        if c.allowance < 1.0:
-            return False
-        c.allowance -= 1.0
-        return True
 
     def _reply(self, c: _Client, message: str | bytes) -> dict | None:
         """Answer one client message (docs/protocol.md); errors become an error message.
@@ -591,6 +581,28 @@ class WebSocketSink:
 def _error(text: str) -> dict:
     return {"type": "error", "error": text}
 
+
+
+class TokenBucket:
+    """A rate limit: ``rate`` tokens per second, holding at most ``2 * rate`` (the burst).
+
+    ``take(now, cost)`` (``now`` in seconds of any monotonic clock) refills the bucket for
+    the time since the last call, then takes ``cost`` tokens if at least one is there
+    (True) or nothing (False); a cost above 1 may overdraw, delaying what comes next.
+    """
+
+    def __init__(self, rate: float, now: float) -> None:
+        self.rate = float(rate)
+        self.tokens = 2.0 * self.rate
+        self._last = now
+
+    def take(self, now: float, cost: float = 1.0) -> bool:
+        self.tokens = min(2.0 * self.rate, self.tokens + (now - self._last) * self.rate)
+        self._last = now
+        if self.tokens < 1.0:
+            return False
+        self.tokens -= cost
+        return True
 
 
 def is_loopback(host: str) -> bool:

@@ -15,14 +15,14 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from models.errors import AudioError
+from models.errors import AudioError, ConfigError
 from models.features.spectral import FeatureConfig, extract_features
 from models.features.streaming import StreamingFeatureExtractor
 from models.rig.humanoid import NUM_BONES
 from models.rig.motion import POSE_DIM
 from models.timebase import FPS, HOP, SAMPLE_RATE
 from realtime.audio_input import FileSource, RingBuffer
-from realtime.engine import Engine, EngineConfig, PoseSmoother, rest_pose
+from realtime.engine import Engine, EngineConfig, IdleFader, PoseSmoother, idle_pose, rest_pose
 from realtime.frame import PoseFrame
 
 CFG = FeatureConfig()
@@ -425,6 +425,155 @@ def test_smoother_blends_on_the_shortest_arc():
     # on the geodesic between a and b (angles add up), closer to a (weight 0.7)
     np.testing.assert_allclose((ra.inv() * ro).magnitude() + (ro.inv() * rb).magnitude(), total, atol=1e-4)
     assert np.all((ra.inv() * ro).magnitude() <= 0.5 * total + 1e-6)
+
+
+# -- show controls: idle, style, energy ------------------------------------------------------
+
+
+class ActingSink(ListSink):
+    """Keeps frames and, right after frame ``i`` went out, calls ``engine.control(*actions[i])``
+    (on the worker, between two frames: the switch falls exactly between frames i and i + 1)."""
+
+    def __init__(self, actions: dict[int, tuple[str, object]]) -> None:
+        super().__init__()
+        self.actions = actions
+        self.engine: Engine | None = None
+
+    def send(self, frame: PoseFrame) -> None:
+        super().send(frame)
+        if frame.index in self.actions:
+            self.engine.control(*self.actions[frame.index])
+
+
+def bone_angles(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(NUM_BONES,) rotation angle in radians between the bones of two flat poses."""
+    qa, qb = a[3:].reshape(-1, 4), b[3:].reshape(-1, 4)
+    return (Rotation.from_quat(qa).inv() * Rotation.from_quat(qb)).magnitude()
+
+
+def test_idle_without_model_support_crossfades_in_one_second_holds_and_comes_back():
+    audio = noise(4.0)
+    sink = ActingSink({10: ("idle", 1), 60: ("idle", 0)})
+    eng = Engine(FileSource(audio, SAMPLE_RATE, realtime=False, block_size=300), extractor, TinyConvModel(),
+                 [sink], EngineConfig(warmup_s=0.5))
+    sink.engine = eng
+    eng.start()
+    assert eng.wait(30)
+    eng.close()
+    out = np.stack([f.pose for f in sink.frames])
+    ref = reference_poses(audio)  # the dance the model kept making all along
+    target = idle_pose()
+    assert len(out) == 120 and eng.idle is False and eng.stats()["idle"] is False
+    np.testing.assert_allclose(out[:11], ref[:11], atol=1e-4)  # untouched before
+    # 29 frames in between (1 s at 30 fps), then exactly the idle pose, held while idle
+    np.testing.assert_array_equal(out[40:61], np.tile(target, (21, 1)))
+    np.testing.assert_allclose(out[90:], ref[90:], atol=1e-4)  # the live dance again, 1 s after idle ended
+    # the blend weight of each frame, read off the root (moved linearly): no step beyond smoothstep's
+    d = ref[:, :3] - target[:3]
+    e = np.einsum("ij,ij->i", ref[:, :3] - out[:, :3], d) / np.einsum("ij,ij->i", d, d)
+    w = np.r_[np.zeros(11), np.arange(1, 30) / 30, np.ones(21), np.arange(29, 0, -1) / 30, np.zeros(30)]
+    np.testing.assert_allclose(e, w * w * (3 - 2 * w), atol=1e-4)
+    assert np.abs(np.diff(e)).max() <= 1.5 / 30 + 1e-4
+    # each bone turns towards the idle pose, never away from it or past it
+    for i in [*range(11, 40), *range(61, 90)]:
+        assert np.all(bone_angles(out[i], target) <= bone_angles(ref[i], target) + 1e-3), i
+
+
+def test_idle_fader_reverses_mid_fade_without_a_jump():
+    rng = np.random.default_rng(3)
+    dance = random_pose(rng)
+    dance[3:] /= np.repeat(np.linalg.norm(dance[3:].reshape(-1, 4), axis=1), 4)
+    fader = IdleFader(idle_pose(), frames=10)
+    assert not fader.active and fader(dance.copy()).tobytes() == dance.tobytes()  # off: bit-exact
+    fader.idle = True
+    roots = [fader(dance.copy())[:3].copy() for _ in range(4)]
+    fader.idle = False  # reverse after 4 of 10 steps: goes back down from there
+    roots += [fader(dance.copy())[:3].copy() for _ in range(5)]
+    weights = [f.item() for f in np.linalg.norm(np.array(roots) - dance[:3], axis=1)
+               / np.linalg.norm(idle_pose()[:3] - dance[:3])]
+    expected = [w * w * (3 - 2 * w) for w in np.r_[np.arange(1, 5), np.arange(3, -1, -1), 0] / 10]
+    np.testing.assert_allclose(weights, expected, atol=1e-5)
+    assert not fader.active
+    with pytest.raises(ValueError, match="idle pose"):
+        IdleFader(np.full(POSE_DIM, np.nan, np.float32))
+
+
+def test_idle_pose_stands_on_the_rest_skeleton():
+    pose = idle_pose()
+    np.testing.assert_array_equal(pose[3:], rest_pose()[3:])  # the T-pose's rotations
+    assert pose[0] == pose[2] == 0.0 and 0.8 < pose[1] < 1.1  # hips at standing height, metres
+
+
+class ShowModel(TinyConvModel):
+    """A TinyConvModel with the optional show controls of the PoseModel protocol: two styles
+    (an offset on the root's x), an energy (a gain on the root) and its own idle (a still root)."""
+
+    STYLES = {"plain": 0.0, "lean": 0.3}
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.style, self.energy, self.idle = "plain", 1.0, False
+
+    def set_style(self, name: str) -> None:
+        if name not in self.STYLES:
+            raise ConfigError(f"unknown style {name!r} (styles: {', '.join(self.STYLES)})")
+        self.style = name
+
+    def set_energy(self, x: float) -> None:
+        if not 0.0 <= x <= 2.0:
+            raise ConfigError(f"energy must be in [0, 2], got {x!r}")
+        self.energy = x
+
+    def set_idle(self, idle: bool) -> None:
+        self.idle = idle
+
+    def push(self, features):
+        out = super().push(features)
+        out[:, :3] *= 0.0 if self.idle else self.energy
+        out[:, 0] += self.STYLES[self.style]
+        return out
+
+
+def test_style_energy_and_idle_go_to_a_model_that_offers_them():
+    model = ShowModel()
+    audio = noise(1.0)
+    sink = ActingSink({5: ("style", "lean"), 10: ("energy", 0.5), 15: ("idle", True)})
+    # one hop per worker step: one push per frame, so a setting reaches the model's very next frame
+    eng = Engine(FileSource(audio, SAMPLE_RATE, realtime=False, block_size=HOP), extractor, model, [sink],
+                 EngineConfig(warmup_s=0, max_read=HOP))
+    sink.engine = eng
+    eng.start()
+    assert eng.wait(30)
+    eng.close()
+    assert (model.style, model.energy, model.idle, eng.idle) == ("lean", 0.5, True, True)
+    roots = np.stack([f.pose[:3] for f in sink.frames])
+    ref = reference_poses(audio)[:, :3]
+    lean = np.array([0.3, 0.0, 0.0], np.float32)
+    np.testing.assert_allclose(roots[:6], ref[:6], atol=1e-5)
+    np.testing.assert_allclose(roots[6:11], ref[6:11] + lean, atol=1e-5)
+    np.testing.assert_allclose(roots[11:16], 0.5 * ref[11:16] + lean, atol=1e-5)
+    # the model's own idle (a still root), not the engine's crossfade towards the rest skeleton's hips
+    np.testing.assert_allclose(roots[16:], np.tile(lean, (len(roots) - 16, 1)), atol=1e-6)
+    for action, value, message in [("style", "disco", "unknown style 'disco'"), ("energy", 5.0, "energy must be in"),
+                                   ("energy", float("nan"), "energy must be a finite number"),
+                                   ("style", "", "style must be a style name"), ("style", 7, "style must be"),
+                                   ("style", "x" * 65, "style must be"), ("idle", 2, "idle must be 0 or 1"),
+                                   ("idle", "1", "idle must be 0 or 1"), ("idle", float("nan"), "idle must be 0 or 1")]:
+        with pytest.raises(ConfigError, match=message):
+            eng.control(action, value)
+    assert (model.style, model.energy, model.idle) == ("lean", 0.5, True)  # nothing changed
+
+
+def test_a_model_without_style_or_energy_refuses_them_clearly():
+    eng = Engine(FileSource(noise(0.1), SAMPLE_RATE, realtime=False), extractor, TinyConvModel(), [],
+                 EngineConfig(warmup_s=0))
+    for action in ("style", "energy"):
+        with pytest.raises(ConfigError, match=f"^this model offers no {action} control$"):
+            eng.control(action, "calm" if action == "style" else 1.0)
+    with pytest.raises(ConfigError, match="unknown control action 'dance'"):
+        eng.control("dance", 1)
+    eng.control("idle", 1.0)  # a TouchOSC toggle's float
+    assert eng.idle and eng.stats()["idle"] is True
 
 
 # -- ring buffer metadata used for latency -------------------------------------------------

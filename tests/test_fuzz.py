@@ -112,7 +112,8 @@ messages = st.one_of(
     st.fixed_dictionaries({"type": st.sampled_from(TYPES)}, optional={
         "format": st.sampled_from(["binary", "json", "xml"]) | json_values,
         "id": json_values, "token": st.sampled_from(["s3cret", "wrong"]) | json_values,
-        "action": st.sampled_from(["reset", "set_offset", "set_smoothing", "stop"]) | json_values,
+        "action": st.sampled_from(["reset", "set_offset", "set_smoothing", "idle", "style", "energy", "stop"])
+        | json_values,
         "value": st.floats() | st.integers(-20000, 20000) | json_values,
     }).map(json.dumps),
 )
@@ -188,7 +189,7 @@ def test_server_on_a_real_socket(server, batch):
 
 
 @FAST
-@given(action=st.sampled_from(["reset", "set_offset", "set_smoothing"]) | json_values,
+@given(action=st.sampled_from(["reset", "set_offset", "set_smoothing", "idle", "style", "energy"]) | json_values,
        value=json_values | st.floats() | st.integers())
 def test_control_commands(server, action, value):
     _, eng = server
@@ -198,6 +199,49 @@ def test_control_commands(server, action, value):
         assert len(str(exc)) < 300
     assert math.isfinite(eng.config.offset_ms) and -10000 <= eng.config.offset_ms <= 10000
     assert 0.0 <= eng.config.smoothing < 1.0
+    assert isinstance(eng.idle, bool)
+
+
+# -- OSC control datagrams ----------------------------------------------------------------------------
+
+osc_texts = st.text(max_size=24).filter(lambda t: "\x00" not in t)
+osc_args = st.lists(st.integers(-(2**31), 2**31 - 1) | st.floats(width=32) | osc_texts
+                    | st.sampled_from([0, 1, 0.0, 1.0, 40, "calm"]), max_size=3)
+
+
+@pytest.fixture(scope="module")
+def osc_control(server):
+    """An OSC control input on loopback driving the same real (stopped) engine."""
+    from realtime.osc_control import OscControl
+
+    _, eng = server
+    with OscControl("127.0.0.1", 0, control=eng.control, max_messages_per_s=1e9) as ctl:
+        yield ctl, eng
+
+
+@FAST
+@given(address=st.sampled_from(["/performer/reset", "/performer/offset", "/performer/smoothing",
+                                "/performer/idle", "/performer/style", "/performer/energy", "/x", "/"])
+       | osc_texts.map(lambda t: "/" + t), args=osc_args, cut=st.integers(0, 64), junk=st.binary(max_size=12),
+       bundle=st.booleans())
+def test_osc_control_any_datagram(osc_control, address, args, cut, junk, bundle):
+    """Any datagram (messages, bundles, cut or with junk added): counted as applied, bad or
+    nothing asked; never an exception; the engine's settings stay valid."""
+    from realtime.vmc import osc_message
+
+    ctl, eng = osc_control
+    data = osc_message(address, *args)
+    if bundle:
+        data = b"#bundle\x00" + bytes(8) + len(data).to_bytes(4, "big") + data
+    data = data[: len(data) - cut % (len(data) + 1)] + junk
+    before = ctl.stats()
+    ctl.handle(data, ("127.0.0.1", 9))
+    after = ctl.stats()
+    new = {k: after[k] - before[k] for k in after}
+    assert new["refused"] == new["rate_limited"] == 0
+    assert new["applied"] + new["bad"] <= new["messages"]  # an empty bundle holds no message
+    assert math.isfinite(eng.config.offset_ms) and -10000 <= eng.config.offset_ms <= 10000
+    assert 0.0 <= eng.config.smoothing < 1.0 and isinstance(eng.idle, bool)
 
 
 # -- configuration files ---------------------------------------------------------------------------------

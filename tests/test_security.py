@@ -8,6 +8,7 @@ import logging
 import threading
 import time
 
+import numpy as np
 import pytest
 from test_engine import ListSink, TinyConvModel, extractor, noise
 from test_run_cli import free_port, ns
@@ -20,7 +21,7 @@ from models.errors import ConfigError
 from models.timebase import HOP, SAMPLE_RATE
 from realtime.audio_input import FileSource
 from realtime.config import DEFAULT_WS, TOKEN_ENV, RunConfig, resolve_run_config
-from realtime.engine import Engine, EngineConfig
+from realtime.engine import Engine, EngineConfig, idle_pose
 from realtime.ws_server import WebSocketSink, is_loopback
 
 TOKEN = "s3cret-token"
@@ -107,6 +108,26 @@ def test_token_holder_controls_the_engine_on_its_worker(live):
         reply = ask(ws, {"type": "control", "action": "shutdown"})
         assert reply["type"] == "error" and "unknown control action 'shutdown'" in reply["error"]
     assert sink.stats()["controls"] == 3
+
+
+def test_idle_and_style_over_websocket_take_the_engine_path(live):
+    eng, sink, frames = live
+    with connect(sink.ws_url + f"?token={TOKEN}") as ws:
+        _hello(ws)
+        assert ask(ws, {"type": "control", "action": "idle", "value": 1}) == {
+            "type": "control_ok", "action": "idle", "value": 1}
+        assert eng.idle is True
+        wait_until(lambda: frames.frames and np.array_equal(frames.frames[-1].pose, idle_pose()), timeout=10)
+        for action, value, why in [("style", "calm", "this model offers no style control"),
+                                   ("energy", 1.0, "this model offers no energy control"),
+                                   ("idle", 2, "idle must be 0 or 1")]:
+            reply = ask(ws, {"type": "control", "action": action, "value": value})
+            assert reply == {"type": "error", "error": f"control {action}: {why}, got 2"
+                             if action == "idle" else f"control {action}: {why}"}, reply
+        assert eng.idle is True  # the bad idle value changed nothing
+        assert ask(ws, {"type": "control", "action": "idle", "value": False})["type"] == "control_ok"
+        assert eng.idle is False
+    assert sink.stats()["controls"] == 2
 
 
 def test_without_the_token_nobody_connects_or_steers(live):

@@ -27,10 +27,22 @@ exit with status 2. SIGHUP re-reads --config and applies offset_ms and smoothing
 live (a bad file is reported and the current settings are kept). See
 docs/engine.md, docs/reliability.md and docs/security.md.
 
+show control (--control-osc, off by default; docs/show.md): OSC messages to
+  /performer/reset                 restart the streaming state
+  /performer/offset     NUMBER     stage offset in ms, -10000..10000
+  /performer/smoothing  NUMBER     pose smoothing in [0, 1)
+  /performer/idle       0|1        1: settle to the idle pose and hold it; 0: dance again
+  /performer/style      STRING     style name (only models that offer styles)
+  /performer/energy     NUMBER     (only models that offer it)
+A bad message is logged once per address, counted in the status line
+("control N ok M bad") and changes nothing; the stream never stops for it.
+
 examples:
   performer run --audio song.wav --record take1.npz
   performer run --input-device "USB Audio" --osc 192.168.1.20:39539 --smoothing 0.3
   performer run --audio song.wav --fast --no-ws --osc-mode plain --osc 127.0.0.1:9000
+  performer run --input-device "USB Audio" --control-osc 0.0.0.0:9100 --control-allow 192.168.10.0/24
+  oscsend 127.0.0.1 9100 /performer/offset f 40       # liblo-tools; QLab, TouchOSC: docs/show.md
 """
 
 
@@ -76,6 +88,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     o.add_argument("--ws-origin", action="append", metavar="URL",
                    help="allowed browser Origin (e.g. http://stage-pc:8765); repeat; default: any")
     o.add_argument("--record", metavar="FILE", help="write what was streamed to FILE.npz and FILE.bvh when the run stops")
+    c = p.add_argument_group("show control")
+    c.add_argument("--control-osc", metavar="[HOST:]PORT",
+                   help="listen for OSC show control (/performer/reset, offset, smoothing, idle, style, energy) "
+                        "on this UDP port; host 127.0.0.1 unless given (0.0.0.0: every interface). Off by default")
+    c.add_argument("--control-allow", action="append", metavar="CIDR",
+                   help="only senders in this network (e.g. 192.168.10.0/24, or one address) may steer; repeat "
+                        "for several; without it a non-loopback --control-osc is open to anyone (warned about)")
     m = p.add_argument_group("model and timing")
     m.add_argument("--checkpoint", metavar="CKPT", help="model checkpoint (default: the packaged one)")
     m.add_argument("--style", choices=("auto", "chacha", "rumba", "waltz"),
@@ -134,11 +153,24 @@ def _discard(sinks) -> None:
             s.close()
 
 
-def _describe(sinks, source, pipeline) -> str:
+def _open_control(cfg, engine):
+    """The OSC control input of ``--control-osc`` (bound, not started), or None when off."""
+    from realtime.osc_control import OscControl
+
+    endpoint = cfg.control_endpoint()
+    if endpoint is None:
+        return None
+    return OscControl(*endpoint, control=engine.control, allow=cfg.control_networks())
+
+
+def _describe(sinks, source, pipeline, control=None) -> str:
     outs = []
     for s in sinks:
         outs.append(f"{s.name} (viewer {s.url})" if hasattr(s, "url") else s.name)
-    return f"{source.name} at {source.sample_rate} Hz -> {', '.join(outs) or 'no outputs'} [{pipeline.checkpoint.name}]"
+    text = f"{source.name} at {source.sample_rate} Hz -> {', '.join(outs) or 'no outputs'} [{pipeline.checkpoint.name}]"
+    if control is not None:
+        text += f"; OSC control on {control.host}:{control.port}"
+    return text
 
 
 def run(args: argparse.Namespace) -> int:
@@ -167,15 +199,24 @@ def run(args: argparse.Namespace) -> int:
     for s in sinks:
         if hasattr(s, "control"):
             s.control = engine.control  # only token-authenticated clients can use it
+    try:
+        control = _open_control(cfg, engine)
+    except BaseException:
+        _discard(sinks)
+        raise
     if not args.quiet:
-        print(f"performer run: {_describe(sinks, source, pipeline)}", file=sys.stderr)
+        print(f"performer run: {_describe(sinks, source, pipeline, control)}", file=sys.stderr)
     try:
         engine.start()
     except BaseException:
         engine.stop()
+        if control is not None:
+            control.close()
         _discard(sinks)
         raise
-    status = None if args.quiet else StatusLine(engine.stats)
+    if control is not None:
+        control.start()
+    status = None if args.quiet else StatusLine(lambda: _stats(engine, control))
     interrupted = False
     restore = _install_reload(args, engine, cfg)
     try:
@@ -187,6 +228,8 @@ def run(args: argparse.Namespace) -> int:
         interrupted = True
     finally:
         restore()
+        if control is not None:
+            control.close()
         if status is not None:
             status.stop(final=engine.frames_out > 0 or interrupted)
         engine.close()
@@ -194,6 +237,14 @@ def run(args: argparse.Namespace) -> int:
         for path in getattr(s, "written", ()):
             print(f"performer run: wrote {path}", file=sys.stderr)
     return 130 if interrupted else 0
+
+
+def _stats(engine, control) -> dict:
+    """The engine's stats, plus the OSC control input's under ``"control"`` when it is on."""
+    stats = engine.stats()
+    if control is not None:
+        stats["control"] = control.stats()
+    return stats
 
 
 def reload_settings(args: argparse.Namespace, engine, current):
