@@ -1,0 +1,74 @@
+"""benchmarks/viewer_video.py: a 1-s, tiny side-by-side recording of the real web viewer.
+
+Needs Debian's chromium, the playwright package, the built viewer (clients/web/dist)
+and the shared dataset; skips with the reason when one is absent.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from models.generate import default_checkpoint_path
+
+REPO = Path(__file__).resolve().parents[1]
+_path = REPO / "benchmarks" / "viewer_video.py"
+_spec = importlib.util.spec_from_file_location("viewer_video", _path)
+vv = importlib.util.module_from_spec(_spec)
+sys.modules[_spec.name] = vv  # its dataclass looks its module up there
+_spec.loader.exec_module(vv)
+
+
+@pytest.fixture
+def can_record():
+    if not vv.CHROMIUM.is_file():
+        pytest.skip(f"{vv.CHROMIUM} not installed (apt-get install chromium; 'make test' does it)")
+    try:
+        import playwright  # noqa: F401
+    except ImportError:
+        pytest.skip("the playwright Python package is not installed (pip install -e '.[dev]')")
+    if not (REPO / "clients" / "web" / "dist" / "index.html").is_file():
+        pytest.skip("clients/web/dist is not built ('make web')")
+
+
+@pytest.mark.slow
+@pytest.mark.data
+def test_one_second_clip_has_every_picture_and_both_performers_move(can_record, dwm_root, tmp_path, capsys):
+    from PIL import Image
+
+    size, fps = (160, 120), 10
+    out = tmp_path / "clip.gif"
+    rc = vv.main(["--checkpoint", str(default_checkpoint_path()), "--data", str(dwm_root), "--dance", "DANCE_C_2",
+                  "--start-s", "30", "--seconds", "1", "--fps", str(fps), "--size", f"{size[0]}x{size[1]}",
+                  "--out", str(out), "--cache", str(REPO / ".cache" / "corpus"), "--quiet"])
+    assert rc == 0, capsys.readouterr().err
+    top, bottom, _ = vv.bands(size)
+    with Image.open(out) as gif:
+        assert gif.n_frames == fps  # 1 s at 10 pictures per second
+        assert gif.size == (2 * size[0], top + size[1] + bottom)
+        frames, total_ms = [], 0
+        for i in range(gif.n_frames):
+            gif.seek(i)
+            total_ms += gif.info["duration"]
+            frames.append(np.asarray(gif.convert("RGB"), dtype=np.int16)[top : top + size[1]])  # the viewers only
+    assert total_ms == 1000
+    for name, half in (("real", slice(0, size[0])), ("generated", slice(size[0], 2 * size[0]))):
+        pictures = [f[:, half] for f in frames]
+        changed = [np.any(a != b) for a, b in zip(pictures, pictures[1:])]
+        # Each performer moves: its viewer's picture changes from picture to picture.
+        assert sum(changed) >= len(changed) - 1, f"{name} side static in {changed.count(False)} of {len(changed)} steps"
+        assert np.abs(pictures[0] - pictures[-1]).sum() > 0, f"{name} side did not move in 1 s"
+    # The two sides show different performers.
+    assert np.any(frames[0][:, : size[0]] != frames[0][:, size[0] :])
+
+
+def test_bad_options_are_refused(capsys):
+    for argv in (["--fps", "60"], ["--seconds", "0"], ["--size", "big"], ["--out", "x.mp4"]):
+        with pytest.raises(SystemExit) as exc:
+            vv.parse_args(argv)
+        assert exc.value.code == 2
+    assert "--out must be a .gif" in capsys.readouterr().err
