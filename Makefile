@@ -52,7 +52,7 @@ constraints:
 	  | sed 's/^torch==\([^+]*\)+.*/torch==\1/'; } > constraints.txt.new
 	mv constraints.txt.new constraints.txt
 	rm -rf $(LOCK_VENV)
-	@git diff --stat constraints.txt 2>/dev/null || true
+	@if git diff --quiet constraints.txt 2>/dev/null; then echo "constraints.txt: no version changed"; else git diff --stat constraints.txt; fi
 
 # Web viewer (docs/receivers.md): clients/web/dist is committed, so the viewer works
 # without npm. With npm, `make web` rebuilds dist/ when a source differs from the build

@@ -111,7 +111,7 @@ def test_reference_file_names_its_command_and_checkpoint() -> None:
     assert set(ref["versions"]) == set(PACKAGES)
 
 
-@pytest.mark.slow  # 10-25 s on 2 cores: two songs' features, librosa's beat tracker compiled by numba
+@pytest.mark.slow  # 15-25 s on 2 busy cores (2.5 min on a fresh venv: numba compiles librosa first)
 @pytest.mark.data
 def test_shipped_model_evaluates_to_the_stored_numbers(dwm_root: Path) -> None:
     ref = json.loads(REFERENCE.read_text())
