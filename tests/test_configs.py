@@ -1,4 +1,5 @@
-"""Every training config under configs/ and configs/experiments/ loads, and the commands documented in it can be rerun.
+"""Every training config under configs/ and configs/experiments/ loads, and the commands
+documented in it can be rerun; configs/README.md lists them all.
 
 docs/training.md cites these files with the command that trained each run, so a config
 that no longer parses, or one whose starting checkpoint changes when the shipped default
