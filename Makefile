@@ -10,7 +10,7 @@ STAMP   := $(VENV)/.installed
 # against our encoder (tests/test_listen.py; about 20 s to install).
 APT_PKGS := libportaudio2 liblo-tools mono-mcs
 
-.PHONY: setup system-deps web browser-deps demo test test-fast bench soak clean help
+.PHONY: setup system-deps web browser-deps demo test test-fast bench soak constraints clean help
 
 help:
 	@echo "make demo   - set up, then run the main job on the bundled defaults"
@@ -18,6 +18,7 @@ help:
 	@echo "make setup  - create ./.venv and install the package (torch first)"
 	@echo "make bench  - run the latency benchmark suite against benchmarks/budgets.toml"
 	@echo "make soak   - SOAK_MINUTES (60) of audio through the full engine: no NaN, exact frames, flat RSS and fds"
+	@echo "make constraints - re-pin constraints.txt to the newest releases (docs/install.md)"
 
 setup: system-deps $(STAMP) $(if $(shell command -v npm 2>/dev/null),web)
 
@@ -31,11 +32,27 @@ system-deps:
 	  else echo "note: missing system packages:$$missing (live audio input / oscdump / C# tests will be skipped)"; fi; \
 	fi
 
-$(STAMP): pyproject.toml
+# Every Python package at the exact version of constraints.txt (docs/install.md); torch
+# first, so that nothing pulls a CUDA build.
+$(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
-	$(BIN)/pip install -q --disable-pip-version-check torch==2.13.0
-	$(BIN)/pip install -q --disable-pip-version-check -e '.[dev]'
+	$(BIN)/pip install -q --disable-pip-version-check -c constraints.txt torch==2.13.0
+	$(BIN)/pip install -q --disable-pip-version-check -c constraints.txt -e '.[dev]'
 	touch $(STAMP)
+
+# make constraints: resolve pyproject.toml's dependencies afresh (newest releases) in a
+# scratch venv and write their exact versions to constraints.txt, keeping its header.
+# Review `git diff constraints.txt`, then `make test` (docs/install.md).
+LOCK_VENV ?= /tmp/live-performer-constraints
+constraints:
+	rm -rf $(LOCK_VENV) && $(PY) -m venv $(LOCK_VENV)
+	$(LOCK_VENV)/bin/pip install -q --disable-pip-version-check torch==2.13.0
+	$(LOCK_VENV)/bin/pip install -q --disable-pip-version-check -e '.[dev]'
+	{ sed -n '/^#/p' constraints.txt; $(LOCK_VENV)/bin/pip freeze | grep -v '^-e \|^#' \
+	  | sed 's/^torch==\([^+]*\)+.*/torch==\1/'; } > constraints.txt.new
+	mv constraints.txt.new constraints.txt
+	rm -rf $(LOCK_VENV)
+	@if git diff --quiet constraints.txt 2>/dev/null; then echo "constraints.txt: no version changed"; else git diff --stat constraints.txt; fi
 
 # Web viewer (docs/receivers.md): clients/web/dist is committed, so the viewer works
 # without npm. With npm, `make web` rebuilds dist/ when a source differs from the build

@@ -16,8 +16,9 @@ under --cache, so later runs start in seconds.
 """
 
 EPILOG = """\
-example (the shipped default checkpoint, see docs/training.md):
-  performer train --config configs/default.toml --data /path/to/dwm --out runs/default
+example (the causal generator with the paper's recipe; every config, and what it trained:
+configs/README.md):
+  performer train --config configs/default.toml --data /path/to/dwm --out runs/causal
 """
 
 
