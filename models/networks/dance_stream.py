@@ -43,6 +43,16 @@ ABSENT_FRAMES: int = 15
 PRESENT_FRAMES: int = 6
 #: Frames of the crossfade between dance and idle (0.67 s), eased with a smoothstep.
 FADE_FRAMES: int = 20
+#: Time constant (frames) of the music detector's running mean while no music is heard: shorter
+#: than the one it was fitted with (GATE_TAU, 0.5 s), so the dance comes back within a second.
+GATE_TAU_RETURN: float = 5.0
+#: Frames over which a new movement's difference from the last one decays (inertialization), at 8 frames a code.
+DECAY_FRAMES: int = 16
+#: Codes drawn from the predictor at each step; the exemplar of theirs that best continues the
+#: motion and dips in speed where the beat tracker expects the next beat is played.
+DRAWS: int = 1
+#: Weight of a speed dip on the expected beat against the continuity cost (median-normalised).
+BEAT_WEIGHT: float = 1.0
 #: Idle sway: (bone, axis, amplitude in degrees, period in s, phase in rad).
 SWAY: tuple[tuple[str, int, float, float, float], ...] = (
     ("Hips", 1, 4.0, 6.0, 0.0),  # a slow turn about the vertical
@@ -62,6 +72,56 @@ def idle_pose(base: np.ndarray, t: np.ndarray) -> np.ndarray:
         vec[:, axis] = np.deg2rad(deg) * np.sin(2 * np.pi * sec / period + phase)
         out[:, i: i + 4] = (Rotation.from_quat(out[:, i: i + 4]) * Rotation.from_rotvec(vec)).as_quat()
     return out.astype(np.float32)
+
+
+def hermite_decay(frames: int) -> np.ndarray:
+    """Cubic Hermite weights (2, frames) that carry an offset and its velocity (per frame) to
+    zero over ``frames`` frames: ``offset(j) = w[0, j] x0 + w[1, j] v0``, with zero value and
+    slope at j = frames."""
+    s = np.arange(frames) / frames
+    return np.stack([2 * s**3 - 3 * s**2 + 1, frames * (s**3 - 2 * s**2 + s)]).astype(np.float32)
+
+
+def _align(q: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Poses (..., P) with every quaternion sign-flipped onto the hemisphere of ``ref`` (P,)'s."""
+    a = q[..., 3:].reshape(*q.shape[:-1], -1, 4)
+    r = ref[3:].reshape(-1, 4)
+    flip = np.where((a * r).sum(-1, keepdims=True) < 0, -1.0, 1.0).astype(q.dtype)
+    out = q.copy()
+    out[..., 3:] = (a * flip).reshape(*q.shape[:-1], -1)
+    return out
+
+
+def _unit(p: np.ndarray) -> np.ndarray:
+    q = p[..., 3:].reshape(*p.shape[:-1], -1, 4)
+    p[..., 3:] = (q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-9)).reshape(*p.shape[:-1], -1)
+    return p
+
+
+def member_dips(windows: np.ndarray, seg: int) -> np.ndarray:
+    """(K, M, seg) 1.0 where an exemplar's smoothed mean joint speed has a local minimum at
+    frame j of its movement (a kinematic beat, as models.evaluation.beats counts them), else 0.
+
+    windows: (K, M, F >= seg + 2, P) poses; speed by forward kinematics on the default skeleton.
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    from models.rig.kinematics import fk
+    from models.rig.motion import Motion
+    from models.rig.skeleton import load_default_skeleton
+
+    k, m, f, p = windows.shape
+    flat = windows.reshape(-1, p).astype(np.float64)
+    q = flat[:, 3:].reshape(len(flat), -1, 4)
+    ok = np.linalg.norm(q, axis=-1).min(1) > 0.5  # empty member slots are zeros
+    q[~ok] = [0.0, 0.0, 0.0, 1.0]
+    flat[:, 3:] = q.reshape(len(flat), -1)
+    pos = fk(Motion.from_vector(flat.astype(np.float32), fps=FPS), load_default_skeleton()).reshape(k * m, f, -1, 3)
+    speed = np.linalg.norm(np.gradient(pos, axis=1), axis=-1).mean(-1)  # (K M, F)
+    speed = gaussian_filter1d(speed, 2.0, axis=1, mode="nearest")
+    dip = np.zeros_like(speed)
+    dip[:, 1:-1] = (speed[:, 1:-1] < speed[:, :-2]) & (speed[:, 1:-1] <= speed[:, 2:])
+    return dip[:, :seg].reshape(k, m, seg).astype(np.float32)
 
 
 def _nlerp(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
@@ -99,6 +159,13 @@ class DanceStream:
         self._gate_mean = self._feat_mean[self._gcols].astype(np.float64)
         self._gate_std = self._feat_std[self._gcols].astype(np.float64)
         self._gate_a = float(np.exp(-1.0 / GATE_TAU))
+        self._gate_a_return = float(np.exp(-1.0 / GATE_TAU_RETURN))
+        self._members = model.member_poses.float().numpy()  # (K, M, 2 seg, P)
+        self._counts = model.member_count.numpy()
+        self._dips = member_dips(self._members[:, :, : self.seg + 2], self.seg)  # (K, M, seg)
+        cc = c.clarity_col
+        self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None
+        self._decay = hermite_decay(DECAY_FRAMES * self.seg // 8)[:, :, None]  # (2, D, 1)
         base = model.destandardize_poses(model.pose_mean * 0)  # the mean pose, unit quaternions
         self._idle_base = base.numpy().astype(np.float32)
         self.forced_idle = False
@@ -117,6 +184,7 @@ class DanceStream:
         self._codes: deque[int] = deque(maxlen=c.decoder_context)
         self._last = c.codebook  # "no code yet"
         self._segment = np.zeros((self.seg, self.pose_dim), np.float32)
+        self._cont: np.ndarray | None = None  # the playing exemplar's continuation (seg, P), offset included
         self._music = False
         self._ema = np.zeros(len(self._gcols))  # the music detector's running mean
         self._run = 0  # frames the gate's input has disagreed with its state
@@ -145,10 +213,11 @@ class DanceStream:
     def _gate(self, row: np.ndarray) -> None:
         present = True
         if self._ecol is not None and row[self._ecol] <= self._energy_min:
-            present = False
-        if self._gcols:  # noise without music: the logistic detector on the running mean
+            present = False  # silence: the detector's running mean waits for sound
+        elif self._gcols:  # noise without music: the logistic detector on the running mean
             z = (row[self._gcols] - self._gate_mean) / self._gate_std
-            self._ema = self._gate_a * self._ema + (1 - self._gate_a) * z
+            a = self._gate_a if self._music else self._gate_a_return
+            self._ema = a * self._ema + (1 - a) * z
             if float(self._ema @ self._gate_w) + self._gate_b <= 0.0:
                 present = False
         self._run = self._run + 1 if present != self._music else 0
@@ -163,11 +232,56 @@ class DanceStream:
         self._tokens.append(self._hist.reshape(-1).copy())
         self._prevs.append(self._last)
         logits = m.next_logits(np.stack(self._tokens), np.fromiter(self._prevs, np.int64), self.style)
-        code = m.sample(logits, self.rng)
+        draws = [m.sample(logits, self.rng) for _ in range(DRAWS)]
+        if int(self._counts[draws[0]]) == 0:  # no exemplars (members = 0): the decoder writes the movement
+            code = draws[0]
+            self._commit(code)
+            self._segment = m.decode_last(np.fromiter(self._codes, np.int64))
+            self._cont = None
+            return
+        pairs = [(c, j) for c in dict.fromkeys(draws) for j in range(int(self._counts[c]))]
+        cands = np.stack([self._members[c, j] for c, j in pairs])  # (n, 2 seg, P)
+        if self._cont is None:  # the first movement starts from its own pose
+            i = 0
+            best = cands[0]
+            self._segment = best[: self.seg].copy()
+        else:  # motion matching among the drawn codes' exemplars, placed on the beat
+            x0, v0 = self._cont[0], self._cont[1] - self._cont[0]
+            cands = _align(cands, x0)
+            vel = cands[:, 1] - cands[:, 0]
+            cost = np.abs(cands[:, 0] - x0).sum(1) + 4.0 * np.abs(vel - v0).sum(1)
+            cost = cost / max(float(np.median(cost)), 1e-9)
+            beat = self._next_beat()
+            if beat is not None:
+                frame, clarity = beat
+                cost -= BEAT_WEIGHT * clarity * np.array([self._dips[c, j, frame] for c, j in pairs])
+            i = int(np.argmin(cost))
+            # inertialization: the difference in pose and velocity decays over DECAY_FRAMES frames,
+            # carried into the continuation so that the next choice starts from where we will be
+            offset = (self._decay * np.stack([x0 - cands[i, 0], v0 - vel[i]])[:, None]).sum(0)  # (D, P)
+            best = cands[i].copy()
+            best[: len(offset)] += offset
+            self._segment = _unit(best[: self.seg].copy())
+        self._commit(pairs[i][0])
+        self._cont = _unit(best[self.seg:].copy())
+
+    def _commit(self, code: int) -> None:
         self._codes.append(code)
         self._last = code
         self.codes_drawn.append(code)
-        self._segment = m.decode_last(np.fromiter(self._codes, np.int64))
+
+    def _next_beat(self) -> tuple[int, float] | None:
+        """(frame of the coming movement, 0..seg-1, on which the beat tracker expects a beat; its
+        pulse clarity), or None when no beat falls in it or the features have no beat columns."""
+        if self._beat_cols is None:
+            return None
+        ccos, csin, clarity, logp = (float(self._raw[j]) for j in self._beat_cols)
+        if clarity <= 0.0:
+            return None
+        period = 15.0 * 2.0 ** logp
+        theta = np.arctan2(csin, ccos) % (2 * np.pi)  # 0 on a beat, rising 2 pi / period a frame
+        ahead = int(round(period * (1 - theta / (2 * np.pi)))) % max(int(round(period)), 1)
+        return (ahead, clarity) if ahead < self.seg else None
 
     def push(self, features: np.ndarray) -> np.ndarray:
         """Consume k >= 0 feature frames (k, D); return their k poses (k, POSE_DIM) float32."""
@@ -182,6 +296,7 @@ class DanceStream:
             t = self.frame
             self._hist[:-1] = self._hist[1:]
             self._hist[-1] = (x[i] - self._feat_mean) / self._feat_std
+            self._raw = x[i]
             if t % self.seg == 0:
                 self._next_code()
             pose = self._segment[t % self.seg]

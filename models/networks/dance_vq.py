@@ -77,7 +77,9 @@ class DanceVQConfig:
     enc_width / dec_width: channels of the motion encoder / decoder. d_model, layers,
     heads: the code predictor's Transformer; window_codes: code steps it reads
     (window_codes * seg frames). temperature, top_k: sampling of the next code
-    (top_k 0 = all codes). energy_col / clarity_col: feature columns of the log frame
+    (top_k 0 = all codes). members: real motion exemplars kept per code (the
+    choreographic memory that plays a chosen code; 0 = play the decoder's output).
+    energy_col / clarity_col: feature columns of the log frame
     energy and of the beat tracker's pulse clarity, read by the idle gate (-1 = unused).
     """
 
@@ -96,6 +98,7 @@ class DanceVQConfig:
     dropout: float = 0.1
     temperature: float = 1.0
     top_k: int = 0
+    members: int = 4
     energy_col: int = 13
     clarity_col: int = 60
 
@@ -276,6 +279,13 @@ class DanceVQ(nn.Module):
         # of GATE_COLUMNS (MFCC 1-12 and the pulse clarity), standardised.
         self.register_buffer("gate", torch.tensor([-1e9, 10.0]))
         self.register_buffer("gate_w", torch.zeros(len(GATE_MFCC) + 1))
+        # choreographic memory (models.training.dance_vq.fit_members): for each code, up to
+        # `members` real 2 * seg-frame windows of the dancers' poses whose encoding is nearest the
+        # code (the first seg frames are the movement, the rest its natural continuation, float16),
+        # and how many each code has (0: play the decoder's output).
+        self.register_buffer("member_poses", torch.zeros(c.codebook, c.members, 2 * c.seg, c.pose_dim,
+                                                         dtype=torch.float16))
+        self.register_buffer("member_count", torch.zeros(c.codebook, dtype=torch.int64))
 
     # -- motion codebook -----------------------------------------------------------------
     def standardize_poses(self, poses: torch.Tensor) -> torch.Tensor:

@@ -243,6 +243,50 @@ def validate_codebook(model: DanceVQ, clips: list, offsets: torch.Tensor) -> dic
             "val_perplexity": perplexity(torch.cat(codes_all), model.config.codebook)}
 
 
+@torch.no_grad()
+def fit_members(model: DanceVQ, clips: list, phases: tuple[int, ...] = (0, 4), progress: bool = False) -> dict[str, float]:
+    """Fill the choreographic memory: for every code, the ``members`` real windows of
+    ``2 * seg`` valid frames (the code's movement and its continuation) whose encoding
+    lies nearest the code vector, from every clip at the grid ``phases``. Returns how
+    many codes got at least one member and the members' mean encoding distance."""
+    model.eval()
+    c = model.config
+    s = c.seg
+    z_all, windows = [], []
+    for clip in clips:
+        for p in phases:
+            n = (clip.num_frames - p) // s
+            if n < 3:
+                continue
+            z = model.encoder(model.standardize_poses(torch.from_numpy(clip.poses[p: p + n * s])[None]))[0].T  # (n, C)
+            ok = np.array([clip.valid[p + k * s: p + (k + 2) * s].all() for k in range(n - 1)])
+            for k in np.flatnonzero(ok):
+                z_all.append(z[k])
+                windows.append(clip.poses[p + k * s: p + (k + 2) * s])
+    z = torch.stack(z_all)
+    codes = model.quantizer.codes(z.T[None])[0]
+    dist = (z - model.quantizer.embed[codes]).pow(2).sum(1)
+    poses = np.stack(windows)
+    model.member_poses.zero_()
+    model.member_count.zero_()
+    for code in codes.unique().tolist():
+        idx = torch.nonzero(codes == code)[:, 0]
+        keep = idx[dist[idx].argsort()[: c.members]].numpy()
+        model.member_poses[code, : len(keep)] = torch.from_numpy(poses[keep]).half()
+        model.member_count[code] = len(keep)
+    have = torch.nonzero(model.member_count > 0)[:, 0]
+    emb = model.quantizer.embed
+    for code in torch.nonzero(model.member_count == 0)[:, 0].tolist():  # a code no window chose: its nearest neighbour's
+        near = have[(emb[have] - emb[code]).pow(2).sum(1).argmin()]
+        model.member_poses[code] = model.member_poses[near]
+        model.member_count[code] = model.member_count[near]
+    model.train()
+    out = {"codes_with_members": len(have), "windows": len(windows)}
+    if progress:
+        print(f"choreographic memory: {out['codes_with_members']} codes with real exemplars from {len(windows)} windows")
+    return out
+
+
 @dataclass
 class CodeSet:
     """Per (clip, phase): audio tokens (N, seg * D), codes (N,), code validity (N,), style token."""
@@ -382,6 +426,8 @@ def train_dance_vq(cfg, data_root: str | Path, out_dir: str | Path, cache_dir: s
             frames += cfg.batch_size * opts.vq_segment
         else:
             if codes is None:
+                if model.config.members > 0 and int(model.member_count.sum()) == 0:
+                    fit_members(model, motion_clips, progress=progress)
                 codes = encode_clips(model, train_clips, range(model.config.seg))
                 val_codes = encode_clips(model, val_clips, range(1))
             model.encoder.eval()
