@@ -101,6 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     steps = bone_steps_deg(poses)
     dancing = np.concatenate([np.arange(a + 60, b - 1) for name, a, b in parts if name not in GAPS])
     dance_p99 = float(np.percentile(steps[dancing], 99))
+    dance_max = float(steps[dancing].max())
     rows = []
     for i, (name, a, b) in enumerate(parts):
         if name not in GAPS:
@@ -120,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         })
     music = np.concatenate([np.arange(a + 60, b) for name, a, b in parts if name not in GAPS])
     false_idle = float((w[music] > 0).mean())
-    print(f"{lm.path}: {len(parts)} parts, {len(feats) / 30:.0f} s; dance frame-to-frame step p99 {dance_p99:.2f} deg; "
+    print(f"{lm.path}: {len(parts)} parts, {len(feats) / 30:.0f} s; dance frame-to-frame step p99 {dance_p99:.2f}, max {dance_max:.2f} deg; "
           f"music frames taken for a gap (from 2 s into each song): {false_idle:.3f}")
     print("| gap | settle (s) ≤ 2 | back (s) ≤ 1 | largest step in the fades (deg) | largest step while idle (deg) |")
     print("| --- | ---: | ---: | ---: | ---: |")
@@ -128,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
         f = lambda v, d=2: "never" if v is None else f"{v:.{d}f}"  # noqa: E731
         print(f"| {r['gap']} | {f(r['settle_s'])} | {f(r['back_s'])} | {r['max_step_deg']:.2f} | {f(r['idle_sway_deg'])} |")
     if args.json:
-        args.json.write_text(json.dumps({"rows": rows, "false_idle": false_idle, "dance_step_p99_deg": dance_p99}, indent=1))
+        args.json.write_text(json.dumps({"rows": rows, "false_idle": false_idle, "dance_step_p99_deg": dance_p99, "dance_step_max_deg": dance_max}, indent=1))
     if args.plot:
         import matplotlib
 

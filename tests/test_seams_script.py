@@ -33,4 +33,4 @@ def test_missing_and_offline_checkpoints_are_refused(tmp_path, capsys):
     assert "nope.pt" in capsys.readouterr().err
     violin = Path(__file__).resolve().parents[1] / "models" / "assets" / "violin.pt"
     assert seams.main(["--checkpoint", str(violin)]) == 2
-    assert "causal" in capsys.readouterr().err
+    assert "only causal checkpoints" in capsys.readouterr().err
