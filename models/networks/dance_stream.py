@@ -46,6 +46,9 @@ FADE_FRAMES: int = 20
 #: Time constant (frames) of the music detector's running mean while no music is heard: shorter
 #: than the one it was fitted with (GATE_TAU, 0.5 s), so the dance comes back within a second.
 GATE_TAU_RETURN: float = 5.0
+#: Logit margin of the music detector while music is playing: quiet or pulse-less passages
+#: of a song must look clearly like noise before the performer stops dancing.
+GATE_MARGIN: float = 6.0
 #: Frames over which a new movement's difference from the last one decays (inertialization), at 8 frames a code.
 DECAY_FRAMES: int = 16
 #: Codes drawn from the predictor at each step; the exemplar of theirs that best continues the
@@ -218,7 +221,8 @@ class DanceStream:
             z = (row[self._gcols] - self._gate_mean) / self._gate_std
             a = self._gate_a if self._music else self._gate_a_return
             self._ema = a * self._ema + (1 - a) * z
-            if float(self._ema @ self._gate_w) + self._gate_b <= 0.0:
+            # hysteresis: while dancing, noise must be clearly noise (logit below -GATE_MARGIN)
+            if float(self._ema @ self._gate_w) + self._gate_b <= (-GATE_MARGIN if self._music else 0.0):
                 present = False
         self._run = self._run + 1 if present != self._music else 0
         if self._run >= (PRESENT_FRAMES if present else ABSENT_FRAMES):
