@@ -1,0 +1,101 @@
+"""benchmarks/style_control.py: style control measured with the evaluation's style classifier (issue 18)."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+_path = REPO / "benchmarks" / "style_control.py"
+_spec = importlib.util.spec_from_file_location("style_control", _path)
+sc = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(sc)
+
+
+def _motion(freq: float, frames: int = 256) -> np.ndarray:
+    """FK-shaped positions (T, 30, 3): every point swings along x at ``freq`` Hz (a toy 'style')."""
+    t = np.arange(frames) / 30.0
+    pos = np.zeros((frames, 30, 3), np.float32)
+    pos[:, :, 1] = np.linspace(0.0, 1.7, 30)
+    pos[:, 1:, 0] += 0.3 * np.sin(2 * np.pi * freq * t)[:, None]
+    return pos
+
+
+@pytest.fixture(scope="module")
+def toy_classifier():
+    """A real StyleClassifier told apart slow (C) from fast (W) swinging, via the evaluation's own windows."""
+    from models.evaluation.classifier import train_style_classifier
+    from models.evaluation.evaluate import classifier_windows
+
+    slow, fast = classifier_windows([_motion(0.5)]), classifier_windows([_motion(3.0)])
+    x = np.concatenate([slow, fast])
+    y = np.concatenate([np.zeros(len(slow), np.int64), np.full(len(fast), 2, np.int64)])
+    return train_style_classifier(x, y, epochs=8, seed=0, class_names=["C", "R", "W"])
+
+
+def test_shares_follow_the_requested_style(toy_classifier):
+    freq = {None: 3.0, "chacha": 0.5, "rumba": 0.5, "waltz": 3.0}  # rumba is 'not controlled' here
+    songs = [("DANCE_C_1", "C", _motion(0.5)), ("DANCE_W_1", "W", _motion(3.0))]
+    calls = []
+
+    def generate(name, style):
+        calls.append((name, style))
+        return _motion(freq[style])
+
+    res = sc.measure(toy_classifier, songs, generate)
+    assert calls == [(n, r) for n, _, _ in songs for r in sc.REQUESTS]
+    for row in res.values():
+        assert set(row) == {"style", "real", "auto", "chacha", "rumba", "waltz"}
+        for col in ("real", "auto", "chacha", "rumba", "waltz"):
+            assert sum(row[col].values()) == pytest.approx(1.0)
+    assert res["DANCE_C_1"]["chacha"]["C"] == 1.0 and res["DANCE_W_1"]["waltz"]["W"] == 1.0
+    s = sc.summary(res)
+    assert s["real"]["songs_clear"] == 2 and s["chacha"]["songs_clear"] == 2 and s["waltz"]["songs_clear"] == 2
+    assert s["rumba"]["songs_clear"] == 0 and s["rumba"]["min_margin"] == -1.0
+    assert s["auto"]["songs_clear"] == 1  # the C song's auto dance came out fast (W)
+    text = sc.table(res)
+    assert "| DANCE_C_1 (C) | 1.00 (+1.00) |" in text and "| songs won by >= 0.2 | 2/2 | 1/2 | 2/2 | 0/2 | 2/2 |" in text
+
+
+def test_style_letters_and_margin():
+    assert [sc.style_letter(s) for s in ("chacha", "rumba", "waltz")] == ["C", "R", "W"]
+    assert sc.margin({"C": 0.5, "R": 0.3, "W": 0.2}, "C") == pytest.approx(0.2)
+    assert sc.margin({"C": 0.5, "R": 0.3, "W": 0.2}, "W") == pytest.approx(-0.3)
+
+
+def test_too_short_a_dance_is_a_data_error(toy_classifier):
+    from models.errors import DataError
+
+    with pytest.raises(DataError, match="shorter than one"):
+        sc.window_shares(toy_classifier, _motion(1.0, frames=40))
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--data", "x", "--margin", "1.5"], "--margin must be in [0, 1)"),
+    (["--data", "x", "--threads", "0"], "--threads must be >= 1"),
+    (["--data", "x", "--checkpoint", "/nonexistent/model.pt"], "style_control.py: "),
+    (["--data", "x", "--checkpoint", str(REPO / "models" / "assets" / "dtm.pt")], "takes no style"),
+])
+def test_bad_input_is_one_line_and_exit_2(args, message, capsys, tmp_path):
+    out = tmp_path / "s.json"
+    try:
+        code = sc.main([*args, "--json", str(out)])
+    except SystemExit as exc:  # argparse errors
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2 and message in err, err
+    assert not out.exists()
+
+
+@pytest.mark.slow
+@pytest.mark.data
+def test_default_checkpoint_on_the_validation_split(dwm_root, tmp_path):
+    out = tmp_path / "s.json"
+    assert sc.main(["--data", str(dwm_root), "--cache", str(REPO / ".cache" / "corpus"), "--json", str(out)]) == 0
+    import json
+
+    d = json.loads(out.read_text())
+    assert len(d["songs"]) == 6 and set(d["summary"]) == {"real", "auto", "chacha", "rumba", "waltz"}
