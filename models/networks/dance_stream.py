@@ -90,10 +90,11 @@ def hermite_decay(frames: int) -> np.ndarray:
 
 
 def _align(q: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """Poses (..., P) with every quaternion sign-flipped onto the hemisphere of ``ref`` (P,)'s."""
+    """Windows (..., F, P) with every bone's quaternions sign-flipped, the same way in all F
+    frames, so that frame 0 is on the hemisphere of ``ref`` (P,)'s (time continuity kept)."""
     a = q[..., 3:].reshape(*q.shape[:-1], -1, 4)
     r = ref[3:].reshape(-1, 4)
-    flip = np.where((a * r).sum(-1, keepdims=True) < 0, -1.0, 1.0).astype(q.dtype)
+    flip = np.where((a[..., :1, :, :] * r).sum(-1, keepdims=True) < 0, -1.0, 1.0).astype(q.dtype)
     out = q.copy()
     out[..., 3:] = (a * flip).reshape(*q.shape[:-1], -1)
     return out
@@ -129,6 +130,33 @@ def member_dips(windows: np.ndarray, seg: int) -> np.ndarray:
     dip = np.zeros_like(speed)
     dip[:, 1:-1] = (speed[:, 1:-1] < speed[:, :-2]) & (speed[:, 1:-1] <= speed[:, 2:])
     return dip[:, :seg].reshape(k, m, seg).astype(np.float32)
+
+
+def inertialize(window: np.ndarray, start: np.ndarray, decay: np.ndarray) -> np.ndarray:
+    """The exemplar ``window`` (F, P) bent to continue from ``start`` (2, P), the two frames the
+    motion would have played next: the difference in pose and in velocity (per frame) decays
+    over ``decay.shape[1]`` frames with the cubic Hermite weights ``decay`` (2, D, 1), then
+    every quaternion is renormalised. Both must be sign-continuous in time and ``window`` on
+    ``start``'s hemisphere (:func:`_align`), so that differences are rotations, not sign flips.
+    """
+    d = decay.shape[1]
+    diff = np.stack([start[0] - window[0], (start[1] - start[0]) - (window[1] - window[0])])[:, None]  # (2, 1, P)
+    out = window.copy()
+    out[:d] += (decay * diff).sum(0)
+    return _unit(out)
+
+
+def sign_continuous(windows: np.ndarray) -> np.ndarray:
+    """Poses (..., F, P) with each quaternion's sign chosen frame by frame to follow the
+    previous frame's (the corpus stores w >= 0 per frame, which flips a bone whose rotation
+    crosses w = 0: a fake jump of the quaternion, not of the bone)."""
+    out = windows.copy()
+    q = out[..., 3:].reshape(*out.shape[:-1], -1, 4)
+    for t in range(1, q.shape[-3]):
+        dot = (q[..., t, :, :] * q[..., t - 1, :, :]).sum(-1, keepdims=True)
+        q[..., t, :, :] *= np.where(dot < 0, -1.0, 1.0).astype(q.dtype)
+    out[..., 3:] = q.reshape(*out.shape[:-1], -1)
+    return out
 
 
 def _nlerp(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
@@ -167,7 +195,7 @@ class DanceStream:
         self._gate_std = self._feat_std[self._gcols].astype(np.float64)
         self._gate_a = float(np.exp(-1.0 / GATE_TAU))
         self._gate_a_return = float(np.exp(-1.0 / GATE_TAU_RETURN))
-        self._members = model.member_poses.float().numpy()  # (K, M, 2 seg, P)
+        self._members = sign_continuous(model.member_poses.float().numpy())  # (K, M, 2 seg, P)
         self._counts = model.member_count.numpy()
         self._dips = member_dips(self._members[:, :, : self.seg + 2], self.seg)  # (K, M, seg)
         cc = c.clarity_col
@@ -268,12 +296,8 @@ class DanceStream:
                 frame, clarity = beat
                 cost -= BEAT_WEIGHT * clarity * np.array([self._dips[c, j, frame] for c, j in pairs])
             i = int(np.argmin(cost))
-            # inertialization: the difference in pose and velocity decays over DECAY_FRAMES frames,
-            # carried into the continuation so that the next choice starts from where we will be
-            offset = (self._decay * np.stack([x0 - cands[i, 0], v0 - vel[i]])[:, None]).sum(0)  # (D, P)
-            best = cands[i].copy()
-            best[: len(offset)] += offset
-            self._segment = _unit(best[: self.seg].copy())
+            best = inertialize(cands[i], self._cont[:2], self._decay)
+            self._segment = best[: self.seg].copy()
         self._commit(pairs[i][0])
         self._cont = _unit(best[self.seg:].copy())
 
