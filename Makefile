@@ -111,12 +111,15 @@ bench: setup
 	$(BIN)/performer bench streams $(BENCH_PIN) --audio models/assets/clip.ogg $$songs --out $(BENCH_OUT)/streams || exit 2
 	$(BIN)/performer bench check --budgets benchmarks/budgets.toml --summary $(BENCH_OUT)/summary.md $(BENCH_OUT)
 
-# make soak: docs/reliability.md. Exit 1 if a check fails; figures in $(SOAK_OUT).
+# make soak: docs/reliability.md. Exit 1 if a check fails; figures in $(SOAK_OUT). SOAK_ARGS: more
+# benchmarks/soak.py options, e.g. the stability check on songs looped:
+#   make soak SOAK_ARGS="--data $(DATA) --cache .cache/corpus --songs DANCE_C_2 DANCE_R_5 DANCE_W_5"
 SOAK_MINUTES ?= 60
 SOAK_OUT     ?= out/soak.json
+SOAK_ARGS    ?=
 soak: setup
 	mkdir -p $(dir $(SOAK_OUT))
-	$(BIN)/python benchmarks/soak.py --minutes $(SOAK_MINUTES) --json $(SOAK_OUT)
+	$(BIN)/python benchmarks/soak.py --minutes $(SOAK_MINUTES) --json $(SOAK_OUT) $(SOAK_ARGS)
 
 clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache

@@ -3,10 +3,12 @@
     .venv/bin/python benchmarks/soak.py --minutes 60                 # the full soak (make soak)
     .venv/bin/python benchmarks/soak.py --minutes 2 --json out.json  # the short one tests/test_soak.py runs
     .venv/bin/python benchmarks/soak.py --minutes 60 --data ../shared/data/dwm   # + the stability check
+    .venv/bin/python benchmarks/soak.py --minutes 60 --data ../shared/data/dwm --songs DANCE_C_2 DANCE_R_5 DANCE_W_5
     .venv/bin/python benchmarks/soak.py load --clients 200 --max-clients 16 --seconds 8 --repeat 2
     .venv/bin/python benchmarks/soak.py crowd --url ws://127.0.0.1:8765/ws --clients 200 --seconds 3
 
-*soak*: the bundled clip, looped, replayed as fast as possible for ``--minutes`` of audio
+*soak*: the bundled clip (or ``--audio FILE`` / ``--songs NAME`` songs back to back), looped,
+replayed as fast as possible for ``--minutes`` of audio
 through the full engine (the default checkpoint, or a default-size causal generator with
 random weights when none is packaged: the same compute) with a VMC receiver (UDP) and two
 WebSocket clients attached, each in another process. Checks: no non-finite pose anywhere
@@ -186,6 +188,43 @@ def clip_audio() -> tuple[np.ndarray, int]:
 
     audio, sr = load_audio(bundled_clip_path(), SAMPLE_RATE)
     return audio.astype(np.float32), sr
+
+
+def playlist(paths: list[str | Path]) -> tuple[np.ndarray, list[dict]]:
+    """The songs ``paths`` back to back, mono float32 at 22050 Hz, and where each lies in it.
+
+    Returns ``(audio, segments)``; a segment is ``{"name", "path", "start_s", "seconds"}``
+    (``name``: the file's parent folder for a DWM ``audio.mp3``, else its stem). The soak
+    loops the whole list: songs follow each other with no gap, so every 30-s stretch is
+    music (a pause between songs is the idle's case, docs/reliability.md). AudioError if
+    a file is missing or unreadable.
+    """
+    from models.features.audio_io import load_audio
+
+    parts, segments, start = [], [], 0
+    for path in map(Path, paths):
+        audio, _ = load_audio(path, SAMPLE_RATE)
+        name = path.parent.name if path.stem == "audio" else path.stem
+        segments.append({"name": name, "path": str(path), "start_s": start / SAMPLE_RATE,
+                         "seconds": len(audio) / SAMPLE_RATE})
+        parts.append(audio.astype(np.float32))
+        start += len(audio)
+    return np.concatenate(parts), segments
+
+
+def playlist_pieces(start_s: float, end_s: float, segments: list[dict]) -> list[str]:
+    """What of a looped playlist plays between ``start_s`` and ``end_s`` of the stream:
+    ``["DANCE_C_2 84.0-114.0 s", ...]`` (times within each song)."""
+    total = sum(seg["seconds"] for seg in segments)
+    out, t = [], start_s
+    while t < end_s - 1e-6:
+        pos = t % total
+        seg = next((g for g in segments if g["start_s"] <= pos < g["start_s"] + g["seconds"]), segments[-1])
+        a = pos - seg["start_s"]
+        b = min(seg["seconds"], a + end_s - t)
+        out.append(f"{seg['name']} {a:.1f}-{b:.1f} s")
+        t += b - a
+    return out
 
 
 # ---------------------------------------------------------------------------- helper processes
@@ -451,12 +490,14 @@ def measure_load(clients: int, max_clients: int, seconds: float, repeat: int = 1
 
 
 def soak(minutes: float, checkpoint: str | None = None, progress: bool = True,
-         stability_ref_m: float | None = None) -> dict:
+         stability_ref_m: float | None = None, audio_paths: list[str | Path] | None = None) -> dict:
     """The soak (module docstring); returns the figures and ``ok``/``failures``.
 
     ``stability_ref_m``: the real dances' dance-band RMS in metres; when given, every frame
     sent goes through :class:`models.evaluation.stability.StabilityMonitor` (result under
-    ``"stability"``, a failing stretch fails the soak).
+    ``"stability"``, a failing stretch fails the soak; each stretch lists the songs it
+    covers under ``"songs"``). ``audio_paths``: songs played back to back and looped
+    (:func:`playlist`) instead of the bundled clip.
     """
     from models.evaluation.stability import StabilityMonitor
     from realtime.audio_input import FileSource
@@ -465,7 +506,13 @@ def soak(minutes: float, checkpoint: str | None = None, progress: bool = True,
     from realtime.ws_server import WebSocketSink
 
     pipeline, trained = default_pipeline(checkpoint)
-    audio, sr = clip_audio()
+    if audio_paths:
+        audio, segments = playlist(audio_paths)
+        sr, name = SAMPLE_RATE, f"{len(segments)} songs (looped)"
+    else:
+        audio, sr = clip_audio()
+        segments, name = [{"name": "clip", "path": "models/assets/clip.ogg", "start_s": 0.0,
+                           "seconds": len(audio) / sr}], "clip (looped)"
     seconds = minutes * 60.0
     expected = int(round(seconds * sr)) // HOP
     warm_s = max(30.0, 0.1 * seconds)
@@ -475,7 +522,7 @@ def soak(minutes: float, checkpoint: str | None = None, progress: bool = True,
     check = FrameCheck()
     monitor = None if stability_ref_m is None else StabilityMonitor(stability_ref_m)
     tap = None if monitor is None else PoseTap()
-    src = FileSource(audio, sr, realtime=False, loop=True, name="clip (looped)")
+    src = FileSource(audio, sr, realtime=False, loop=True, name=name)
     eng = Engine(src, pipeline.extractor_factory, pipeline.model, [osc, ws, check] + ([tap] if tap else []),
                  EngineConfig(warmup_s=3.0, duration_s=seconds))
     crowd = Crowd(ws.ws_url, 2, seconds=0)  # until the server closes
@@ -510,6 +557,7 @@ def soak(minutes: float, checkpoint: str | None = None, progress: bool = True,
     end = samples[-1]
     out = {
         "minutes": minutes, "model": "trained" if trained else "random weights (default size)",
+        "audio": segments, "playlist_s": len(audio) / sr,
         "expected_frames": expected, "frames": st["frames"], "checked_frames": check.frames,
         "nan_frames": st["nan_frames"], "nonfinite_sent": check.nonfinite, "index_gaps": check.index_gaps,
         "max_rotation_step_deg": check.max_step_deg,
@@ -537,6 +585,8 @@ def soak(minutes: float, checkpoint: str | None = None, progress: bool = True,
     if monitor is not None:
         report = monitor.result()
         out["stability"] = report.to_dict()
+        for st in out["stability"]["stretches"]:
+            st["songs"] = playlist_pieces(st["start_s"], st["end_s"], segments)
         if not report.ok:
             failures.append("stability: " + report.summary())
     out["failures"] = failures
@@ -545,7 +595,9 @@ def soak(minutes: float, checkpoint: str | None = None, progress: bool = True,
 
 
 def _print_soak(r: dict) -> None:
-    print(f"soak: {r['minutes']:g} min of audio ({r['model']}) in {r['wall_s']:.0f} s ({r['speed']:.1f}x real time)")
+    songs = ", ".join(f"{g['name']} ({g['seconds']:.0f} s)" for g in r.get("audio", []))
+    print(f"soak: {r['minutes']:g} min of audio ({r['model']}) in {r['wall_s']:.0f} s ({r['speed']:.1f}x real time)"
+          + (f"; looped: {songs}" if songs else ""))
     print(f"  frames {r['frames']} of {r['expected_frames']} expected; checked {r['checked_frames']}, "
           f"non-finite sent {r['nonfinite_sent']}, engine NaN guard {r['nan_frames']}, index gaps {r['index_gaps']}")
     print(f"  per-hop compute p50 {r['compute_ms_p50']:.2f} ms p99 {r['compute_ms_p99']:.2f} ms (last 2048 frames)")
@@ -575,6 +627,10 @@ def _print_stability(st: dict) -> None:
                  f"{max(s['root_vertical_m'] for s in rows):.2f} m vertically (0.5), longest still "
                  f"{max(s['still_s'] for s in rows):.1f} s, fastest point {max(s['max_speed'] for s in rows):.1f} m/s")
     print(line)
+    for s in st["stretches"]:
+        if s["reasons"]:
+            print(f"    stretch {s['index']} ({s['start_s']:g}-{s['end_s']:g} s; {', '.join(s.get('songs', []))}): "
+                  + "; ".join(s["reasons"]))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -617,6 +673,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--checkpoint", help="checkpoint (default: the packaged one, else random weights)")
     p.add_argument("--json", help="also write the figures to this JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument("--audio", action="append", metavar="FILE",
+                   help="a song to play instead of the bundled clip (repeatable: the songs play back to back, "
+                        "looped)")
+    p.add_argument("--songs", nargs="+", metavar="NAME",
+                   help="songs of the DWM dataset under --data (DIR/NAME/audio.mp3), after any --audio")
     g = p.add_argument_group("stability check (issue 18; off unless one of these is given)")
     g.add_argument("--stability-ref-m", type=float, metavar="M",
                    help="the real dances' dance-scale amplitude (band RMS 0.25-3 Hz, metres) every 30-s stretch "
@@ -631,6 +692,12 @@ def main(argv: list[str] | None = None) -> int:
         p.error("give --stability-ref-m or --data, not both")
     if ref is not None and not (math.isfinite(ref) and ref > 0):
         p.error(f"--stability-ref-m must be a positive number of metres, got {ref}")
+    if a.songs and not a.data:
+        p.error("--songs needs --data DIR (the dataset the names are in)")
+    paths = [Path(f) for f in a.audio or []] + [Path(a.data) / n / "audio.mp3" for n in a.songs or []]
+    missing = [str(f) for f in paths if not f.is_file()]
+    if missing:
+        p.error(f"audio file(s) not found: {', '.join(missing)}")
     if a.data:
         from models.errors import PerformerError
 
@@ -641,7 +708,7 @@ def main(argv: list[str] | None = None) -> int:
         if not a.quiet:
             print(f"  stability reference: {ref * 100:.2f} cm band RMS (0.25-3 Hz) of the validation dances under "
                   f"{a.data}", file=sys.stderr)
-    r = soak(a.minutes, a.checkpoint, progress=not a.quiet, stability_ref_m=ref)
+    r = soak(a.minutes, a.checkpoint, progress=not a.quiet, stability_ref_m=ref, audio_paths=paths or None)
     if a.json:
         Path(a.json).write_text(json.dumps(r, indent=1))
     _print_soak(r)

@@ -132,6 +132,60 @@ def test_non_finite_features_are_counted_and_poses_stay_valid():
         s.push(np.zeros((3, 9), np.float32))
 
 
+@pytest.mark.parametrize("cfg", [TINY, DanceVQConfig(feature_dim=12, codebook=40, code_dim=8, enc_width=16,
+                                                     dec_width=16, d_model=32, layers=3, heads=4, window_codes=6)])
+def test_numpy_predictor_gives_the_torch_predictors_logits(cfg):
+    """The live path's NumPy predictor (models/networks/dance_numpy.py) against the torch module it copies."""
+    from models.networks.dance_numpy import NumpyPredictor, single_thread_blas
+
+    torch.manual_seed(1)
+    m = DanceVQ(cfg).eval()
+    fast = NumpyPredictor(m.predictor)
+    rng = np.random.default_rng(0)
+    for n in range(1, cfg.window_codes + 1):
+        audio = rng.normal(size=(n, cfg.seg * cfg.feature_dim)).astype(np.float32)
+        prev = rng.integers(0, cfg.codebook + 1, n)  # codebook = "no code yet"
+        for style in range(cfg.num_styles + 1):
+            ref = m.next_logits(audio, prev, style)
+            with single_thread_blas():
+                got = fast.logits(np.stack([fast.embed(a, int(p)) for a, p in zip(audio, prev)]), style)
+            assert got.shape == ref.shape == (cfg.codebook,) and got.dtype == np.float32
+            np.testing.assert_allclose(got, ref, atol=1e-5 * max(1.0, float(np.abs(ref).max())), rtol=0)
+
+
+def test_idle_pose_is_the_scipy_composition_it_replaced():
+    from scipy.spatial.transform import Rotation
+
+    from models.networks.dance_stream import SWAY, IdleSway
+    from models.rig.humanoid import BONE_INDEX
+    from models.timebase import FPS
+
+    base = DanceStream(tiny_model())._idle_base
+    t = np.arange(0, 20000, 3)
+    ref = np.repeat(base[None].astype(np.float64), len(t), axis=0)
+    for bone, axis, deg, period, phase in SWAY:
+        i = 3 + 4 * BONE_INDEX[bone]
+        vec = np.zeros((len(t), 3))
+        vec[:, axis] = np.deg2rad(deg) * np.sin(2 * np.pi * (t / FPS) / period + phase)
+        ref[:, i: i + 4] = (Rotation.from_quat(ref[:, i: i + 4]) * Rotation.from_rotvec(vec)).as_quat()
+    np.testing.assert_allclose(idle_pose(base, t), ref.astype(np.float32), atol=1e-7, rtol=0)
+    sway = IdleSway(base)
+    np.testing.assert_array_equal(np.concatenate([sway(np.array([k])) for k in t[:50]]), idle_pose(base, t[:50]))
+
+
+def test_exemplar_beat_dips_are_computed_once_per_model_until_the_exemplars_change():
+    m = tiny_model()
+    with torch.no_grad():
+        m.member_poses.copy_(m.pose_mean.to(m.member_poses.dtype))
+        m.member_count.fill_(1)
+    a, b = DanceStream(m), DanceStream(m)
+    assert a._dips is b._dips
+    with torch.no_grad():
+        m.member_poses[0, 0, :, 4] += 0.5  # written in place: the version counter moves
+    c = DanceStream(m)
+    assert c._dips is not a._dips and c._dips.shape == a._dips.shape
+
+
 def test_decoder_is_causal_over_codes():
     m = tiny_model()
     zq = torch.randn(1, TINY.code_dim, 12)
@@ -201,19 +255,25 @@ def test_codebook_and_predictor_learn_on_a_toy_dance():
     assert np.mean(ce[-5:]) < np.mean(ce[:5])
 
 
-def test_checkpoint_round_trip_and_the_engine_pipeline(tmp_path):
+def tiny_checkpoint(path):
+    """A small dance_vq checkpoint on the shipped feature kind (MFCC + onset, context, beat): (path, config, features)."""
     from models.features.spectral import FeatureConfig
-
-    from realtime.pipeline import build_pipeline
 
     fcfg = FeatureConfig(kind="mfcc_onset", n_mels=32, context_s=60.0, beat_phase=True)
     cfg = DanceVQConfig(feature_dim=fcfg.dim, codebook=16, code_dim=8, enc_width=16, dec_width=16, d_model=16,
                         layers=1, heads=2, clarity_col=fcfg.dim - 2)
     torch.manual_seed(0)
     m = build_model("dance_vq", cfg)
-    path = save_checkpoint(tmp_path / "d.pt", m, model_name="dance_vq", generator_config=m.config,
+    path = save_checkpoint(path, m, model_name="dance_vq", generator_config=m.config,
                            feature_config={**fcfg.to_dict(), "fingerprint": fcfg.fingerprint()},
                            rig={"bones": list(BONES), "pose_dim": POSE_DIM})
+    return path, cfg, fcfg
+
+
+def test_checkpoint_round_trip_and_the_engine_pipeline(tmp_path):
+    from realtime.pipeline import build_pipeline
+
+    path, cfg, fcfg = tiny_checkpoint(tmp_path / "d.pt")
     m2, meta = load_checkpoint(path)
     assert isinstance(m2, DanceVQ) and meta["model_name"] == "dance_vq" and m2.config == cfg
     pipe = build_pipeline(path, seed=3, style="rumba")

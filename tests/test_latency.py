@@ -154,6 +154,49 @@ def test_budgets_diff_names_metric_budget_measured_and_excess(tmp_path):
     assert not missing[0].ok and "not measured" in bud.format_verdicts(missing)
 
 
+def test_a_metric_the_model_does_not_have_is_not_applicable_with_its_reason():
+    budgets = [bud.Budget("latency", "model_step_naive_over_streaming", "min", 10.0),
+               bud.Budget("latency", "per_hop_ms_p99", "max", 5.0)]
+    r = {"kind": "latency", "label": "song", "metrics": {"per_hop_ms_p99": 2.0},
+         "not_applicable": {"model_step_naive_over_streaming": "no naive recompute for this model"}}
+    na, hop = bud.check([r], budgets)
+    assert na.ok and na.measured is None and na.not_applicable == "no naive recompute for this model" and hop.ok
+    text = bud.format_verdicts([na, hop])
+    assert "model_step_naive_over_streaming  >= 10" in text and text.splitlines()[1].split()[-1] == "n/a"
+    assert text.splitlines()[-1] == "n/a model_step_naive_over_streaming: no naive recompute for this model"
+    assert bud.format_verdicts([na, hop], only_failures=True).count("\n") == 0  # header only
+    # a metric missing without a reason still fails
+    del r["not_applicable"]
+    assert not bud.check([r], budgets)[0].ok
+
+
+def test_model_step_and_stream_vs_offline_measure_both_live_model_kinds(tmp_path, checkpoint):
+    """The suite's in-process figures for a causal U-Net (naive baseline, ratio) and a dance_vq
+    model (no naive baseline: code steps timed apart, the reason recorded), and streaming ==
+    offline for both."""
+    from models.generate import load_model
+    from realtime.bench.suite import model_step_costs, naive_baseline, stream_vs_offline
+
+    from tests.test_dance_vq import tiny_checkpoint
+
+    vq, _, fcfg = tiny_checkpoint(tmp_path / "vq.pt")
+    dim = fcfg.dim
+    x = np.random.default_rng(0).normal(scale=0.5, size=(300, dim)).astype(np.float32)
+    ms = model_step_costs(vq, x, frames=16)
+    assert ms["naive_us"] is None and ms["ratio_p50"] is None and "offline pass" in ms["naive_reason"]
+    assert ms["streaming_us"]["n"] == 960 and ms["code_step_us"]["n"] == 120 and ms["other_us"]["n"] == 840
+    assert naive_baseline(load_model(vq).model)[0] is None
+    so = stream_vs_offline(vq, x)
+    assert so["frames"] == 300 and so["max_abs"] < 1e-4
+
+    unet = load_model(checkpoint)
+    x = np.random.default_rng(1).normal(scale=0.5, size=(200, unet.features.dim)).astype(np.float32)
+    ms = model_step_costs(checkpoint, x, frames=8, rounds=2)
+    assert ms["naive_us"]["n"] == ms["streaming_us"]["n"] == 8 and ms["ratio_p50"] > 1
+    assert naive_baseline(unet.model)[0] is not None
+    assert stream_vs_offline(checkpoint, x)["max_abs"] < 1e-4
+
+
 @pytest.mark.parametrize("text, needle", [
     ("[latency]\nper_hop_ms_p99 = 5.0\n", "expected { max = X }"),
     ("[latency]\nper_hop_ms_p99 = { most = 5.0 }\n", "expected { max = X }"),

@@ -60,8 +60,11 @@ def test_pose_tap_hands_every_frame_to_the_stability_monitor_in_order():
     (["--stability-ref-m", "-1"], "--stability-ref-m must be a positive number"),
     (["--stability-ref-m", "0.08", "--data", "x"], "not both"),
     (["--data", "/nonexistent/dwm"], "--data: "),
+    (["--songs", "DANCE_C_2"], "--songs needs --data"),
+    (["--audio", "/nonexistent/song.mp3"], "audio file(s) not found: /nonexistent/song.mp3"),
+    (["--data", "/nonexistent/dwm", "--songs", "NOPE"], "audio file(s) not found: /nonexistent/dwm/NOPE/audio.mp3"),
 ])
-def test_stability_options_are_checked_before_the_run(args, message, capsys):
+def test_stability_and_song_options_are_checked_before_the_run(args, message, capsys):
     with pytest.raises(SystemExit) as exc:
         soak.main(["--minutes", "1", *args])
     assert exc.value.code == 2 and message in capsys.readouterr().err
@@ -81,3 +84,46 @@ def test_one_minute_soak_with_the_stability_check(tmp_path):
     assert [f for f in r["failures"] if not f.startswith("stability: ")] == []
     assert res.returncode == (0 if st["ok"] else 1) and r["ok"] == st["ok"]
     assert "stability: 2 stretches of 30 s" in res.stdout
+
+
+def _song(path: Path, seconds: float, bpm: float, seed: int) -> Path:
+    """A short synthetic song: a click on every beat over a chord, mono at 22050 Hz."""
+    import soundfile as sf
+
+    sr = 22050
+    t = np.arange(int(seconds * sr)) / sr
+    rng = np.random.default_rng(seed)
+    x = 0.1 * sum(np.sin(2 * np.pi * f * t) for f in rng.uniform(150, 600, 3))
+    beat = (t * bpm / 60.0) % 1.0
+    x += 0.5 * np.exp(-beat * 30.0) * rng.standard_normal(len(t))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    sf.write(path, (x / np.abs(x).max() * 0.8).astype(np.float32), sr)
+    return path
+
+
+def test_playlist_puts_songs_back_to_back_and_names_what_each_stretch_plays(tmp_path):
+    a = _song(tmp_path / "a.wav", 3.0, 120, 0)
+    b = _song(tmp_path / "DANCE_X_1" / "audio.wav", 2.0, 100, 1)  # a DWM song is named by its folder
+    audio, segs = soak.playlist([a, b])
+    assert audio.dtype == np.float32 and len(audio) == 5 * 22050
+    assert [(g["name"], g["start_s"], g["seconds"]) for g in segs] == [("a", 0.0, 3.0), ("DANCE_X_1", 3.0, 2.0)]
+    assert soak.playlist_pieces(0.0, 4.0, segs) == ["a 0.0-3.0 s", "DANCE_X_1 0.0-1.0 s"]
+    # the playlist loops: 4-12 s of the stream is the rest of b, a, b, and a's first 2 s
+    assert soak.playlist_pieces(4.0, 12.0, segs) == ["DANCE_X_1 1.0-2.0 s", "a 0.0-3.0 s", "DANCE_X_1 0.0-2.0 s",
+                                                      "a 0.0-2.0 s"]
+
+
+@pytest.mark.slow
+def test_one_minute_soak_of_two_songs_looped_names_the_songs_of_every_stretch(tmp_path):
+    a, b = _song(tmp_path / "one.wav", 20.0, 120, 0), _song(tmp_path / "two.wav", 25.0, 96, 1)
+    out = tmp_path / "soak.json"
+    res = subprocess.run([sys.executable, "benchmarks/soak.py", "--minutes", "1", "--json", str(out), "--quiet",
+                          "--stability-ref-m", "0.08", "--audio", str(a), "--audio", str(b)],
+                         cwd=REPO, capture_output=True, text=True, timeout=300)
+    r = json.loads(out.read_text())
+    assert [g["name"] for g in r["audio"]] == ["one", "two"] and r["playlist_s"] == pytest.approx(45.0)
+    assert r["frames"] == r["expected_frames"] == 1800 and r["nan_frames"] == 0
+    assert [s["songs"] for s in r["stability"]["stretches"]] == [["one 0.0-20.0 s", "two 0.0-10.0 s"],
+                                                                 ["two 10.0-25.0 s", "one 0.0-15.0 s"]]
+    assert [f for f in r["failures"] if not f.startswith("stability: ")] == []
+    assert "looped: one (20 s), two (25 s)" in res.stdout

@@ -28,10 +28,10 @@ from __future__ import annotations
 from collections import deque
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from models.errors import ConfigError
 from models.networks.blend import blend_track
+from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ, style_token
 from models.networks.streaming import sanitize_features
 from models.rig.humanoid import BONE_INDEX
@@ -69,16 +69,45 @@ SWAY: tuple[tuple[str, int, float, float, float], ...] = (
 )
 
 
+class IdleSway:
+    """:func:`idle_pose` for one ``base`` pose (P,), with everything that does not depend on time computed once.
+
+    Each swaying bone's rotation is its base rotation composed with a rotation of the
+    sway's angle ``a`` about one local axis ``e``: the Hamilton product
+    ``q_base * (sin(a/2) e, cos(a/2))``, written out in NumPy for all bones at once
+    (float64, the same arithmetic as SciPy's ``Rotation`` composition, which this
+    replaces: that took 0.2-0.5 ms a frame while idle).
+    """
+
+    def __init__(self, base: np.ndarray) -> None:
+        self.base = np.asarray(base, np.float64)
+        self.cols = np.array([3 + 4 * BONE_INDEX[b] for b, *_ in SWAY])[:, None] + np.arange(4)  # (B, 4)
+        q = self.base[self.cols]
+        self.q = q / np.linalg.norm(q, axis=1, keepdims=True)  # (B, 4) unit, as Rotation.from_quat
+        self.axis = np.array([a for _, a, *_ in SWAY])
+        self.amp = np.deg2rad(np.array([d for _, _, d, _, _ in SWAY]))
+        self.period = np.array([p for *_, p, _ in SWAY], np.float64)
+        self.phase = np.array([ph for *_, ph in SWAY], np.float64)
+        self.onehot = np.eye(3)[self.axis]  # (B, 3)
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        """Idle poses (len(t), P) float32 at frame times ``t`` (frames)."""
+        sec = np.asarray(t, np.float64)[:, None] / FPS
+        half = 0.5 * (self.amp * np.sin(2 * np.pi * sec / self.period + self.phase))  # (T, B)
+        s, c = np.sin(half), np.cos(half)
+        v = s[..., None] * self.onehot  # (T, B, 3): the sway rotation's vector part
+        p, pw = self.q[:, :3], self.q[:, 3]
+        cross = np.stack([p[:, 1] * v[..., 2] - p[:, 2] * v[..., 1], p[:, 2] * v[..., 0] - p[:, 0] * v[..., 2],
+                          p[:, 0] * v[..., 1] - p[:, 1] * v[..., 0]], axis=-1)
+        out = np.repeat(self.base[None], len(sec), axis=0)
+        out[:, self.cols[:, :3]] = pw[:, None] * v + c[..., None] * p + cross
+        out[:, self.cols[:, 3]] = pw * c - p[np.arange(len(p)), self.axis] * s
+        return out.astype(np.float32)
+
+
 def idle_pose(base: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Idle poses (len(t), P): ``base`` (P,) with the :data:`SWAY` rotations at frame times ``t`` (frames)."""
-    out = np.repeat(base[None].astype(np.float64), len(t), axis=0)
-    sec = np.asarray(t, np.float64) / FPS
-    for bone, axis, deg, period, phase in SWAY:
-        i = 3 + 4 * BONE_INDEX[bone]
-        vec = np.zeros((len(t), 3))
-        vec[:, axis] = np.deg2rad(deg) * np.sin(2 * np.pi * sec / period + phase)
-        out[:, i: i + 4] = (Rotation.from_quat(out[:, i: i + 4]) * Rotation.from_rotvec(vec)).as_quat()
-    return out.astype(np.float32)
+    return IdleSway(base)(t)
 
 
 def hermite_decay(frames: int) -> np.ndarray:
@@ -98,6 +127,33 @@ def _align(q: np.ndarray, ref: np.ndarray) -> np.ndarray:
     out = q.copy()
     out[..., 3:] = (a * flip).reshape(*q.shape[:-1], -1)
     return out
+
+
+def _renorm_frame(pose: np.ndarray, prev_quat: np.ndarray | None) -> np.ndarray:
+    """``blend_track(pose[None, None], [[1]], prev_quat)[0]`` for one pose (P,): its quaternions
+    renormalised and sign-aligned to ``prev_quat`` (J, 4), without the blend of one candidate
+    with itself (the engine pushes one frame at a time: 50-80 µs a frame there, 15 here).
+    The same values (a zero may change sign); non-finite or near-zero quaternions take the
+    general path."""
+    q = pose[3:].reshape(-1, 4).copy()
+    norm = np.sqrt(np.einsum("jc,jc->j", q, q))
+    if not (np.isfinite(norm).all() and norm.min() > 1e-8 and np.isfinite(pose[:3]).all()):
+        return blend_track(pose[None, None], np.ones((1, 1)), prev_quat)[0]
+    q /= norm[:, None]
+    if prev_quat is not None:
+        q[np.einsum("jc,jc->j", q, prev_quat) < 0.0] *= -1.0
+    out = np.empty_like(pose)
+    out[:3] = pose[:3]
+    out[3:] = q.ravel()
+    return out
+
+
+def _median(v: np.ndarray) -> float:
+    """``float(np.median(v))`` of a short 1-D array, without NumPy's machinery (the same value: the
+    middle element, or the mean of the middle two)."""
+    s = sorted(v.tolist())
+    n = len(s)
+    return s[n // 2] if n % 2 else (s[n // 2 - 1] + s[n // 2]) / 2
 
 
 def _unit(p: np.ndarray) -> np.ndarray:
@@ -159,6 +215,20 @@ def sign_continuous(windows: np.ndarray) -> np.ndarray:
     return out
 
 
+def _cached_dips(model: DanceVQ, members: np.ndarray, seg: int) -> np.ndarray:
+    """:func:`member_dips` of ``model``'s exemplars, kept on the model: the forward kinematics
+    of every exemplar took 0.4-0.6 s, paid by every new stream (each song ``DanceVQ.generate``
+    runs, each ``build_pipeline``). Recomputed when ``member_poses`` changes (another tensor,
+    or the same one written in place: its version counter moves)."""
+    t = model.member_poses
+    key = (t.data_ptr(), t._version, tuple(t.shape), seg)
+    cached = getattr(model, "_dips_cache", None)
+    if cached is None or cached[0] != key:
+        cached = (key, member_dips(members[:, :, : seg + 2], seg))
+        model._dips_cache = cached
+    return cached[1]
+
+
 def _nlerp(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
     """Pose a -> b by weight w in [0, 1]: root lerped, every quaternion nlerped on b's hemisphere of a."""
     out = (1 - w) * a + w * b
@@ -182,6 +252,7 @@ class DanceStream:
             raise ConfigError(f"DanceStream needs a dance_vq model, got {type(model).__name__}")
         self.model = model.eval()
         c = model.config
+        self._predictor = NumpyPredictor(model.predictor)  # the torch predictor's logits, in NumPy (dance_numpy)
         self.seg, self.feature_dim, self.pose_dim = c.seg, c.feature_dim, c.pose_dim
         self.seed = int(seed)
         self.style = style_token(style)
@@ -197,12 +268,13 @@ class DanceStream:
         self._gate_a_return = float(np.exp(-1.0 / GATE_TAU_RETURN))
         self._members = sign_continuous(model.member_poses.float().numpy())  # (K, M, 2 seg, P)
         self._counts = model.member_count.numpy()
-        self._dips = member_dips(self._members[:, :, : self.seg + 2], self.seg)  # (K, M, seg)
+        self._dips = _cached_dips(model, self._members, self.seg)  # (K, M, seg)
         cc = c.clarity_col
         self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None
         self._decay = hermite_decay(DECAY_FRAMES * self.seg // 8)[:, :, None]  # (2, D, 1)
         base = model.destandardize_poses(model.pose_mean * 0)  # the mean pose, unit quaternions
         self._idle_base = base.numpy().astype(np.float32)
+        self._sway = IdleSway(self._idle_base)
         self.forced_idle = False
         self.reset()
 
@@ -214,8 +286,9 @@ class DanceStream:
         self.frame = 0
         self.nonfinite_frames = 0
         self._hist = np.zeros((self.seg, self.feature_dim), np.float32)
-        self._tokens: deque[np.ndarray] = deque(maxlen=c.window_codes)
-        self._prevs: deque[int] = deque(maxlen=c.window_codes)
+        self._tokens: deque[np.ndarray] = deque(maxlen=c.window_codes)  # embedded (audio + previous code)
+        self._prefix: Prefix | None = None  # the next code step's window but its last token, computed ahead
+        self._prefix_auto: Prefix | None = None  # the same with the "auto" style, while a style is guided
         self._codes: deque[int] = deque(maxlen=c.decoder_context)
         self._last = c.codebook  # "no code yet"
         self._segment = np.zeros((self.seg, self.pose_dim), np.float32)
@@ -264,14 +337,24 @@ class DanceStream:
         self._w_idle = min(target, self._w_idle + step) if target > self._w_idle else max(target, self._w_idle - step)
 
     def _next_code(self) -> None:
-        m = self.model
-        self._tokens.append(self._hist.reshape(-1).copy())
-        self._prevs.append(self._last)
-        audio, prevs = np.stack(self._tokens), np.fromiter(self._prevs, np.int64)
-        logits = m.next_logits(audio, prevs, self.style)
-        if self.style and STYLE_GUIDANCE != 1.0:  # classifier-free guidance towards the requested style
-            auto = m.next_logits(audio, prevs, 0)
-            logits = auto + STYLE_GUIDANCE * (logits - auto)
+        m, pred = self.model, self._predictor
+        guided = bool(self.style) and STYLE_GUIDANCE != 1.0
+        with single_thread_blas():
+            token = pred.embed(self._hist.reshape(-1), self._last)
+            window = np.stack(self._tokens) if self._tokens else np.zeros((0, pred.d_model), np.float32)
+            prefix = self._prefix
+            if prefix is None or prefix.style != self.style:  # the first step, or the style changed since
+                prefix = Prefix(pred, window, self.style)
+            logits = pred.logits_after(prefix, token)
+            if guided:  # classifier-free guidance towards the requested style
+                auto = self._prefix_auto if self._prefix_auto is not None else Prefix(pred, window, 0)
+                base = pred.logits_after(auto, token)
+                logits = base + STYLE_GUIDANCE * (logits - base)
+            self._tokens.append(token)
+            # the next step's window but its newest token is known now: its layers run on the frames between
+            nxt = np.stack(list(self._tokens)[-(pred.window - 1):])
+            self._prefix = Prefix(pred, nxt, self.style)
+            self._prefix_auto = Prefix(pred, nxt, 0) if guided else None
         draws = [m.sample(logits, self.rng) for _ in range(DRAWS)]
         if int(self._counts[draws[0]]) == 0:  # no exemplars (members = 0): the decoder writes the movement
             code = draws[0]
@@ -279,8 +362,14 @@ class DanceStream:
             self._segment = m.decode_last(np.fromiter(self._codes, np.int64))
             self._cont = None
             return
-        pairs = [(c, j) for c in dict.fromkeys(draws) for j in range(int(self._counts[c]))]
-        cands = np.stack([self._members[c, j] for c, j in pairs])  # (n, 2 seg, P)
+        codes = list(dict.fromkeys(draws))
+        pairs = [(c, j) for c in codes for j in range(int(self._counts[c]))]
+        if len(codes) == 1:  # one code (DRAWS = 1): its exemplars are a slice, no gathering
+            c, n = codes[0], len(pairs)
+            cands, dips = self._members[c, :n], self._dips[c, :n]  # (n, 2 seg, P), (n, seg)
+        else:
+            cands = np.stack([self._members[c, j] for c, j in pairs])
+            dips = np.stack([self._dips[c, j] for c, j in pairs])
         if self._cont is None:  # the first movement starts from its own pose
             i = 0
             best = cands[0]
@@ -290,11 +379,11 @@ class DanceStream:
             cands = _align(cands, x0)
             vel = cands[:, 1] - cands[:, 0]
             cost = np.abs(cands[:, 0] - x0).sum(1) + 4.0 * np.abs(vel - v0).sum(1)
-            cost = cost / max(float(np.median(cost)), 1e-9)
+            cost = cost / max(_median(cost), 1e-9)
             beat = self._next_beat()
             if beat is not None:
                 frame, clarity = beat
-                cost -= BEAT_WEIGHT * clarity * np.array([self._dips[c, j, frame] for c, j in pairs])
+                cost -= BEAT_WEIGHT * clarity * dips[:, frame]
             i = int(np.argmin(cost))
             best = inertialize(cands[i], self._cont[:2], self._decay)
             self._segment = best[: self.seg].copy()
@@ -335,16 +424,22 @@ class DanceStream:
             self._raw = x[i]
             if t % self.seg == 0:
                 self._next_code()
+            else:
+                for pre in (self._prefix, self._prefix_auto):
+                    if pre is not None and not pre.done:
+                        with single_thread_blas():
+                            pre.step()  # one layer a frame (docs: models/networks/dance_numpy.py)
             pose = self._segment[t % self.seg]
             self._gate(x[i])
             w = self._w_idle
             if w > 0.0:
                 e = w * w * (3 - 2 * w)  # smoothstep: no kink where the fade starts or ends
-                pose = _nlerp(pose, idle_pose(self._idle_base, np.array([t]))[0], e)
+                pose = _nlerp(pose, self._sway(np.array([t]))[0], e)
             out[i] = pose
             self.frame += 1
         if k == 0:
             return out
-        out = blend_track(out[None], np.ones((1, k)), self._prev_quat)
+        out = _renorm_frame(out[0], self._prev_quat)[None] if k == 1 else \
+            blend_track(out[None], np.ones((1, k)), self._prev_quat)
         self._prev_quat = out[-1, 3:].reshape(-1, 4).copy()
         return out

@@ -39,9 +39,12 @@ class Verdict:
     label: str
     budget: Budget
     measured: float | None  # None: the result does not have this metric
+    not_applicable: str | None = None  # why the metric does not apply to this result's model (then ok)
 
     @property
     def ok(self) -> bool:
+        if self.not_applicable is not None:
+            return True
         m = self.measured
         if m is None or not math.isfinite(m):
             return False
@@ -81,13 +84,21 @@ def load_budgets(path: str | Path) -> list[Budget]:
 
 
 def check(results: list[dict], budgets: list[Budget]) -> list[Verdict]:
-    """Every budget of each result's kind applied to that result's ``metrics``."""
+    """Every budget of each result's kind applied to that result's ``metrics``.
+
+    A metric the result lacks fails its budget ("not measured"), unless the result names
+    it under ``not_applicable`` with the reason (a figure its model does not have, e.g. the
+    naive-recompute ratio of a dance_vq model): that verdict is "n/a" and passes.
+    """
     verdicts = []
     for r in results:
+        na = r.get("not_applicable") or {}
         for b in budgets:
             if b.kind == r.get("kind"):
                 v = r.get("metrics", {}).get(b.metric)
-                verdicts.append(Verdict(r.get("label", "?"), b, None if v is None else float(v)))
+                reason = na.get(b.metric) if v is None else None
+                verdicts.append(Verdict(r.get("label", "?"), b, None if v is None else float(v),
+                                        None if reason is None else str(reason)))
     return verdicts
 
 
@@ -104,6 +115,9 @@ def format_verdicts(verdicts: list[Verdict], only_failures: bool = False) -> str
         if only_failures and v.ok:
             continue
         sign = "<=" if v.budget.op == "max" else ">="
+        if v.not_applicable is not None:
+            rows.append((v.label, v.budget.metric, f"{sign} {v.budget.limit:g}", "n/a", "-", "n/a"))
+            continue
         if v.ok:
             over = "-"
         elif v.measured is None or not math.isfinite(v.measured):
@@ -114,4 +128,7 @@ def format_verdicts(verdicts: list[Verdict], only_failures: bool = False) -> str
         rows.append((v.label, v.budget.metric, f"{sign} {v.budget.limit:g}", _fmt(v.measured), over,
                      "ok" if v.ok else "OVER BUDGET"))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows)
+    table = "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows)
+    reasons = [] if only_failures else sorted({(v.budget.metric, v.not_applicable) for v in verdicts
+                                               if v.not_applicable is not None})
+    return table + "".join(f"\nn/a {metric}: {why}" for metric, why in reasons)

@@ -53,6 +53,10 @@ def _f(x, digits: int = 2) -> str:
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{digits}f}"
 
 
+def _g(x) -> str:
+    return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.2g}"
+
+
 def _row(name: str, s: dict, note: str = "") -> str:
     return f"| {name} | {_f(s['p50'])} | {_f(s['p95'])} | {_f(s['p99'])} | {_f(s['max'])} | {note} |"
 
@@ -61,7 +65,8 @@ def _budget_notes(result: dict, budgets: list[Budget] | None) -> dict[str, str]:
     notes = {}
     for v in check([result], budgets or []):
         sign = "≤" if v.budget.op == "max" else "≥"
-        notes[v.budget.metric] = f"{sign} {v.budget.limit:g} {'ok' if v.ok else '**over**'}"
+        status = "n/a" if v.not_applicable is not None else "ok" if v.ok else "**over**"
+        notes[v.budget.metric] = f"{sign} {v.budget.limit:g} {status}"
     return notes
 
 
@@ -83,7 +88,8 @@ def latency_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
         "",
         f"* Audio: `{r['audio']}`, {s['frames']} frames ({st['seconds']:g} s) replayed in real time at "
         f"{st['sample_rate']} Hz in blocks of {st['block_size']} ({_f(a['block_ms'])} ms)",
-        f"* Checkpoint: `{r['checkpoint']}` ({r['checkpoint_source']}); torch threads per performer: {st['threads']}",
+        f"* Checkpoint: `{r['checkpoint']}` ({r['checkpoint_source']}, model {r.get('model', '?')}); torch threads "
+        f"per performer: {st['threads']}",
         f"* Machine: {machine_line(r)}",
         f"* During the replay all CPUs were {_f(r['machine_busy_percent'], 0)}% busy (any process); this "
         f"performer used {_f(s['cpu_percent'], 1)}% of one CPU ({_f(s['cpu_ms_per_frame'])} ms CPU per frame), "
@@ -131,7 +137,7 @@ def latency_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
         lines += [
             f"## Where a hop goes (in-process, unpaced, mean µs per frame over {c['frames']} frames)",
             "",
-            "| mixdown + streaming features | streaming model + blending | OSC (VMC) encode + send "
+            "| mixdown + streaming features | streaming model (+ blending) | OSC (VMC) encode + send "
             "| WebSocket encode + hand-off | total |",
             "|---|---|---|---|---|",
             f"| {_f(c['features_us'], 0)} | {_f(c['model_us'], 0)} | {_f(c['osc_us'], 0)} | {_f(c['ws_us'], 0)} "
@@ -142,9 +148,30 @@ def latency_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _baseline_lines(r: dict, notes: dict[str, str]) -> list[str]:
-    s, ms = r["streaming"], r["model_step"]
-    lines = [
+def _model_step_lines(r: dict, notes: dict[str, str]) -> list[str]:
+    """The model-only cost table: streaming against the naive recompute, or (no naive
+    baseline: dance_vq) the streaming model alone, its code steps apart."""
+    ms = r["model_step"]
+    if ms.get("naive_us") is None:
+        rows = [("every frame", ms["streaming_us"]),
+                (f"code-step frames (1 in {ms.get('code_every', '?')}: the predictor runs, a movement is chosen)",
+                 ms.get("code_step_us")),
+                ("other frames", ms.get("other_us"))]
+        return [
+            "## The model alone, same run",
+            "",
+            f"Streaming model only (in this process, one frame per push), µs per frame over "
+            f"{ms['streaming_us']['n']} frames:",
+            "",
+            "| frames | p50 | p95 | p99 | max | mean |",
+            "|---|---|---|---|---|---|",
+            *(f"| {name} | {_f(v['p50'], 0)} | {_f(v['p95'], 0)} | {_f(v['p99'], 0)} | {_f(v['max'], 0)} "
+              f"| {_f(v['mean'], 0)} |" for name, v in rows if v is not None),
+            "",
+            f"Naive full-window recompute (the budget on naive / streaming): not applicable. "
+            f"{ms.get('naive_reason', '')}.",
+        ]
+    return [
         "## Baselines, same run",
         "",
         "| figure | streaming (ours) | naive full-window recompute | naive / streaming |",
@@ -154,6 +181,11 @@ def _baseline_lines(r: dict, notes: dict[str, str]) -> list[str]:
         f"| model only, µs per frame, p99 | {_f(ms['streaming_us']['p99'], 0)} | {_f(ms['naive_us']['p99'], 0)} | "
         f"{_f(ms['naive_us']['p99'] / ms['streaming_us']['p99'], 1)}× |",
     ]
+
+
+def _baseline_lines(r: dict, notes: dict[str, str]) -> list[str]:
+    s = r["streaming"]
+    lines = _model_step_lines(r, notes)
     if "naive" in r:
         n = r["naive"]
         lines += [
@@ -167,8 +199,18 @@ def _baseline_lines(r: dict, notes: dict[str, str]) -> list[str]:
             f"{_f(n['cpu_ms_per_frame'] / s['cpu_ms_per_frame'], 1)}× |",
         ]
     lines.append("")
+    if "stream_vs_offline" in r:
+        so = r["stream_vs_offline"]
+        lines += [
+            f"Streaming against offline: the engine's pose model fed the first {so['frames']} feature frames "
+            f"{so['chunks']}, against the offline pass on the same features: largest difference "
+            f"{so['max_abs']:.2g} {notes.get('stream_offline_max_abs', '')}.",
+            "",
+        ]
     if "offline" in r:
         o = r["offline"]
+        name = o.get("model", "causal")
+        how = "offline pass (DanceVQ.generate)" if name == "dance_vq" else "windowed"
         lines += [
             f"## Offline generation of the whole file ({_f(o['audio_s'], 1)} s, {o['threads']} torch threads)",
             "",
@@ -176,7 +218,7 @@ def _baseline_lines(r: dict, notes: dict[str, str]) -> list[str]:
             "|---|---|---|",
             f"| decode + resample to 22050 Hz | {_f(o['decode_s'])} | {_f(o['decode_s'] / o['audio_s'], 4)} |",
             f"| features | {_f(o['features_s'])} | {_f(o['rtf_features'], 4)} |",
-            f"| causal generator, windowed | {_f(o['causal_s'])} | {_f(o['rtf_causal'], 4)} "
+            f"| the checkpoint ({name}), {how} | {_f(o['causal_s'])} | {_f(o['rtf_causal'], 4)} "
             f"{notes.get('rtf_causal', '')} |",
             f"| paper U-Net GAN generator (unet_gan), windowed | {_f(o['unet_gan_s'])} | {_f(o['rtf_unet_gan'], 4)} "
             f"{notes.get('rtf_unet_gan', '')} |",
@@ -309,8 +351,8 @@ def summary_markdown(results: list[dict]) -> str:
     if lat:
         lines += ["| recording | per-hop p50 | per-hop p99 | e2e OSC p50 | e2e OSC p99 | e2e WS p50 | e2e WS p99 "
                   "| algorithmic max | jitter p99 | lost | peak RSS MB | CPU % | naive/streaming model p50 "
-                  "| naive/streaming per hop p50 | offline RTF causal |",
-                  "|---|" + "---:|" * 14]
+                  "| naive/streaming per hop p50 | offline RTF | stream vs offline max diff |",
+                  "|---|" + "---:|" * 15]
         for r in lat:
             m = r["metrics"]
             lines.append(
@@ -319,7 +361,7 @@ def summary_markdown(results: list[dict]) -> str:
                 f"| {_f(m['algorithmic_ms_max'])} | {_f(m['jitter_ms_p99'])} | {m['lost_frames']} "
                 f"| {_f(m['peak_rss_mb'], 0)} | {_f(m['cpu_percent'], 1)} "
                 f"| {_f(m.get('model_step_naive_over_streaming'), 1)}× | {_f(m.get('per_hop_naive_over_streaming'), 1)}× "
-                f"| {_f(m.get('rtf_causal'), 4)} |")
+                f"| {_f(m.get('rtf_causal'), 4)} | {_g(m.get('stream_offline_max_abs'))} |")
         lines.append("")
         lines.append("Times in ms; RTF: seconds of compute per second of audio.")
         lines.append("")

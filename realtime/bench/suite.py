@@ -191,22 +191,71 @@ def frame_series(rec: dict) -> dict[str, np.ndarray]:
 
 # -- in-process baselines -------------------------------------------------------------------
 
+def naive_baseline(net) -> tuple[object | None, str]:
+    """The naive full-window recompute of ``net`` for the engine (a PoseModel), or None and why not.
+
+    A causal U-Net has one: :class:`~models.networks.streaming.NaiveWindowGenerator` reruns
+    the whole 128-frame window every frame and emits the same poses as the streaming step,
+    so the two differ in cost only. A ``dance_vq`` model has none: its stream is its
+    offline pass (:meth:`~models.networks.dance_vq.DanceVQ.generate` pushes the song
+    through the same :class:`~models.networks.dance_stream.DanceStream`), it carries state
+    from code to code (the playing movement, the sampler), and a window rerun from scratch
+    would dance a different dance; its predictor already reads its whole 16-code window
+    at each code step.
+    """
+    from models.networks.causal import CausalGenerator
+    from models.networks.streaming import NaiveWindowGenerator
+
+    if isinstance(net, CausalGenerator):
+        return NaiveWindowGenerator(net), ""
+    return None, (f"{type(net).__name__} has no naive window recompute: its stream is its offline pass, with state "
+                  "carried from code to code, so a window rerun from scratch would not give the same poses")
+
+
 def model_step_costs(checkpoint: Path, features: np.ndarray, frames: int = 240, rounds: int = 4) -> dict:
-    """Microseconds per frame of the model alone: streaming step vs naive 128-frame recompute.
+    """Microseconds per frame of the model alone: the engine's streaming model vs the naive 128-frame recompute.
 
     Both run the same weights on the same feature frames, one frame per ``push`` (the
     engine's case), in the current torch thread setting, interleaved over ``rounds``
     so that load changes hit both alike. The naive generator is primed with 127 frames,
     so every timed call recomputes a full window.
+
+    A model without a naive baseline (:func:`naive_baseline`; ``dance_vq``) is timed
+    alone over ``max(frames, 960)`` frames, and its ``code_step_us`` (frames on which the
+    predictor runs, one in ``seg``) and ``other_us`` are reported apart; ``naive_us`` and
+    the ratios are None and ``naive_reason`` says why.
     """
     import torch
 
-    from models.networks.checkpoint import load_checkpoint
-    from models.networks.streaming import NaiveWindowGenerator, StreamingGenerator
+    from realtime.pipeline import build_pipeline
 
-    net, _ = load_checkpoint(checkpoint)
+    pipeline = build_pipeline(checkpoint)
+    fast = pipeline.model
+    naive, reason = naive_baseline(getattr(fast, "model", None))
+    if naive is None:
+        n = max(frames, 960)
+        x = np.resize(features.astype(np.float32), (NAIVE_FULL_WINDOW + n, features.shape[1]))
+        fast.push(x[:NAIVE_FULL_WINDOW])  # past the stream's start (idle fade-in), as in a song
+        first = fast.frame
+        t_fast = []
+        with torch.inference_mode():
+            for row in x[NAIVE_FULL_WINDOW:]:
+                t = time.perf_counter()
+                fast.push(row[None])
+                t_fast.append(time.perf_counter() - t)
+        us = np.array(t_fast) * 1e6
+        code = (first + np.arange(n)) % fast.seg == 0
+        return {
+            "streaming_us": summarize(us),
+            "code_step_us": summarize(us[code]),
+            "other_us": summarize(us[~code]),
+            "code_every": int(fast.seg),
+            "naive_us": None,
+            "ratio_p50": None,
+            "ratio_mean": None,
+            "naive_reason": reason,
+        }
     x = np.resize(features.astype(np.float32), (NAIVE_FULL_WINDOW + frames, features.shape[1]))
-    fast, naive = StreamingGenerator(net), NaiveWindowGenerator(net)
     fast.push(x[:NAIVE_FULL_WINDOW])
     naive.push(x[:NAIVE_FULL_WINDOW])
     t_fast, t_naive = [], []
@@ -227,6 +276,29 @@ def model_step_costs(checkpoint: Path, features: np.ndarray, frames: int = 240, 
         "ratio_p50": n_us["p50"] / s_us["p50"],
         "ratio_mean": n_us["mean"] / s_us["mean"],
     }
+
+
+def stream_vs_offline(checkpoint: Path, features: np.ndarray, seed: int = 0) -> dict:
+    """Streaming equals offline: the engine's pose model fed ``features`` a few frames per push
+    (0-3 frames, seeded: the engine pushes 0, 1 or 2 per audio block) against the offline pass
+    (:func:`models.generate.run_model`: ``offline_windowed`` for a causal U-Net,
+    ``DanceVQ.generate`` for dance_vq) on the same features. Returns frames, the chunking
+    and the largest absolute difference of any pose value."""
+    from models.generate import run_model
+    from realtime.pipeline import build_pipeline
+
+    pipeline = build_pipeline(checkpoint)
+    x = features.astype(np.float32)
+    offline = run_model(pipeline.model.model, x)
+    rng = np.random.default_rng(seed)
+    parts, i = [], 0
+    while i < len(x):
+        k = int(rng.integers(0, 4))
+        parts.append(pipeline.model.push(x[i : i + k]))
+        i += k
+    live = np.concatenate(parts)
+    return {"frames": int(len(x)), "chunks": "0-3 frames per push, seeded",
+            "max_abs": float(np.abs(live - offline).max()) if len(x) else 0.0}
 
 
 def component_costs(checkpoint: Path, samples: np.ndarray, sample_rate: int, block_size: int,
@@ -299,29 +371,31 @@ def component_costs(checkpoint: Path, samples: np.ndarray, sample_rate: int, blo
 def offline_rtf(audio: Path, checkpoint: Path, baseline_checkpoint: Path | None = None) -> dict:
     """Real-time factor (processing seconds / audio seconds) of offline generation on a whole file.
 
-    Decoding to 22050 Hz, :func:`~models.features.spectral.extract_features`, then
-    :func:`~models.networks.streaming.offline_windowed` (128-frame windows, hop 64, batches
-    of 32) with the causal checkpoint and with the offline paper generator ("unet_gan",
-    non-causal; random weights unless ``baseline_checkpoint``: same cost). Wall and
-    process-CPU seconds for each stage; current torch thread setting.
+    Decoding to 22050 Hz, :func:`~models.features.spectral.extract_features`, then the
+    checkpoint's offline pass, :func:`models.generate.run_model` (what ``performer
+    generate`` runs: :func:`~models.networks.streaming.offline_windowed`, 128-frame windows,
+    hop 64, batches of 32, for a causal U-Net; :meth:`~models.networks.dance_vq.DanceVQ.generate`
+    for dance_vq), and the offline paper generator ("unet_gan", non-causal, windowed;
+    random weights unless ``baseline_checkpoint``: same cost). Wall and process-CPU
+    seconds for each stage; current torch thread setting. The checkpoint's figures are
+    keyed ``causal`` (every live model is causal); ``model`` names its kind.
     """
     import torch
 
     from models.features.audio_io import load_audio
     from models.features.spectral import extract_features
+    from models.generate import load_model, run_model
     from models.networks.checkpoint import build_model, load_checkpoint
     from models.networks.streaming import offline_windowed
-    from realtime.pipeline import build_pipeline
 
-    pipeline = build_pipeline(checkpoint)
-    net = pipeline.model.model  # the CausalGenerator inside the StreamingGenerator
-    cfg = pipeline.extractor_factory(SAMPLE_RATE).cfg
+    loaded = load_model(checkpoint)
+    net, cfg = loaded.model, loaded.features
     if baseline_checkpoint is not None:
         paper, _ = load_checkpoint(baseline_checkpoint)
     else:
         torch.manual_seed(0)
         paper = build_model("unet_gan", {"feature_dim": cfg.dim}).eval()
-    out: dict = {"threads": torch.get_num_threads()}
+    out: dict = {"threads": torch.get_num_threads(), "model": loaded.name}
 
     def timed(name, fn):
         w, c = time.perf_counter(), time.process_time()
@@ -332,8 +406,9 @@ def offline_rtf(audio: Path, checkpoint: Path, baseline_checkpoint: Path | None 
 
     x, _ = timed("decode", lambda: load_audio(audio, SAMPLE_RATE))
     feats = timed("features", lambda: extract_features(x, cfg))
-    timed("causal", lambda: offline_windowed(net, feats))
-    timed("unet_gan", lambda: offline_windowed(paper, feats))
+    with torch.inference_mode():
+        timed("causal", lambda: run_model(net, feats))
+        timed("unet_gan", lambda: offline_windowed(paper, feats))
     dur = len(x) / SAMPLE_RATE
     out["audio_s"] = dur
     out["frames"] = int(len(feats))
@@ -360,9 +435,13 @@ def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seco
        (streaming model) with an OSC and a WebSocket receiver on loopback;
     2. the same for ``naive_seconds`` with the naive full-window baseline in the engine
        (0 skips it; its first 127 frames, before the window is full, are left out);
-    3. model-only cost per frame, streaming vs naive, interleaved, and the per-stage
-       breakdown of a hop (:func:`component_costs`), in this process;
-    4. offline real-time factor on the whole file, causal vs the paper's U-Net (``offline``).
+    3. model-only cost per frame, streaming vs naive, interleaved (:func:`model_step_costs`;
+       a model without a naive baseline, dance_vq, skips step 2 and the ratio, and the
+       result says why under ``not_applicable``), the per-stage breakdown of a hop
+       (:func:`component_costs`) and streaming against offline on the first 60 s
+       (:func:`stream_vs_offline`), in this process;
+    4. offline real-time factor on the whole file, the checkpoint's offline pass vs the
+       paper's U-Net (``offline``).
     """
     import torch
 
@@ -396,14 +475,20 @@ def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seco
         result["receiver_cpu_percent"] = 100.0 * run["receiver_cpu_s"] / max(run["wall_s"], 1e-9)
         series = frame_series(rec)
 
-        if naive_seconds > 0:
+        loaded = load_model(checkpoint)
+        result["model"] = loaded.name
+        naive, reason = naive_baseline(loaded.model)
+        if naive_seconds > 0 and naive is not None:
             nrun = run_performers([spec], _settings(cfg, checkpoint, naive_seconds, "naive"), work / "naive")
             result["naive"] = stream_metrics(nrun["streams"][0], skip_frames=NAIVE_FULL_WINDOW)
+        elif naive is None:
+            result["not_applicable"] = {"model_step_naive_over_streaming": reason}
 
         torch.set_num_threads(cfg.threads)
         x, _ = load_audio(audio, SAMPLE_RATE)
-        feats = extract_features(x[: 60 * SAMPLE_RATE], load_model(checkpoint).features)  # the model's own features
+        feats = extract_features(x[: 60 * SAMPLE_RATE], loaded.features)  # the model's own features
         result["model_step"] = model_step_costs(checkpoint, feats)
+        result["stream_vs_offline"] = stream_vs_offline(checkpoint, feats)
         result["components"] = component_costs(checkpoint, np.load(seg), cfg.sample_rate, cfg.block_size)
         if offline:
             torch.set_num_threads(len(cores))
@@ -431,8 +516,10 @@ def latency_metrics(r: dict) -> dict[str, float]:
         "lost_frames": s["lost_osc"] + s["lost_ws"],
         "cpu_percent": s["cpu_percent"],
         "peak_rss_mb": s["peak_rss_mb"],
-        "model_step_naive_over_streaming": r["model_step"]["ratio_p50"],
+        "stream_offline_max_abs": r["stream_vs_offline"]["max_abs"],
     }
+    if r["model_step"].get("ratio_p50") is not None:
+        m["model_step_naive_over_streaming"] = r["model_step"]["ratio_p50"]
     if "naive" in r:
         m["per_hop_naive_over_streaming"] = r["naive"]["per_hop_ms"]["p50"] / s["per_hop_ms"]["p50"]
     if "offline" in r:

@@ -130,14 +130,17 @@ def _cpu_s() -> float:
 
 
 def _model(pipeline, kind: str, checkpoint: str):
-    """The engine's pose model: the pipeline's streaming generator, or the naive baseline."""
+    """The engine's pose model: the pipeline's streaming model, or the naive baseline
+    (:func:`realtime.bench.suite.naive_baseline`; ConfigError for a model without one)."""
     if kind == "streaming":
         return pipeline.model
-    from models.networks.checkpoint import load_checkpoint
-    from models.networks.streaming import NaiveWindowGenerator
+    from models.errors import ConfigError
+    from realtime.bench.suite import naive_baseline
 
-    net, _ = load_checkpoint(checkpoint)
-    return NaiveWindowGenerator(net)
+    naive, reason = naive_baseline(pipeline.model.model)
+    if naive is None:
+        raise ConfigError(reason)
+    return naive
 
 
 def _say(obj: dict) -> None:

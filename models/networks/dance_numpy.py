@@ -1,0 +1,234 @@
+"""The dance_vq code predictor's live step in NumPy (:class:`NumpyPredictor`, :class:`Prefix`).
+
+:class:`~models.networks.dance_stream.DanceStream` asks the code predictor
+(:class:`~models.networks.dance_vq.CodePredictor`, a 3-layer causal Transformer over the
+last 16 code steps) for the next code every 8 frames. Through torch that call took
+2-4 ms on the 2-core bench machine, most of it per-operation dispatch (the arithmetic is
+about 10 M multiply-adds), all of it on one frame in eight: that frame set the live
+engine's per-hop p99 (docs/latency.md). This does the same computation with NumPy
+arrays, less of it, and most of it before it is needed:
+
+* a token's input embedding (the audio MLP of its 8 feature frames plus the embedding
+  of the code before it) does not change while the token stays in the window, so it is
+  computed once, when the token arrives (:meth:`NumpyPredictor.embed`), instead of for
+  all 16 tokens at every step;
+* only the last token's logits are used, so the last layer's attention output,
+  feed-forward, the final norm and the 512-way head run for that token alone;
+* causal attention: the other 15 tokens' rows do not depend on the newest token, and
+  they are known as soon as the previous code is chosen. :class:`Prefix` computes their
+  keys and values one layer per frame on the frames after a code step, and the code
+  step runs the newest token's row alone (:meth:`NumpyPredictor.logits_after`).
+
+The same numbers come out whichever frame computes them, so the live stream and the
+offline pass (which pushes the song through the same stream) stay equal. The torch
+module stays the reference: logits agree to float32 rounding (a few 1e-6 on logits of
+magnitude ~7; ``tests/test_dance_vq.py``). Rounding can decide a draw: over 2 x 1,230
+code draws of the shipped default (5.5 minutes of songs, silence and noise, two seeds)
+the codes were those of the torch predictor but for one, whose uniform variate fell
+2e-7 from a boundary of the cumulative distribution (docs/latency.md). The weights are
+copied once, when the predictor is made: a model trained further afterwards needs a new
+one (a new ``DanceStream``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+
+import numpy as np
+from scipy.special import erf
+
+_SQRT_HALF = np.float32(np.sqrt(0.5))
+_BLAS = None  # threadpoolctl's controller of the BLAS libraries, made on first use (about 2 ms)
+
+
+@contextlib.contextmanager
+def single_thread_blas() -> Iterator[None]:
+    """Run the block with one BLAS thread, then restore the count (about 12 µs).
+
+    The predictor's matrix products (16 rows, up to 512 columns) are above OpenBLAS's
+    threshold for splitting a product over every core, and split they cost several times
+    more: on the 2-core bench machine with another job running, a 5.5-minute stream took
+    36 s instead of 7 s. Without threadpoolctl the block runs as it is.
+    """
+    global _BLAS
+    if _BLAS is None:
+        try:
+            from threadpoolctl import ThreadpoolController
+
+            _BLAS = ThreadpoolController().select(user_api="blas")
+        except ImportError:  # pragma: no cover - threadpoolctl is a dependency
+            _BLAS = False
+    if not _BLAS:
+        yield
+        return
+    with _BLAS.limit(limits=1):
+        yield
+
+
+def _np(t) -> np.ndarray:
+    return np.ascontiguousarray(t.detach().cpu().numpy(), dtype=np.float32)
+
+
+def _gelu(x: np.ndarray) -> np.ndarray:
+    """Exact (erf) GELU, as torch's ``F.gelu`` default. (Not torch's kernel on the same memory:
+    with more than one torch thread it splits even 8,000 values over the threads, 7 ms a
+    call on a busy 2-core machine, and the offline pass runs with the caller's threads.)"""
+    return 0.5 * x * (1.0 + erf(x * _SQRT_HALF))
+
+
+def _layer_norm(x: np.ndarray, w: np.ndarray, b: np.ndarray, eps: float) -> np.ndarray:
+    """LayerNorm over the last axis; ``np.add.reduce(...) / d`` is ``mean`` without its Python wrapper."""
+    d = x.shape[-1]
+    xc = x - np.add.reduce(x, -1, keepdims=True) / d
+    var = np.add.reduce(xc * xc, -1, keepdims=True) / d
+    return xc / np.sqrt(var + eps) * w + b
+
+
+class _Layer:
+    """One ``nn.TransformerEncoderLayer`` (norm_first, GELU, eval mode: no dropout)."""
+
+    def __init__(self, layer, d: int) -> None:
+        att = layer.self_attn
+        if not (layer.norm_first and att.batch_first and att._qkv_same_embed_dim):
+            raise ValueError("NumpyPredictor supports norm_first, batch_first layers with one in-projection")
+        self.n1 = (_np(layer.norm1.weight), _np(layer.norm1.bias), float(layer.norm1.eps))
+        self.n2 = (_np(layer.norm2.weight), _np(layer.norm2.bias), float(layer.norm2.eps))
+        self.w_qkv, self.b_qkv = _np(att.in_proj_weight).T.copy(), _np(att.in_proj_bias)
+        self.w_o, self.b_o = _np(att.out_proj.weight).T.copy(), _np(att.out_proj.bias)
+        self.w_1, self.b_1 = _np(layer.linear1.weight).T.copy(), _np(layer.linear1.bias)
+        self.w_2, self.b_2 = _np(layer.linear2.weight).T.copy(), _np(layer.linear2.bias)
+        self.heads = att.num_heads
+        self.d = d
+        self.scale = np.float32(1.0 / np.sqrt(d // att.num_heads))
+
+    def qkv(self, h: np.ndarray) -> np.ndarray:
+        """Rows (n, d) -> their queries, keys and values side by side (n, 3d)."""
+        return _layer_norm(h, *self.n1) @ self.w_qkv + self.b_qkv
+
+    def attend(self, h: np.ndarray, q: np.ndarray, k: np.ndarray, v: np.ndarray,
+               mask: np.ndarray | None) -> np.ndarray:
+        """Rows ``h`` (m, d) with queries ``q`` (m, d) over keys and values ``k``, ``v`` (n, d):
+        the residual attention and feed-forward blocks -> (m, d). ``mask`` (m, n) or None."""
+        n, nh = len(k), self.heads
+        return self.attend_heads(h, q, k.reshape(n, nh, -1).transpose(1, 2, 0), v.reshape(n, nh, -1).transpose(1, 0, 2),
+                                 mask)
+
+    def attend_heads(self, h: np.ndarray, q: np.ndarray, kh: np.ndarray, vh: np.ndarray,
+                     mask: np.ndarray | None) -> np.ndarray:
+        """:meth:`attend` with the keys and values already split by head: ``kh`` (H, hd, n), ``vh`` (H, n, hd)."""
+        m, d, nh = len(q), self.d, self.heads
+        s = (q.reshape(m, nh, -1).transpose(1, 0, 2) @ kh) * self.scale  # (H, m, n)
+        if mask is not None:
+            s += mask
+        s = np.exp(s - s.max(-1, keepdims=True))
+        s /= s.sum(-1, keepdims=True)
+        h = h + (s @ vh).transpose(1, 0, 2).reshape(m, d) @ self.w_o + self.b_o
+        return h + _gelu(_layer_norm(h, *self.n2) @ self.w_1 + self.b_1) @ self.w_2 + self.b_2
+
+    def __call__(self, h: np.ndarray, mask: np.ndarray, last_only: bool) -> np.ndarray:
+        """Rows ``h`` (n, d) -> (n, d), or (1, d) for the last row only (``last_only``)."""
+        d = self.d
+        qkv = self.qkv(h)
+        k, v = qkv[:, d: 2 * d], qkv[:, 2 * d:]
+        if last_only:  # the last row sees every token: no mask
+            return self.attend(h[-1:], qkv[-1:, :d], k, v, None)
+        return self.attend(h, qkv[:, :d], k, v, mask)
+
+
+class Prefix:
+    """The part of a predictor step that does not need the newest token, computed ahead, a layer at a time.
+
+    Causal attention: in a window of n tokens, the first n - 1 rows of every layer
+    depend on those n - 1 tokens only. Once a code is chosen, the next step's window is
+    known but for its last token (the coming 8 frames of audio), so the stream computes
+    the keys and values of the next window's other tokens, one layer per frame, on the
+    frames between code steps (:meth:`step`), and the code step itself runs the one new
+    row (:meth:`NumpyPredictor.logits_after`). The numbers are those of the whole window
+    at once (:meth:`NumpyPredictor.logits`), whichever frames compute them.
+    """
+
+    def __init__(self, pred: "NumpyPredictor", tokens: np.ndarray, style: int) -> None:
+        self.pred, self.style, self.m = pred, int(style), len(tokens)
+        self.h = tokens + pred.style[style] + pred.pos[: self.m]  # (m, d), m may be 0
+        # per layer: keys (H, hd, m + 1) and values (H, m + 1, hd) by head; the last slot is the new token's
+        self.kv: list[tuple[np.ndarray, np.ndarray]] = []
+
+    @property
+    def done(self) -> bool:
+        return len(self.kv) == len(self.pred.layers)
+
+    def step(self) -> None:
+        """Keys and values of the next layer (and, but for the last layer, its output rows)."""
+        layer = self.pred.layers[len(self.kv)]
+        d, nh, m = layer.d, layer.heads, self.m
+        qkv = layer.qkv(self.h)
+        kh = np.empty((nh, d // nh, m + 1), np.float32)
+        vh = np.empty((nh, m + 1, d // nh), np.float32)
+        kh[:, :, :m] = qkv[:, d: 2 * d].reshape(m, nh, d // nh).transpose(1, 2, 0)
+        vh[:, :m] = qkv[:, 2 * d:].reshape(m, nh, d // nh).transpose(1, 0, 2)
+        self.kv.append((kh, vh))
+        if not self.done and m:
+            self.h = layer.attend_heads(self.h, qkv[:, :d], kh[:, :, :m], vh[:, :m], self.pred.mask[:m, :m])
+
+    def finish(self) -> "Prefix":
+        while not self.done:
+            self.step()
+        return self
+
+
+class NumpyPredictor:
+    """:class:`~models.networks.dance_vq.CodePredictor`'s next-code logits in NumPy (module docstring).
+
+    ``embed(audio_row, prev)`` once per token, then ``logits(tokens, style)`` on the
+    window's embedded tokens (oldest first) gives what ``predictor(audio, prev, style)[0, -1]``
+    gives for the same window; ``logits_after(Prefix(self, tokens[:-1], style), tokens[-1])``
+    the same, with the first tokens' work done ahead (:class:`Prefix`).
+    """
+
+    def __init__(self, predictor) -> None:
+        lin1, lin2 = predictor.audio[0], predictor.audio[2]
+        self.w_a1, self.b_a1 = _np(lin1.weight).T.copy(), _np(lin1.bias)
+        self.w_a2, self.b_a2 = _np(lin2.weight).T.copy(), _np(lin2.bias)
+        self.code = _np(predictor.code.weight)
+        self.style = _np(predictor.style.weight)
+        self.pos = _np(predictor.pos)
+        d = self.pos.shape[1]
+        self.layers = [_Layer(layer, d) for layer in predictor.blocks.layers]
+        self.norm = (_np(predictor.norm.weight), _np(predictor.norm.bias), float(predictor.norm.eps))
+        self.w_head, self.b_head = _np(predictor.head.weight).T.copy(), _np(predictor.head.bias)
+        n = len(self.pos)
+        self.mask = np.triu(np.full((n, n), -np.inf, np.float32), k=1)
+        self.d_model = d
+        self.window = n
+
+    def embed(self, audio_row: np.ndarray, prev: int) -> np.ndarray:
+        """One token's input (d,): audio MLP of its standardised frames (seg * D,) + the previous code's embedding."""
+        a = np.asarray(audio_row, np.float32)[None]
+        return (_gelu(a @ self.w_a1 + self.b_a1) @ self.w_a2 + self.b_a2)[0] + self.code[prev]
+
+    def logits(self, tokens: np.ndarray, style: int) -> np.ndarray:
+        """Logits (K,) of the next code: ``tokens`` (n, d) from :meth:`embed`, n <= window_codes."""
+        n = len(tokens)
+        h = tokens + self.style[style] + self.pos[:n]
+        mask = self.mask[:n, :n]
+        last = len(self.layers) - 1
+        for i, layer in enumerate(self.layers):
+            h = layer(h, mask, last_only=i == last)
+        return self._head(h[-1])
+
+    def logits_after(self, prefix: Prefix, token: np.ndarray) -> np.ndarray:
+        """Logits (K,) of the window ``prefix``'s tokens + ``token`` (d,), in ``prefix.style``."""
+        prefix.finish()
+        m = prefix.m
+        h = (token + self.style[prefix.style] + self.pos[m])[None]  # (1, d)
+        for layer, (kh, vh) in zip(self.layers, prefix.kv):
+            d = layer.d
+            qkv = layer.qkv(h)
+            kh[:, :, m] = qkv[0, d: 2 * d].reshape(layer.heads, -1)
+            vh[:, m] = qkv[0, 2 * d:].reshape(layer.heads, -1)
+            h = layer.attend_heads(h, qkv[:, :d], kh, vh, None)  # the last row sees every token: no mask
+        return self._head(h[0])
+
+    def _head(self, h: np.ndarray) -> np.ndarray:
+        return (_layer_norm(h, *self.norm) @ self.w_head + self.b_head).astype(np.float32)
