@@ -386,7 +386,7 @@ class DanceStream:
                 self._next_code()
             elif self._prefix is not None and not self._prefix.done:
                 with single_thread_blas():
-                    self._prefix.step()  # one layer a frame (docs: models/networks/dance_numpy.py)
+                    self._prefix.step()  # a piece a frame (models/networks/dance_numpy.py)
             pose = self._segment[t % self.seg]
             self._gate(x[i])
             w = self._w_idle
