@@ -16,7 +16,7 @@ arrays, less of it, and most of it before it is needed:
   feed-forward, the final norm and the 512-way head run for that token alone;
 * causal attention: the other 15 tokens' rows do not depend on the newest token, and
   they are known as soon as the previous code is chosen. :class:`Prefix` computes their
-  keys and values one layer per frame on the frames after a code step, and the code
+  keys and values in five pieces on the five frames after a code step, and the code
   step runs the newest token's row alone (:meth:`NumpyPredictor.logits_after`).
 
 The same numbers come out whichever frame computes them, so the live stream and the
@@ -44,12 +44,15 @@ _BLAS = None  # threadpoolctl's controller of the BLAS libraries, made on first 
 
 @contextlib.contextmanager
 def single_thread_blas() -> Iterator[None]:
-    """Run the block with one BLAS thread, then restore the count (about 12 µs).
+    """Run the block with one BLAS thread, then restore the count.
 
-    The predictor's matrix products (16 rows, up to 512 columns) are above OpenBLAS's
-    threshold for splitting a product over every core, and split they cost several times
-    more: on the 2-core bench machine with another job running, a 5.5-minute stream took
-    36 s instead of 7 s. Without threadpoolctl the block runs as it is.
+    The predictor's matrix products (15 rows, up to 512 columns; even its one-row products
+    are above OpenBLAS's threshold for matrix-vector threading) are split over every core
+    by default, and split they cost several times more: on the 2-core bench machine with
+    another job running, a 5.5-minute stream took 36 s instead of 7 s. Where BLAS already
+    runs one thread (the bench's performers: OMP_NUM_THREADS=1) this costs two library
+    calls; else a threadpoolctl limit (about 20 µs). Without threadpoolctl the block runs
+    as it is.
     """
     global _BLAS
     if _BLAS is None:
@@ -57,9 +60,9 @@ def single_thread_blas() -> Iterator[None]:
             from threadpoolctl import ThreadpoolController
 
             _BLAS = ThreadpoolController().select(user_api="blas")
-        except ImportError:  # pragma: no cover - threadpoolctl is a dependency
+        except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn (librosa)
             _BLAS = False
-    if not _BLAS:
+    if not _BLAS or all(lib.get_num_threads() == 1 for lib in _BLAS.lib_controllers):
         yield
         return
     with _BLAS.limit(limits=1):
@@ -115,8 +118,9 @@ class _Layer:
                                  mask)
 
     def attend_heads(self, h: np.ndarray, q: np.ndarray, kh: np.ndarray, vh: np.ndarray,
-                     mask: np.ndarray | None) -> np.ndarray:
-        """:meth:`attend` with the keys and values already split by head: ``kh`` (H, hd, n), ``vh`` (H, n, hd)."""
+                     mask: np.ndarray | None, feed_forward: bool = True) -> np.ndarray:
+        """:meth:`attend` with the keys and values already split by head: ``kh`` (H, hd, n), ``vh`` (H, n, hd).
+        ``feed_forward=False``: the attention block only (then :meth:`feed_forward`)."""
         m, d, nh = len(q), self.d, self.heads
         s = (q.reshape(m, nh, -1).transpose(1, 0, 2) @ kh) * self.scale  # (H, m, n)
         if mask is not None:
@@ -124,6 +128,10 @@ class _Layer:
         s = np.exp(s - s.max(-1, keepdims=True))
         s /= s.sum(-1, keepdims=True)
         h = h + (s @ vh).transpose(1, 0, 2).reshape(m, d) @ self.w_o + self.b_o
+        return self.feed_forward(h) if feed_forward else h
+
+    def feed_forward(self, h: np.ndarray) -> np.ndarray:
+        """The residual feed-forward block: (m, d) -> (m, d)."""
         return h + _gelu(_layer_norm(h, *self.n2) @ self.w_1 + self.b_1) @ self.w_2 + self.b_2
 
     def __call__(self, h: np.ndarray, mask: np.ndarray, last_only: bool) -> np.ndarray:
@@ -137,15 +145,17 @@ class _Layer:
 
 
 class Prefix:
-    """The part of a predictor step that does not need the newest token, computed ahead, a layer at a time.
+    """The part of a predictor step that does not need the newest token, computed ahead in small steps.
 
     Causal attention: in a window of n tokens, the first n - 1 rows of every layer
     depend on those n - 1 tokens only. Once a code is chosen, the next step's window is
     known but for its last token (the coming 8 frames of audio), so the stream computes
-    the keys and values of the next window's other tokens, one layer per frame, on the
-    frames between code steps (:meth:`step`), and the code step itself runs the one new
-    row (:meth:`NumpyPredictor.logits_after`). The numbers are those of the whole window
-    at once (:meth:`NumpyPredictor.logits`), whichever frames compute them.
+    the keys and values of the next window's other tokens on the frames between code
+    steps, one :meth:`step` a frame (a layer's attention block, then its feed-forward
+    block; for the last layer only its keys and values: 5 steps for 3 layers), and the
+    code step runs the one new row (:meth:`NumpyPredictor.logits_after`). The numbers
+    are those of the whole window at once (:meth:`NumpyPredictor.logits`), whichever
+    frames compute them.
     """
 
     def __init__(self, pred: "NumpyPredictor", tokens: np.ndarray, style: int) -> None:
@@ -153,13 +163,18 @@ class Prefix:
         self.h = tokens + pred.style[style] + pred.pos[: self.m]  # (m, d), m may be 0
         # per layer: keys (H, hd, m + 1) and values (H, m + 1, hd) by head; the last slot is the new token's
         self.kv: list[tuple[np.ndarray, np.ndarray]] = []
+        self._ff_due = False  # the last layer's attention is done, its feed-forward not yet
 
     @property
     def done(self) -> bool:
-        return len(self.kv) == len(self.pred.layers)
+        return len(self.kv) == len(self.pred.layers) and not self._ff_due
 
     def step(self) -> None:
-        """Keys and values of the next layer (and, but for the last layer, its output rows)."""
+        """The next piece: a layer's keys, values and attention block, or its feed-forward block."""
+        if self._ff_due:
+            self.h = self.pred.layers[len(self.kv) - 1].feed_forward(self.h)
+            self._ff_due = False
+            return
         layer = self.pred.layers[len(self.kv)]
         d, nh, m = layer.d, layer.heads, self.m
         qkv = layer.qkv(self.h)
@@ -168,8 +183,10 @@ class Prefix:
         kh[:, :, :m] = qkv[:, d: 2 * d].reshape(m, nh, d // nh).transpose(1, 2, 0)
         vh[:, :m] = qkv[:, 2 * d:].reshape(m, nh, d // nh).transpose(1, 0, 2)
         self.kv.append((kh, vh))
-        if not self.done and m:
-            self.h = layer.attend_heads(self.h, qkv[:, :d], kh[:, :, :m], vh[:, :m], self.pred.mask[:m, :m])
+        if len(self.kv) < len(self.pred.layers) and m:  # the last layer's rows are not needed, only its keys
+            self.h = layer.attend_heads(self.h, qkv[:, :d], kh[:, :, :m], vh[:, :m], self.pred.mask[:m, :m],
+                                        feed_forward=False)
+            self._ff_due = True
 
     def finish(self) -> "Prefix":
         while not self.done:

@@ -428,7 +428,7 @@ class DanceStream:
                 for pre in (self._prefix, self._prefix_auto):
                     if pre is not None and not pre.done:
                         with single_thread_blas():
-                            pre.step()  # one layer a frame (docs: models/networks/dance_numpy.py)
+                            pre.step()  # a piece a frame (models/networks/dance_numpy.py)
             pose = self._segment[t % self.seg]
             self._gate(x[i])
             w = self._w_idle
