@@ -150,7 +150,8 @@ def _median(v: np.ndarray) -> float:
 
 def _unit(p: np.ndarray) -> np.ndarray:
     q = p[..., 3:].reshape(*p.shape[:-1], -1, 4)
-    p[..., 3:] = (q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-9)).reshape(*p.shape[:-1], -1)
+    norm = np.sqrt(np.add.reduce(q * q, axis=-1, keepdims=True))  # np.linalg.norm's arithmetic, without its wrapper
+    p[..., 3:] = (q / np.maximum(norm, 1e-9)).reshape(*p.shape[:-1], -1)
     return p
 
 
@@ -305,12 +306,11 @@ class DanceStream:
             token = pred.embed(self._hist.reshape(-1), self._last)
             prefix = self._prefix
             if prefix is None or prefix.style != self.style:  # the first step, or the style changed since
-                prefix = Prefix(pred, np.stack(self._tokens) if self._tokens else np.zeros((0, pred.d_model),
-                                                                                          np.float32), self.style)
+                prefix = Prefix(pred, list(self._tokens), self.style)
             logits = pred.logits_after(prefix, token)
             self._tokens.append(token)
             # the next step's window but its newest token is known now: its layers run on the frames between
-            self._prefix = Prefix(pred, np.stack(list(self._tokens)[-(pred.window - 1):]), self.style)
+            self._prefix = Prefix(pred, list(self._tokens)[-(pred.window - 1):], self.style)
         draws = [m.sample(logits, self.rng) for _ in range(DRAWS)]
         if int(self._counts[draws[0]]) == 0:  # no exemplars (members = 0): the decoder writes the movement
             code = draws[0]
