@@ -193,11 +193,12 @@ def clip_audio() -> tuple[np.ndarray, int]:
 def playlist(paths: list[str | Path]) -> tuple[np.ndarray, list[dict]]:
     """The songs ``paths`` back to back, mono float32 at 22050 Hz, and where each lies in it.
 
-    Returns ``(audio, segments)``; a segment is ``{"name", "path", "start_s", "seconds"}``
-    (``name``: the file's parent folder for a DWM ``audio.mp3``, else its stem). The soak
-    loops the whole list: songs follow each other with no gap, so every 30-s stretch is
-    music (a pause between songs is the idle's case, docs/reliability.md). AudioError if
-    a file is missing or unreadable.
+    Returns ``(audio, segments)``; a segment is ``{"name", "path", "start", "samples",
+    "start_s", "seconds"}`` (``start``/``samples`` in samples at 22050 Hz; ``name``: the
+    file's parent folder for a DWM ``audio.mp3``, else its stem). The soak loops the whole
+    list: songs follow each other with no gap, so every 30-s stretch is music (a pause
+    between songs is the idle's case, docs/reliability.md). AudioError if a file is
+    missing or unreadable.
     """
     from models.features.audio_io import load_audio
 
@@ -205,8 +206,8 @@ def playlist(paths: list[str | Path]) -> tuple[np.ndarray, list[dict]]:
     for path in map(Path, paths):
         audio, _ = load_audio(path, SAMPLE_RATE)
         name = path.parent.name if path.stem == "audio" else path.stem
-        segments.append({"name": name, "path": str(path), "start_s": start / SAMPLE_RATE,
-                         "seconds": len(audio) / SAMPLE_RATE})
+        segments.append({"name": name, "path": str(path), "start": start, "samples": len(audio),
+                         "start_s": start / SAMPLE_RATE, "seconds": len(audio) / SAMPLE_RATE})
         parts.append(audio.astype(np.float32))
         start += len(audio)
     return np.concatenate(parts), segments
@@ -214,16 +215,18 @@ def playlist(paths: list[str | Path]) -> tuple[np.ndarray, list[dict]]:
 
 def playlist_pieces(start_s: float, end_s: float, segments: list[dict]) -> list[str]:
     """What of a looped playlist plays between ``start_s`` and ``end_s`` of the stream:
-    ``["DANCE_C_2 84.0-114.0 s", ...]`` (times within each song)."""
-    total = sum(seg["seconds"] for seg in segments)
-    out, t = [], start_s
-    while t < end_s - 1e-6:
-        pos = t % total
-        seg = next((g for g in segments if g["start_s"] <= pos < g["start_s"] + g["seconds"]), segments[-1])
-        a = pos - seg["start_s"]
-        b = min(seg["seconds"], a + end_s - t)
-        out.append(f"{seg['name']} {a:.1f}-{b:.1f} s")
-        t += b - a
+    ``["DANCE_C_2 84.0-114.0 s", ...]`` (times within each song). Counted in whole samples
+    at 22050 Hz, so every piece is at least a sample long and the walk always ends."""
+    total = sum(g["samples"] for g in segments)
+    n, end = int(round(start_s * SAMPLE_RATE)), int(round(end_s * SAMPLE_RATE))
+    out = []
+    while n < end:
+        pos = n % total
+        seg = next(g for g in segments if g["start"] <= pos < g["start"] + g["samples"])
+        a = pos - seg["start"]
+        take = min(seg["samples"] - a, end - n)
+        out.append(f"{seg['name']} {a / SAMPLE_RATE:.1f}-{(a + take) / SAMPLE_RATE:.1f} s")
+        n += take
     return out
 
 
@@ -511,8 +514,8 @@ def soak(minutes: float, checkpoint: str | None = None, progress: bool = True,
         sr, name = SAMPLE_RATE, f"{len(segments)} songs (looped)"
     else:
         audio, sr = clip_audio()
-        segments, name = [{"name": "clip", "path": "models/assets/clip.ogg", "start_s": 0.0,
-                           "seconds": len(audio) / sr}], "clip (looped)"
+        segments, name = [{"name": "clip", "path": "models/assets/clip.ogg", "start": 0, "samples": len(audio),
+                           "start_s": 0.0, "seconds": len(audio) / sr}], "clip (looped)"
     seconds = minutes * 60.0
     expected = int(round(seconds * sr)) // HOP
     warm_s = max(30.0, 0.1 * seconds)

@@ -135,8 +135,9 @@ def test_non_finite_features_are_counted_and_poses_stay_valid():
 @pytest.mark.parametrize("cfg", [TINY, DanceVQConfig(feature_dim=12, codebook=40, code_dim=8, enc_width=16,
                                                      dec_width=16, d_model=32, layers=3, heads=4, window_codes=6)])
 def test_numpy_predictor_gives_the_torch_predictors_logits(cfg):
-    """The live path's NumPy predictor (models/networks/dance_numpy.py) against the torch module it copies."""
-    from models.networks.dance_numpy import NumpyPredictor, single_thread_blas
+    """The live path's NumPy predictor (models/networks/dance_numpy.py) against the torch module it copies:
+    the whole window at once, and the newest row after the others were computed ahead (Prefix)."""
+    from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 
     torch.manual_seed(1)
     m = DanceVQ(cfg).eval()
@@ -148,9 +149,27 @@ def test_numpy_predictor_gives_the_torch_predictors_logits(cfg):
         for style in range(cfg.num_styles + 1):
             ref = m.next_logits(audio, prev, style)
             with single_thread_blas():
-                got = fast.logits(np.stack([fast.embed(a, int(p)) for a, p in zip(audio, prev)]), style)
-            assert got.shape == ref.shape == (cfg.codebook,) and got.dtype == np.float32
-            np.testing.assert_allclose(got, ref, atol=1e-5 * max(1.0, float(np.abs(ref).max())), rtol=0)
+                tokens = [fast.embed(a, int(p)) for a, p in zip(audio, prev)]
+                whole = fast.logits(np.stack(tokens), style)
+                ahead = Prefix(fast, tokens[:-1], style)
+                if n > 1:
+                    ahead.step()  # some pieces ahead, the rest when the newest token is there
+                row = fast.logits_after(ahead, tokens[-1])
+            for got in (whole, row):
+                assert got.shape == ref.shape == (cfg.codebook,) and got.dtype == np.float32
+                np.testing.assert_allclose(got, ref, atol=1e-5 * max(1.0, float(np.abs(ref).max())), rtol=0)
+
+
+def test_sampling_draws_what_rng_choice_draws():
+    """DanceVQ.sample replays Generator.choice(p=...) without its checks: same codes, same generator state."""
+    m = tiny_model()
+    logits = np.random.default_rng(3).normal(scale=3.0, size=(2000, TINY.codebook)).astype(np.float32)
+    a, b = np.random.default_rng(9), np.random.default_rng(9)
+    for lg in logits:
+        z = lg.astype(np.float64) / TINY.temperature
+        p = np.exp(z - z.max())
+        assert m.sample(lg, a) == int(b.choice(len(p), p=p / p.sum()))
+    assert a.bit_generator.state == b.bit_generator.state
 
 
 def test_idle_pose_is_the_scipy_composition_it_replaced():

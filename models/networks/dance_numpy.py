@@ -33,6 +33,7 @@ one (a new ``DanceStream``).
 from __future__ import annotations
 
 import contextlib
+import math
 from collections.abc import Iterator
 
 import numpy as np
@@ -88,6 +89,15 @@ def _layer_norm(x: np.ndarray, w: np.ndarray, b: np.ndarray, eps: float) -> np.n
     return xc / np.sqrt(var + eps) * w + b
 
 
+def _layer_norm_row(x: np.ndarray, w: np.ndarray, b: np.ndarray, eps: float) -> np.ndarray:
+    """:func:`_layer_norm` of one row (d,), in six array operations (the mean and variance as
+    Python floats, the variance by a dot product): the code step's row runs it seven times,
+    and on the live path every NumPy call costs several µs."""
+    d = len(x)
+    xc = x - float(np.add.reduce(x)) / d
+    return xc * (w / math.sqrt(float(np.dot(xc, xc)) / d + eps)) + b
+
+
 class _Layer:
     """One ``nn.TransformerEncoderLayer`` (norm_first, GELU, eval mode: no dropout)."""
 
@@ -134,6 +144,19 @@ class _Layer:
         """The residual feed-forward block: (m, d) -> (m, d)."""
         return h + _gelu(_layer_norm(h, *self.n2) @ self.w_1 + self.b_1) @ self.w_2 + self.b_2
 
+    def row(self, h: np.ndarray, kh: np.ndarray, vh: np.ndarray, m: int) -> np.ndarray:
+        """The newest token's row (d,) through this layer: its key and value go into slot ``m`` of
+        ``kh`` (H, hd, m + 1) and ``vh`` (H, m + 1, hd), its query attends to all m + 1."""
+        d = self.d
+        qkv = _layer_norm_row(h, *self.n1) @ self.w_qkv + self.b_qkv  # (3d,)
+        kh[:, :, m] = qkv[d: 2 * d].reshape(self.heads, -1)
+        vh[:, m] = qkv[2 * d:].reshape(self.heads, -1)
+        s = (qkv[:d].reshape(self.heads, 1, -1) @ kh) * self.scale  # (H, 1, m + 1)
+        s = np.exp(s - s.max(-1, keepdims=True))
+        s /= s.sum(-1, keepdims=True)
+        h = h + (s @ vh).reshape(d) @ self.w_o + self.b_o
+        return h + _gelu(_layer_norm_row(h, *self.n2) @ self.w_1 + self.b_1) @ self.w_2 + self.b_2
+
     def __call__(self, h: np.ndarray, mask: np.ndarray, last_only: bool) -> np.ndarray:
         """Rows ``h`` (n, d) -> (n, d), or (1, d) for the last row only (``last_only``)."""
         d = self.d
@@ -158,9 +181,11 @@ class Prefix:
     frames compute them.
     """
 
-    def __init__(self, pred: "NumpyPredictor", tokens: np.ndarray, style: int) -> None:
+    def __init__(self, pred: "NumpyPredictor", tokens, style: int) -> None:
+        """``tokens``: the window's tokens but the newest, oldest first ((m, d) array or a list of
+        m (d,) arrays, m may be 0), ``style``: the style token they are computed in."""
         self.pred, self.style, self.m = pred, int(style), len(tokens)
-        self.h = tokens + pred.style[style] + pred.pos[: self.m]  # (m, d), m may be 0
+        self.h = tokens  # becomes tokens + style + position at the first step (a list is stacked then)
         # per layer: keys (H, hd, m + 1) and values (H, m + 1, hd) by head; the last slot is the new token's
         self.kv: list[tuple[np.ndarray, np.ndarray]] = []
         self._ff_due = False  # the last layer's attention is done, its feed-forward not yet
@@ -177,6 +202,9 @@ class Prefix:
             return
         layer = self.pred.layers[len(self.kv)]
         d, nh, m = layer.d, layer.heads, self.m
+        if not self.kv:
+            tokens = np.stack(self.h) if m else np.zeros((0, d), np.float32)
+            self.h = tokens + self.pred.style[self.style] + self.pred.pos[:m]
         qkv = layer.qkv(self.h)
         kh = np.empty((nh, d // nh, m + 1), np.float32)
         vh = np.empty((nh, m + 1, d // nh), np.float32)
@@ -221,8 +249,8 @@ class NumpyPredictor:
 
     def embed(self, audio_row: np.ndarray, prev: int) -> np.ndarray:
         """One token's input (d,): audio MLP of its standardised frames (seg * D,) + the previous code's embedding."""
-        a = np.asarray(audio_row, np.float32)[None]
-        return (_gelu(a @ self.w_a1 + self.b_a1) @ self.w_a2 + self.b_a2)[0] + self.code[prev]
+        a = np.asarray(audio_row, np.float32)
+        return _gelu(a @ self.w_a1 + self.b_a1) @ self.w_a2 + self.b_a2 + self.code[prev]
 
     def logits(self, tokens: np.ndarray, style: int) -> np.ndarray:
         """Logits (K,) of the next code: ``tokens`` (n, d) from :meth:`embed`, n <= window_codes."""
@@ -238,14 +266,10 @@ class NumpyPredictor:
         """Logits (K,) of the window ``prefix``'s tokens + ``token`` (d,), in ``prefix.style``."""
         prefix.finish()
         m = prefix.m
-        h = (token + self.style[prefix.style] + self.pos[m])[None]  # (1, d)
+        h = token + self.style[prefix.style] + self.pos[m]  # (d,)
         for layer, (kh, vh) in zip(self.layers, prefix.kv):
-            d = layer.d
-            qkv = layer.qkv(h)
-            kh[:, :, m] = qkv[0, d: 2 * d].reshape(layer.heads, -1)
-            vh[:, m] = qkv[0, 2 * d:].reshape(layer.heads, -1)
-            h = layer.attend_heads(h, qkv[:, :d], kh, vh, None)  # the last row sees every token: no mask
-        return self._head(h[0])
+            h = layer.row(h, kh, vh, m)  # the last row sees every token: no mask
+        return (_layer_norm_row(h, *self.norm) @ self.w_head + self.b_head).astype(np.float32, copy=False)
 
     def _head(self, h: np.ndarray) -> np.ndarray:
         return (_layer_norm(h, *self.norm) @ self.w_head + self.b_head).astype(np.float32)

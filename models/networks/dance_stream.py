@@ -158,7 +158,8 @@ def _median(v: np.ndarray) -> float:
 
 def _unit(p: np.ndarray) -> np.ndarray:
     q = p[..., 3:].reshape(*p.shape[:-1], -1, 4)
-    p[..., 3:] = (q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-9)).reshape(*p.shape[:-1], -1)
+    norm = np.sqrt(np.add.reduce(q * q, axis=-1, keepdims=True))  # np.linalg.norm's arithmetic, without its wrapper
+    p[..., 3:] = (q / np.maximum(norm, 1e-9)).reshape(*p.shape[:-1], -1)
     return p
 
 
@@ -341,18 +342,17 @@ class DanceStream:
         guided = bool(self.style) and STYLE_GUIDANCE != 1.0
         with single_thread_blas():
             token = pred.embed(self._hist.reshape(-1), self._last)
-            window = np.stack(self._tokens) if self._tokens else np.zeros((0, pred.d_model), np.float32)
             prefix = self._prefix
             if prefix is None or prefix.style != self.style:  # the first step, or the style changed since
-                prefix = Prefix(pred, window, self.style)
+                prefix = Prefix(pred, list(self._tokens), self.style)
             logits = pred.logits_after(prefix, token)
             if guided:  # classifier-free guidance towards the requested style
-                auto = self._prefix_auto if self._prefix_auto is not None else Prefix(pred, window, 0)
+                auto = self._prefix_auto if self._prefix_auto is not None else Prefix(pred, list(self._tokens), 0)
                 base = pred.logits_after(auto, token)
                 logits = base + STYLE_GUIDANCE * (logits - base)
             self._tokens.append(token)
             # the next step's window but its newest token is known now: its layers run on the frames between
-            nxt = np.stack(list(self._tokens)[-(pred.window - 1):])
+            nxt = list(self._tokens)[-(pred.window - 1):]
             self._prefix = Prefix(pred, nxt, self.style)
             self._prefix_auto = Prefix(pred, nxt, 0) if guided else None
         draws = [m.sample(logits, self.rng) for _ in range(DRAWS)]

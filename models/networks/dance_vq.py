@@ -342,7 +342,12 @@ class DanceVQ(nn.Module):
             cut = np.partition(z, -self.config.top_k)[-self.config.top_k]
             z = np.where(z >= cut, z, -np.inf)
         p = np.exp(z - z.max())
-        return int(rng.choice(len(p), p=p / p.sum()))
+        # rng.choice(len(p), p=p / p.sum()) without its argument checks (about 25 µs of a 35 µs call on
+        # the live path): the same cumulative sum, the same uniform draw, the same search, so the same
+        # code for the same generator state (tests/test_dance_vq.py holds the two equal)
+        cdf = (p / p.sum()).cumsum()
+        cdf /= cdf[-1]
+        return int(cdf.searchsorted(rng.random(), side="right"))
 
     def generate(self, features: np.ndarray, seed: int = 0, style: str | None = None) -> np.ndarray:
         """Poses (T, P) float32 for features (T, D): the live stream's frames, all at once."""
