@@ -39,6 +39,8 @@ from collections.abc import Iterator
 import numpy as np
 from scipy.special import erf
 
+from models.networks.dance_jit import head, row_layer
+
 _SQRT_HALF = np.float32(np.sqrt(0.5))
 _BLAS = None  # threadpoolctl's controller of the BLAS libraries, made on first use (about 2 ms)
 
@@ -146,7 +148,13 @@ class _Layer:
 
     def row(self, h: np.ndarray, kh: np.ndarray, vh: np.ndarray, m: int) -> np.ndarray:
         """The newest token's row (d,) through this layer: its key and value go into slot ``m`` of
-        ``kh`` (H, hd, m + 1) and ``vh`` (H, m + 1, hd), its query attends to all m + 1."""
+        ``kh`` (H, hd, m + 1) and ``vh`` (H, m + 1, hd), its query attends to all m + 1.
+        One compiled call (:func:`models.networks.dance_jit.row_layer`)."""
+        return row_layer(h, kh, vh, m, *self.n1, self.w_qkv, self.b_qkv, self.w_o, self.b_o, *self.n2,
+                         self.w_1, self.b_1, self.w_2, self.b_2, self.scale)
+
+    def row_numpy(self, h: np.ndarray, kh: np.ndarray, vh: np.ndarray, m: int) -> np.ndarray:
+        """:meth:`row` in NumPy calls (the reference the compiled kernel is tested against)."""
         d = self.d
         qkv = _layer_norm_row(h, *self.n1) @ self.w_qkv + self.b_qkv  # (3d,)
         kh[:, :, m] = qkv[d: 2 * d].reshape(self.heads, -1)
@@ -269,7 +277,7 @@ class NumpyPredictor:
         h = token + self.style[prefix.style] + self.pos[m]  # (d,)
         for layer, (kh, vh) in zip(self.layers, prefix.kv):
             h = layer.row(h, kh, vh, m)  # the last row sees every token: no mask
-        return (_layer_norm_row(h, *self.norm) @ self.w_head + self.b_head).astype(np.float32, copy=False)
+        return head(h, *self.norm, self.w_head, self.b_head)
 
     def _head(self, h: np.ndarray) -> np.ndarray:
         return (_layer_norm(h, *self.norm) @ self.w_head + self.b_head).astype(np.float32)
