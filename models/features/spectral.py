@@ -55,6 +55,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from models.errors import AudioError, ConfigError
 from models.features.context import BEAT_COLUMNS, ContextTracker
@@ -195,6 +196,43 @@ class FeatureConfig:
         return f"{self.kind}-d{self.dim}-{hashlib.sha1(blob.encode()).hexdigest()[:12]}"
 
 
+def banded(mel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A mel filterbank (n_mels, n_bins) as bands: each filter's first nonzero bin (n_mels,) int64
+    and its weights from there (n_mels, width) float64, zero-padded to the widest filter."""
+    nz = mel != 0
+    lo = np.where(nz.any(1), nz.argmax(1), 0).astype(np.int64)
+    hi = np.where(nz.any(1), mel.shape[1] - nz[:, ::-1].argmax(1), 0)
+    width = int((hi - lo).max(initial=1))
+    w = np.zeros((mel.shape[0], width))
+    for m, (a, b) in enumerate(zip(lo, hi)):
+        w[m, : b - a] = mel[m, a:b]
+    return lo, w
+
+
+@njit(cache=True, nogil=True)
+def _log_mel(spec, lo, w, amin):  # pragma: no cover - compiled
+    """``10 log10(max(amin, mel @ |spec|**2))`` of STFT rows ``spec`` (k, n_bins) complex, the
+    filterbank as :func:`banded` gives it -> (k, n_mels) float64.
+
+    Why compiled: a dense 1025 x 128 float64 filterbank is a 1 MB matrix product per live
+    frame (0.15 ms with cold caches) for about 2,000 nonzero weights.
+    """
+    k, nb = spec.shape
+    n_mels, width = w.shape
+    out = np.empty((k, n_mels))
+    power = np.empty(nb)
+    for f in range(k):
+        for j in range(nb):
+            power[j] = spec[f, j].real ** 2 + spec[f, j].imag ** 2
+        for m in range(n_mels):
+            acc = 0.0
+            top = min(width, nb - lo[m])
+            for j in range(top):
+                acc += w[m, j] * power[lo[m] + j]
+            out[f, m] = 10.0 * np.log10(max(acc, amin))
+    return out
+
+
 class SpectralKernel:
     """Precomputed window and filterbank for one config; turns frames into features."""
 
@@ -204,13 +242,13 @@ class SpectralKernel:
 
         self.cfg = cfg
         self.window = get_window("hann", cfg.n_fft, fftbins=True).astype(np.float64)
-        self.mel_t = None
+        self.mel_lo = self.mel_w = None  # the mel filterbank as bands (:func:`banded`)
         self.dct_t = None
         if cfg.kind != "linear":
             mel = librosa.filters.mel(
                 sr=cfg.sample_rate, n_fft=cfg.n_fft, n_mels=cfg.n_mels, fmin=cfg.fmin, fmax=cfg.fmax, dtype=np.float64
             )
-            self.mel_t = np.ascontiguousarray(mel.T)  # (n_fft//2+1, n_mels)
+            self.mel_lo, self.mel_w = banded(mel)
         if cfg.kind in ("mfcc", "mfcc_onset"):
             from scipy.fft import dct
 
@@ -227,11 +265,11 @@ class SpectralKernel:
         Returns ((k, base_dim) float32 base features, last state row to pass as the next prev_logmel).
         """
         spec = np.fft.rfft(frames * self.window, axis=-1)
-        power = spec.real**2 + spec.imag**2  # (k, n_fft//2+1)
         amin = self.cfg.amin
-        if self.mel_t is None:
+        if self.mel_w is None:
+            power = spec.real**2 + spec.imag**2  # (k, n_fft//2+1)
             return (10.0 * np.log10(np.maximum(power, amin))).astype(np.float32), None
-        logmel = 10.0 * np.log10(np.maximum(power @ self.mel_t, amin))  # (k, n_mels)
+        logmel = _log_mel(spec, self.mel_lo, self.mel_w, amin)  # (k, n_mels)
         out = np.empty((logmel.shape[0], self.cfg.base_dim), np.float32)
         state = []
         if self.dct_t is not None:  # "mfcc", "mfcc_onset": static 14 + backward differences
