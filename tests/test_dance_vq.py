@@ -367,3 +367,36 @@ def test_choreographic_memory_plays_real_movements_at_their_scale_and_hands_over
     assert ang(out).std() > 0.5 * ang(poses).std()
     # handovers between exemplars are invisible: no extra angular acceleration at movement starts
     assert seam_ratio(out, cfg.seg, cfg.seg, radius=1) < 1.5
+
+
+def test_compiled_motion_matching_picks_and_bends_as_the_numpy_steps_do():
+    """match_exemplar (one numba call on the live path) against _align + the cost + inertialize in NumPy."""
+    from models.networks.dance_jit import match_exemplar
+    from models.networks.dance_stream import _align, _median, _unit, hermite_decay, inertialize, sign_continuous
+
+    rng = np.random.default_rng(5)
+    decay = hermite_decay(16)
+    agree = 0
+    for trial in range(200):
+        n = int(rng.integers(1, 4))
+        cands = _unit(sign_continuous(np.cumsum(rng.normal(scale=0.05, size=(n, 16, POSE_DIM)), 1)
+                                      .astype(np.float32) + rng.normal(size=(n, 1, POSE_DIM)).astype(np.float32)))
+        cont = _unit(rng.normal(size=(2, POSE_DIM)).astype(np.float32))
+        cont[1] = _unit(cont[0] + rng.normal(scale=0.05, size=POSE_DIM).astype(np.float32))
+        dips = (rng.random((n, 8)) < 0.3).astype(np.float32)
+        frame = int(rng.integers(-1, 8))
+        bonus = float(rng.random())
+        a = _align(cands, cont[0])
+        cost = np.abs(a[:, 0] - cont[0]).sum(1) + 4.0 * np.abs((a[:, 1] - a[:, 0]) - (cont[1] - cont[0])).sum(1)
+        cost = cost / max(_median(cost), 1e-9)
+        if frame >= 0:
+            cost -= bonus * dips[:, frame]
+        want_i = int(np.argmin(cost))
+        want = inertialize(a[want_i], cont, decay[:, :, None])
+        got_i, got = match_exemplar(cands, dips, cont, decay, frame, bonus, 8)
+        assert got.shape == want.shape and got.dtype == np.float32
+        if n == 1 or np.ptp(np.sort(cost)[:2]) > 1e-5:  # no near tie: the same exemplar, the same poses
+            assert got_i == want_i
+            np.testing.assert_allclose(got, want, atol=2e-6)
+            agree += 1
+    assert agree > 150

@@ -99,3 +99,63 @@ def row_layer(h, kh, vh, m, n1w, n1b, eps1, w_qkv, b_qkv, w_o, b_o, n2w, n2b, ep
 def head(h, nw, nb, eps, w_head, b_head):  # pragma: no cover - compiled
     """Final layer norm and the code head: row (d,) -> logits (K,)."""
     return _vec_mat(_layer_norm_row(h, nw, nb, eps), w_head, b_head)
+
+
+@njit(cache=True, nogil=True)
+def _unit_rows(p):  # pragma: no cover - compiled
+    """Renormalise every quaternion (columns 3.., groups of 4) of poses ``p`` (F, P), in place."""
+    for f in range(p.shape[0]):
+        for c in range(3, p.shape[1], 4):
+            n = np.float32(0.0)
+            for k in range(4):
+                n += p[f, c + k] * p[f, c + k]
+            n = max(np.float32(math.sqrt(n)), np.float32(1e-9))
+            for k in range(4):
+                p[f, c + k] /= n
+
+
+@njit(cache=True, nogil=True)
+def match_exemplar(cands, dips, cont, decay, beat_frame, beat_bonus, seg):  # pragma: no cover - compiled
+    """Motion matching of the chosen code's exemplars, then inertialization (dance_stream.py).
+
+    ``cands`` (n, F, P) exemplar windows, ``dips`` (n, seg) their speed dips, ``cont`` (2, P)
+    the two frames the motion would play next, ``decay`` (2, D) Hermite weights,
+    ``beat_frame`` the frame of the coming movement the beat tracker expects a beat on (-1:
+    none), ``beat_bonus`` the cost taken off an exemplar that dips there. Each exemplar's
+    bones are sign-flipped onto ``cont[0]``'s hemisphere; the cost is the L1 distance of
+    its first pose to ``cont[0]`` plus 4x that of its first velocity, over the median cost,
+    less the beat bonus. Returns (index of the best, its window (F, P) bent to continue
+    from ``cont`` over D frames, every quaternion renormalised).
+    """
+    n, nf, p = cands.shape
+    a = cands.copy()
+    for i in range(n):
+        for c in range(3, p, 4):
+            dot = np.float32(0.0)
+            for k in range(4):
+                dot += a[i, 0, c + k] * cont[0, c + k]
+            if dot < 0:
+                for f in range(nf):
+                    for k in range(4):
+                        a[i, f, c + k] = -a[i, f, c + k]
+    cost = np.empty(n)
+    for i in range(n):
+        pos = np.float32(0.0)
+        vel = np.float32(0.0)
+        for c in range(p):
+            pos += abs(a[i, 0, c] - cont[0, c])
+            vel += abs((a[i, 1, c] - a[i, 0, c]) - (cont[1, c] - cont[0, c]))
+        cost[i] = pos + np.float32(4.0) * vel
+    cost /= max(np.median(cost), 1e-9)
+    if beat_frame >= 0:
+        for i in range(n):
+            cost[i] -= beat_bonus * dips[i, beat_frame]
+    best = int(np.argmin(cost))
+    out = a[best].copy()
+    for j in range(decay.shape[1]):
+        for c in range(p):
+            d0 = cont[0, c] - a[best, 0, c]
+            d1 = (cont[1, c] - cont[0, c]) - (a[best, 1, c] - a[best, 0, c])
+            out[j, c] += decay[0, j] * d0 + decay[1, j] * d1
+    _unit_rows(out)
+    return best, out

@@ -31,6 +31,7 @@ import numpy as np
 
 from models.errors import ConfigError
 from models.networks.blend import blend_track
+from models.networks.dance_jit import match_exemplar
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ, style_token
 from models.networks.streaming import sanitize_features
@@ -273,6 +274,7 @@ class DanceStream:
         cc = c.clarity_col
         self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None
         self._decay = hermite_decay(DECAY_FRAMES * self.seg // 8)[:, :, None]  # (2, D, 1)
+        self._decay2 = np.ascontiguousarray(self._decay[:, :, 0])  # (2, D): match_exemplar's
         base = model.destandardize_poses(model.pose_mean * 0)  # the mean pose, unit quaternions
         self._idle_base = base.numpy().astype(np.float32)
         self._sway = IdleSway(self._idle_base)
@@ -374,18 +376,11 @@ class DanceStream:
             i = 0
             best = cands[0]
             self._segment = best[: self.seg].copy()
-        else:  # motion matching among the drawn codes' exemplars, placed on the beat
-            x0, v0 = self._cont[0], self._cont[1] - self._cont[0]
-            cands = _align(cands, x0)
-            vel = cands[:, 1] - cands[:, 0]
-            cost = np.abs(cands[:, 0] - x0).sum(1) + 4.0 * np.abs(vel - v0).sum(1)
-            cost = cost / max(_median(cost), 1e-9)
+        else:  # motion matching among the drawn codes' exemplars, placed on the beat (one compiled call)
             beat = self._next_beat()
-            if beat is not None:
-                frame, clarity = beat
-                cost -= BEAT_WEIGHT * clarity * dips[:, frame]
-            i = int(np.argmin(cost))
-            best = inertialize(cands[i], self._cont[:2], self._decay)
+            frame, clarity = beat if beat is not None else (-1, 0.0)
+            i, best = match_exemplar(cands, dips, self._cont[:2], self._decay2, frame, BEAT_WEIGHT * clarity,
+                                     self.seg)
             self._segment = best[: self.seg].copy()
         self._commit(pairs[i][0])
         self._cont = _unit(best[self.seg:].copy())
