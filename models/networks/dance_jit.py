@@ -115,7 +115,37 @@ def _unit_rows(p):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def match_exemplar(cands, dips, cont, decay, beat_frame, beat_bonus, seg):  # pragma: no cover - compiled
+def _qmul(a, b):  # pragma: no cover - compiled
+    """Quaternion product a b, x y z w order (float64 (4,))."""
+    ax, ay, az, aw = a[0], a[1], a[2], a[3]
+    bx, by, bz, bw = b[0], b[1], b[2], b[3]
+    return np.array([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz])
+
+
+@njit(cache=True, nogil=True)
+def _qlog(q):  # pragma: no cover - compiled
+    """Rotation vector (3,) (axis times angle, radians) of unit quaternion q (x y z w), the short way."""
+    x, y, z, w = q[0], q[1], q[2], q[3]
+    if w < 0:
+        x, y, z, w = -x, -y, -z, -w
+    s = math.sqrt(x * x + y * y + z * z)
+    k = 2.0 * math.atan2(s, w) / s if s > 1e-12 else 2.0
+    return np.array([k * x, k * y, k * z])
+
+
+@njit(cache=True, nogil=True)
+def _qexp(r):  # pragma: no cover - compiled
+    """Unit quaternion (x y z w) of rotation vector r (3,), radians."""
+    a = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    k = math.sin(0.5 * a) / a if a > 1e-12 else 0.5
+    return np.array([k * r[0], k * r[1], k * r[2], math.cos(0.5 * a)])
+
+
+@njit(cache=True, nogil=True)
+def match_exemplar(cands, dips, cont, decay, beat_frame, beat_bonus, seg, vel_cap):  # pragma: no cover - compiled
     """Motion matching of the chosen code's exemplars, then inertialization (dance_stream.py).
 
     ``cands`` (n, F, P) exemplar windows, ``dips`` (n, seg) their speed dips, ``cont`` (2, P)
@@ -125,7 +155,15 @@ def match_exemplar(cands, dips, cont, decay, beat_frame, beat_bonus, seg):  # pr
     bones are sign-flipped onto ``cont[0]``'s hemisphere; the cost is the L1 distance of
     its first pose to ``cont[0]`` plus 4x that of its first velocity, over the median cost,
     less the beat bonus. Returns (index of the best, its window (F, P) bent to continue
-    from ``cont`` over D frames, every quaternion renormalised).
+    from ``cont`` over D frames).
+
+    The bend is inertialization in rotation space: per bone, the rotation from the
+    exemplar's first frame to ``cont[0]`` and the difference of their angular velocities
+    (rotation vectors, radians per frame; each bone's capped at ``vel_cap``) decay with the
+    Hermite weights and are applied as a rotation before the exemplar's own; the root's
+    position offsets decay the same way. (Adding the differences to the quaternions'
+    components and renormalising, as before, whipped a bone through 100+ degrees in a
+    frame when a large offset met a fast exemplar: the sum passed near zero.)
     """
     n, nf, p = cands.shape
     a = cands.copy()
@@ -151,11 +189,33 @@ def match_exemplar(cands, dips, cont, decay, beat_frame, beat_bonus, seg):  # pr
         for i in range(n):
             cost[i] -= beat_bonus * dips[i, beat_frame]
     best = int(np.argmin(cost))
-    out = a[best].copy()
-    for j in range(decay.shape[1]):
-        for c in range(p):
-            d0 = cont[0, c] - a[best, 0, c]
-            d1 = (cont[1, c] - cont[0, c]) - (a[best, 1, c] - a[best, 0, c])
+    w = a[best]
+    out = w.copy()
+    nd = min(decay.shape[1], nf)
+    for c in range(3):  # the root's position
+        d0 = cont[0, c] - w[0, c]
+        d1 = (cont[1, c] - cont[0, c]) - (w[1, c] - w[0, c])
+        for j in range(nd):
             out[j, c] += decay[0, j] * d0 + decay[1, j] * d1
+    for c in range(3, p, 4):  # each bone
+        c0 = cont[0, c:c + 4].astype(np.float64)
+        c1 = cont[1, c:c + 4].astype(np.float64)
+        w0 = w[0, c:c + 4].astype(np.float64)
+        w1 = w[1, c:c + 4].astype(np.float64)
+        inv0 = np.array([-w0[0], -w0[1], -w0[2], w0[3]])
+        inv_c0 = np.array([-c0[0], -c0[1], -c0[2], c0[3]])
+        r0 = _qlog(_qmul(c0, inv0))
+        d1 = _qlog(_qmul(c1, inv_c0)) - _qlog(_qmul(w1, inv0))
+        norm = math.sqrt(d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2])
+        if norm > vel_cap:
+            d1 *= vel_cap / norm
+        for j in range(nd):
+            wj = w[j, c:c + 4].astype(np.float64)
+            q = _qmul(_qexp(decay[0, j] * r0 + decay[1, j] * d1), wj)
+            qn = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+            if q[0] * wj[0] + q[1] * wj[1] + q[2] * wj[2] + q[3] * wj[3] < 0:  # keep the exemplar's signs
+                qn = -qn
+            for k in range(4):
+                out[j, c + k] = q[k] / qn
     _unit_rows(out)
     return best, out

@@ -52,6 +52,9 @@ GATE_TAU_RETURN: float = 5.0
 GATE_MARGIN: float = 6.0
 #: Frames over which a new movement's difference from the last one decays (inertialization), at 8 frames a code.
 DECAY_FRAMES: int = 16
+#: Largest angular-velocity mismatch (per bone, radians per frame: 23 degrees) that the
+#: inertialization carries into a new movement (models/networks/dance_jit.py: match_exemplar).
+VEL_CAP: float = 0.4
 #: Codes drawn from the predictor at each step; the exemplar of theirs that best continues the
 #: motion and dips in speed where the beat tracker expects the next beat is played.
 DRAWS: int = 1
@@ -119,17 +122,6 @@ def hermite_decay(frames: int) -> np.ndarray:
     return np.stack([2 * s**3 - 3 * s**2 + 1, frames * (s**3 - 2 * s**2 + s)]).astype(np.float32)
 
 
-def _align(q: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """Windows (..., F, P) with every bone's quaternions sign-flipped, the same way in all F
-    frames, so that frame 0 is on the hemisphere of ``ref`` (P,)'s (time continuity kept)."""
-    a = q[..., 3:].reshape(*q.shape[:-1], -1, 4)
-    r = ref[3:].reshape(-1, 4)
-    flip = np.where((a[..., :1, :, :] * r).sum(-1, keepdims=True) < 0, -1.0, 1.0).astype(q.dtype)
-    out = q.copy()
-    out[..., 3:] = (a * flip).reshape(*q.shape[:-1], -1)
-    return out
-
-
 def _renorm_frame(pose: np.ndarray, prev_quat: np.ndarray | None) -> np.ndarray:
     """``blend_track(pose[None, None], [[1]], prev_quat)[0]`` for one pose (P,): its quaternions
     renormalised and sign-aligned to ``prev_quat`` (J, 4), without the blend of one candidate
@@ -147,14 +139,6 @@ def _renorm_frame(pose: np.ndarray, prev_quat: np.ndarray | None) -> np.ndarray:
     out[:3] = pose[:3]
     out[3:] = q.ravel()
     return out
-
-
-def _median(v: np.ndarray) -> float:
-    """``float(np.median(v))`` of a short 1-D array, without NumPy's machinery (the same value: the
-    middle element, or the mean of the middle two)."""
-    s = sorted(v.tolist())
-    n = len(s)
-    return s[n // 2] if n % 2 else (s[n // 2 - 1] + s[n // 2]) / 2
 
 
 def _unit(p: np.ndarray) -> np.ndarray:
@@ -188,20 +172,6 @@ def member_dips(windows: np.ndarray, seg: int) -> np.ndarray:
     dip = np.zeros_like(speed)
     dip[:, 1:-1] = (speed[:, 1:-1] < speed[:, :-2]) & (speed[:, 1:-1] <= speed[:, 2:])
     return dip[:, :seg].reshape(k, m, seg).astype(np.float32)
-
-
-def inertialize(window: np.ndarray, start: np.ndarray, decay: np.ndarray) -> np.ndarray:
-    """The exemplar ``window`` (F, P) bent to continue from ``start`` (2, P), the two frames the
-    motion would have played next: the difference in pose and in velocity (per frame) decays
-    over ``decay.shape[1]`` frames with the cubic Hermite weights ``decay`` (2, D, 1), then
-    every quaternion is renormalised. Both must be sign-continuous in time and ``window`` on
-    ``start``'s hemisphere (:func:`_align`), so that differences are rotations, not sign flips.
-    """
-    d = decay.shape[1]
-    diff = np.stack([start[0] - window[0], (start[1] - start[0]) - (window[1] - window[0])])[:, None]  # (2, 1, P)
-    out = window.copy()
-    out[:d] += (decay * diff).sum(0)
-    return _unit(out)
 
 
 def sign_continuous(windows: np.ndarray) -> np.ndarray:
@@ -273,8 +243,7 @@ class DanceStream:
         self._dips = _cached_dips(model, self._members, self.seg)  # (K, M, seg)
         cc = c.clarity_col
         self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None
-        self._decay = hermite_decay(DECAY_FRAMES * self.seg // 8)[:, :, None]  # (2, D, 1)
-        self._decay2 = np.ascontiguousarray(self._decay[:, :, 0])  # (2, D): match_exemplar's
+        self._decay = hermite_decay(DECAY_FRAMES * self.seg // 8)  # (2, D): match_exemplar's
         base = model.destandardize_poses(model.pose_mean * 0)  # the mean pose, unit quaternions
         self._idle_base = base.numpy().astype(np.float32)
         self._sway = IdleSway(self._idle_base)
@@ -379,8 +348,8 @@ class DanceStream:
         else:  # motion matching among the drawn codes' exemplars, placed on the beat (one compiled call)
             beat = self._next_beat()
             frame, clarity = beat if beat is not None else (-1, 0.0)
-            i, best = match_exemplar(cands, dips, self._cont[:2], self._decay2, frame, BEAT_WEIGHT * clarity,
-                                     self.seg)
+            i, best = match_exemplar(cands, dips, self._cont[:2], self._decay, frame, BEAT_WEIGHT * clarity,
+                                     self.seg, VEL_CAP)
             self._segment = best[: self.seg].copy()
         self._commit(pairs[i][0])
         self._cont = _unit(best[self.seg:].copy())
