@@ -57,6 +57,7 @@ if str(REPO) not in sys.path:  # run as a script from anywhere
 
 import numpy as np  # noqa: E402
 
+from models.rig.humanoid import BONES  # noqa: E402
 from models.timebase import FPS, HOP, SAMPLE_RATE  # noqa: E402
 
 _VMC_T = b"/VMC/Ext/T\x00\x00,f\x00\x00"  # address + type tag of a VMC frame's last message
@@ -95,6 +96,7 @@ class FrameCheck:
     def __init__(self) -> None:
         self.frames = self.nonfinite = self.index_gaps = 0
         self.max_step_deg = 0.0
+        self.max_step_at = self.max_step_bone = -1  # frame index and bone of the largest change
         self._prev: np.ndarray | None = None
         self._next_index = 0
 
@@ -107,8 +109,10 @@ class FrameCheck:
             self.nonfinite += 1
             return
         if self._prev is not None:
-            step = float(rotation_steps_deg(np.stack([self._prev, frame.pose])).max())
-            self.max_step_deg = max(self.max_step_deg, step)
+            steps = rotation_steps_deg(np.stack([self._prev, frame.pose]))[0]
+            j = int(steps.argmax())
+            if steps[j] > self.max_step_deg:
+                self.max_step_deg, self.max_step_at, self.max_step_bone = float(steps[j]), frame.index, j
         self._prev = frame.pose.copy()
 
     def close(self) -> None:
@@ -564,6 +568,8 @@ def soak(minutes: float, checkpoint: str | None = None, progress: bool = True,
         "expected_frames": expected, "frames": st["frames"], "checked_frames": check.frames,
         "nan_frames": st["nan_frames"], "nonfinite_sent": check.nonfinite, "index_gaps": check.index_gaps,
         "max_rotation_step_deg": check.max_step_deg,
+        "max_rotation_step_at": {"frame": check.max_step_at, "audio_s": round(check.max_step_at / 30.0, 2),
+                                 "bone": BONES[check.max_step_bone] if check.max_step_bone >= 0 else None},
         "wall_s": wall, "speed": seconds / wall,
         "compute_ms_p50": st["compute_ms_p50"], "compute_ms_p99": st["compute_ms_p99"],
         "warm_audio_s": warm[1], "rss_warm_mib": warm[2] / 2**20, "rss_end_mib": end[2] / 2**20,
@@ -613,7 +619,9 @@ def _print_soak(r: dict) -> None:
     c = r["ws_clients"]
     print(f"  WebSocket: {r['ws']['frames']:.0f} frames, {r['ws']['drops']:.0f} dropped for slow clients; "
           f"clients got {c['frames']} ({c['nonfinite']} non-finite), closes {c['closes']}")
-    print(f"  largest frame-to-frame rotation change {r['max_rotation_step_deg']:.1f} deg")
+    at = r.get("max_rotation_step_at", {})
+    print(f"  largest frame-to-frame rotation change {r['max_rotation_step_deg']:.1f} deg"
+          + (f" ({at['bone']}, frame {at['frame']}, {at['audio_s']:.1f} s of audio)" if at.get("bone") else ""))
     if "stability" in r:
         _print_stability(r["stability"])
     print("  OK" if r["ok"] else "  FAILED: " + "; ".join(r["failures"]))
