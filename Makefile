@@ -5,6 +5,7 @@ PY      ?= python3
 VENV    := .venv
 BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
+JIT_STAMP := $(VENV)/.jit-compiled
 # System packages: PortAudio for live input, liblo-tools (oscdump) to prove the
 # OSC wire format, mono-mcs to compile and run the Unity receiver's C# OSC parser
 # against our encoder (tests/test_listen.py; about 20 s to install).
@@ -20,7 +21,7 @@ help:
 	@echo "make soak   - SOAK_MINUTES (60) of audio through the full engine: no NaN, exact frames, flat RSS and fds"
 	@echo "make constraints - re-pin constraints.txt to the newest releases (docs/install.md)"
 
-setup: system-deps $(STAMP) $(if $(shell command -v npm 2>/dev/null),web)
+setup: system-deps $(STAMP) $(JIT_STAMP) $(if $(shell command -v npm 2>/dev/null),web)
 
 system-deps:
 	@missing=""; for p in $(APT_PKGS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
@@ -39,6 +40,12 @@ $(STAMP): pyproject.toml constraints.txt
 	$(BIN)/pip install -q --disable-pip-version-check -c constraints.txt torch==2.13.0
 	$(BIN)/pip install -q --disable-pip-version-check -c constraints.txt -e '.[dev]'
 	touch $(STAMP)
+
+# The live path's numba kernels, compiled once into __pycache__ (models/jit.py) so that
+# the first `performer run` does not compile them (about 4 s) inside its warm-up.
+$(JIT_STAMP): $(STAMP) models/jit.py models/features/spectral.py models/features/context.py models/networks/dance_jit.py
+	$(BIN)/python -m models.jit
+	touch $(JIT_STAMP)
 
 # make constraints: resolve pyproject.toml's dependencies afresh (newest releases) in a
 # scratch venv and write their exact versions to constraints.txt, keeping its header.
