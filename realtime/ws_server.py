@@ -6,8 +6,10 @@ in one process) shares one server: :meth:`WebSocketSink.route` adds one performe
 stream at its own path (``/ws/NAME`` by default), and ``/ws`` and ``/`` carry the first
 performer's (:class:`WebSocketRoute`). The server runs an asyncio
 loop in its own daemon thread; :meth:`WebSocketSink.send`, called on the engine
-thread, encodes the frame (:mod:`realtime.wire`), hands it to the loop with
-``call_soon_threadsafe`` and returns at once. On the loop, a frame goes straight into
+thread, encodes the frame (:mod:`realtime.wire`), appends it to an outbox the loop
+empties, waking the loop with ``call_soon_threadsafe`` only when it is not already due
+to run (an ensemble's performers hand over a frame each per hop: one wake-up serves
+them all), and returns at once. On the loop, a frame goes straight into
 a client's socket buffer while that buffer is under ``write_limit`` and nothing is
 queued for the client; otherwise into the client's bounded queue, which drops its
 OLDEST frame when full, so a slow or stalled client only loses its own frames. The protocol (query string, client messages, close codes) is in
@@ -281,6 +283,8 @@ class WebSocketSink:
         self._default_route: str | None = None  # the route "/" and "/ws" clients get (None: the server's own)
         self._open_routes = 0
         self._route_drops: dict[str | None, int] = {}
+        self._outbox: deque[tuple[bytes, str | None]] = deque()  # engine thread -> loop (deque ops are atomic)
+        self._wake_pending = False
 
         self._loop = asyncio.new_event_loop()
         self._ready = threading.Event()
@@ -333,10 +337,22 @@ class WebSocketSink:
         self._frames += 1
         if route is not None:
             route.frames += 1
+        self._outbox.append((data, key))
+        if self._wake_pending:  # the loop has not taken the last hand-off yet: it takes this one too
+            return
+        self._wake_pending = True
         try:
-            self._loop.call_soon_threadsafe(self._broadcast, data, key)
+            self._loop.call_soon_threadsafe(self._flush)
         except RuntimeError:  # loop already closed
             pass
+
+    def _flush(self) -> None:
+        """On the loop: broadcast every frame handed over since the last flush, in order. An
+        ensemble's performers hand over one frame each per hop; one wake-up of the server
+        thread (a self-pipe write, a GIL hand-off) then serves all of them."""
+        self._wake_pending = False  # before popping: a frame appended from now on schedules a flush
+        while self._outbox:
+            self._broadcast(*self._outbox.popleft())
 
     def route(self, path: str, performer: str | None = None, *, default: bool = False) -> WebSocketRoute:
         """Add one performer's stream at ``path`` (:func:`check_ws_path`; ConfigError naming a
