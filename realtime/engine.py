@@ -356,6 +356,23 @@ def cycle_frames(model: object) -> int:
     return 1
 
 
+def silence_features(extractor_factory: ExtractorFactory) -> np.ndarray | None:
+    """The feature frame a fresh extractor gives for digital silence (built for 22050 Hz, so
+    the same whatever the input rate): what a staggered performer hears before the input's
+    first frame (:attr:`Performer.phase`). None if the extractor gives no frame for 1 s of it."""
+    feats = np.asarray(extractor_factory(SAMPLE_RATE).push(np.zeros(SAMPLE_RATE, dtype=np.float32)))
+    return feats[0].astype(np.float32, copy=True) if len(feats) else None
+
+
+def stagger_lead(model: PoseModel, extractor_factory: ExtractorFactory, phase: int) -> np.ndarray | None:
+    """The feature frames a performer with this ``phase`` hears after a reset, before the input:
+    ``phase % cycle_frames(model)`` copies of :func:`silence_features` ((k, D); None for none). Its
+    stream then equals the offline pass on these frames followed by the input's, from frame k on."""
+    k = int(phase) % cycle_frames(model)
+    row = silence_features(extractor_factory) if k else None
+    return None if row is None else np.repeat(row[None], k, axis=0)
+
+
 @dataclass
 class Performer:
     """One performer of an :class:`Engine`: a pose model and everything after it.
@@ -392,15 +409,13 @@ class _FeatureGroup:
         self.index = 0  # frames emitted since the last full reset
         self.seg_index0 = 0  # frame index where the current extractor segment began
         self.time0 = 0.0  # stream audio time (s) where it began
-        self._silence: np.ndarray | None = None
+        self._silence: list[np.ndarray | None] = []
 
     def silence_row(self) -> np.ndarray | None:
-        """The feature frame a fresh extractor gives for digital silence (at 22050 Hz, so the
-        same whatever the input rate), computed once; None if it gives none."""
-        if self._silence is None:
-            feats = np.asarray(self.factory(SAMPLE_RATE).push(np.zeros(SAMPLE_RATE, dtype=np.float32)))
-            self._silence = feats[0].astype(np.float32, copy=True) if len(feats) else np.zeros(0, np.float32)
-        return self._silence if len(self._silence) else None
+        """:func:`silence_features` of this group's extractor, computed once."""
+        if not self._silence:
+            self._silence.append(silence_features(self.factory))
+        return self._silence[0]
 
 
 class _Lane:
@@ -600,6 +615,11 @@ class Engine:
     def phases(self) -> dict[str, int]:
         """Each performer's stagger: silence frames its model hears after a reset (see :class:`Performer`)."""
         return {lane.name: lane.phase for lane in self._lanes}
+
+    def performer_compute_ms(self, name: str) -> RollingStats:
+        """One performer's own part of each hop (its model, guard, smoothing, stamps and sends),
+        ms per frame; ``compute_ms`` is the whole hop."""
+        return self._lane(name).compute_ms
 
     @property
     def _time0(self) -> float:
@@ -1297,7 +1317,7 @@ class Engine:
 
 __all__ = [
     "Engine", "EngineConfig", "Performer", "FeatureStream", "PoseModel", "ExtractorFactory", "PoseSmoother",
-    "IdleFader", "RollingStats", "rest_pose", "idle_pose", "cycle_frames", "LIVE_SETTINGS", "CONTROL_ACTIONS",
+    "IdleFader", "RollingStats", "rest_pose", "idle_pose", "cycle_frames", "silence_features", "stagger_lead", "LIVE_SETTINGS", "CONTROL_ACTIONS",
     "MAX_SAMPLE", "MAX_STYLE_CHARS", "MAX_NAME_CHARS", "check_live_setting", "check_switch", "check_finite",
     "check_style_name", "check_performer_name",
 ]

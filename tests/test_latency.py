@@ -118,7 +118,7 @@ def test_timing_sink_records_release_and_send_of_every_frame(checkpoint):
     asked = []
     src = ScheduledSource(FileSource(audio, 44100, block_size=512, realtime=False), lambda: asked.append(1) or 0.0)
     eng = Engine(src, p.extractor_factory, p.model, [], EngineConfig(warmup_s=0.1, stats_size=128))
-    timing = TimingSink(eng, 100)
+    timing = TimingSink(100)
     eng.sinks.append(timing)
     eng.start()
     eng.wait(30)
