@@ -140,6 +140,8 @@ def _performer_from_toml(i: int, entry: object, p: Path) -> PerformerConfig:
         if name in ("checkpoint", "record"):
             value = (p.parent / value) if not Path(value).is_absolute() else Path(value)
         values[name] = value
+    if "name" not in values:
+        raise ConfigError(f"performer {i + 1} has no name (name = \"...\")", source=p)
     return PerformerConfig(**values)
 
 
@@ -429,6 +431,8 @@ def performer_live_changes(old: RunConfig, new: RunConfig) -> tuple[dict[str, di
     changes])``. Live: each performer's resolved ``offset_ms`` and ``smoothing`` (its own, or
     the top level's it takes); a performer added, removed or otherwise changed, and the
     non-live top-level fields, need a restart."""
+    from realtime.engine import LIVE_SETTINGS
+
     olds = {p.name: p for p in old.performer_specs()}
     news = {p.name: p for p in new.performer_specs()}
     live: dict[str, dict[str, float]] = {}
