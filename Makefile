@@ -98,7 +98,8 @@ test-fast: setup browser-deps
 	$(BIN)/python -m pytest -q -m "not slow"
 
 # make bench: the latency suite (docs/latency.md) on the bundled clip and BENCH_SONGS from
-# DATA, the concurrency sweep, then every result against benchmarks/budgets.toml (exit 1
+# DATA, the concurrency sweep, the ensemble (1, 2, 4, 8 performers in one process against
+# as many processes, on the clip), then every result against benchmarks/budgets.toml (exit 1
 # with a diff when over). Every process is pinned to BENCH_CORES (set it empty not to pin).
 DATA        ?= ../shared/data/dwm
 BENCH_OUT   ?= out/bench
@@ -116,6 +117,7 @@ bench: setup
 	  else echo "make bench: $$f not found (set DATA=...); skipping $$s"; fi; done; \
 	echo "$(BIN)/performer bench streams $(BENCH_PIN) --audio models/assets/clip.ogg $$songs --out $(BENCH_OUT)/streams"; \
 	$(BIN)/performer bench streams $(BENCH_PIN) --audio models/assets/clip.ogg $$songs --out $(BENCH_OUT)/streams || exit 2
+	$(BIN)/performer bench ensemble $(BENCH_PIN) --out $(BENCH_OUT)/ensemble
 	$(BIN)/performer bench check --budgets benchmarks/budgets.toml --summary $(BENCH_OUT)/summary.md $(BENCH_OUT)
 
 # make soak: docs/reliability.md. Exit 1 if a check fails; figures in $(SOAK_OUT). SOAK_ARGS: more

@@ -14,6 +14,19 @@ The TOML file is flat and uses the long flag names with ``_`` (or ``-``) for key
 Relative paths in the file are taken relative to the file's directory. An unknown
 key or a value of the wrong type is a :class:`ConfigError` naming the file and key.
 
+An ensemble (several performers on the one audio input, docs/show.md) is a list of
+``[[performer]]`` tables (or repeated ``--performer name=...,style=...`` flags), each with
+the keys of :class:`PerformerConfig`; what a performer does not set it takes from the top
+level::
+
+    [[performer]]
+    name = "alice"
+    style = "waltz"
+    [[performer]]
+    name = "bob"
+    seed = 7
+    osc = "127.0.0.1:39600"
+
 While running, ``performer run`` re-reads the file on SIGHUP and applies the
 settings that can change live (:data:`realtime.engine.LIVE_SETTINGS`: ``offset_ms``,
 ``smoothing``); see :func:`live_changes`.
@@ -39,6 +52,97 @@ STYLE_CHOICES = ("auto", "chacha", "rumba", "waltz")
 #: Environment variable read for the WebSocket token when neither flag nor file sets one
 #: (unlike a flag, it does not show in the process list).
 TOKEN_ENV = "PERFORMER_WS_TOKEN"
+
+
+#: Keys of one performer of an ensemble ([[performer]] in TOML, --performer on the command line).
+PERFORMER_KEYS: tuple[str, ...] = ("name", "checkpoint", "style", "seed", "osc", "ws_path", "smoothing",
+                                   "offset_ms", "record", "phase")
+_PERFORMER_TYPES: dict[str, tuple[type, ...]] = {
+    "name": (str,), "checkpoint": (str,), "style": (str,), "seed": (int,), "osc": (list, str), "ws_path": (str,),
+    "smoothing": (int, float), "offset_ms": (int, float), "record": (str,), "phase": (int,),
+}
+#: Most performers in one process.
+MAX_PERFORMERS: int = 64
+
+
+@dataclass
+class PerformerConfig:
+    """One performer of an ensemble as given; None takes the top-level setting (see
+    :meth:`RunConfig.performer_specs` for the defaults of ``osc``, ``ws_path`` and ``record``)."""
+
+    name: str | None = None
+    checkpoint: Path | None = None
+    style: str | None = None
+    seed: int | None = None
+    osc: list[str] | None = None
+    ws_path: str | None = None
+    smoothing: float | None = None
+    offset_ms: float | None = None
+    record: Path | None = None
+    phase: int | None = None
+
+
+@dataclass
+class PerformerSpec:
+    """One performer with every setting resolved (:meth:`RunConfig.performer_specs`)."""
+
+    name: str
+    checkpoint: Path | None
+    style: str
+    seed: int
+    osc: list[tuple[str, int]]
+    ws_path: str
+    smoothing: float
+    offset_ms: float
+    record: Path | None
+    phase: int | None
+
+
+def parse_performer(text: str) -> PerformerConfig:
+    """One ``--performer`` value: ``NAME`` or ``name=NAME``, then ``,key=value`` pairs of
+    :data:`PERFORMER_KEYS` (``osc`` may repeat: one target each), e.g.
+    ``alice,style=waltz,seed=3,osc=127.0.0.1:39540``. ConfigError naming the bad part."""
+    values: dict[str, Any] = {}
+    for k, part in enumerate(str(text).split(",")):
+        key, sep, value = part.partition("=")
+        key, value = key.strip().replace("-", "_"), value.strip()
+        if not sep and k == 0:
+            key, value = "name", key
+        if key not in PERFORMER_KEYS or not sep and k > 0:
+            raise ConfigError(f"--performer {text!r}: {part!r} is not KEY=VALUE with a key of "
+                              f"{', '.join(PERFORMER_KEYS)}")
+        if key != "osc" and key in values:
+            raise ConfigError(f"--performer {text!r}: {key} is given twice")
+        try:
+            if key in ("seed", "phase"):
+                values[key] = int(value)
+            elif key in ("smoothing", "offset_ms"):
+                values[key] = float(value)
+            elif key in ("checkpoint", "record"):
+                values[key] = Path(value)
+            elif key == "osc":
+                values.setdefault("osc", []).append(value)
+            else:
+                values[key] = value
+        except ValueError:
+            raise ConfigError(f"--performer {text!r}: {key} must be a number, got {value!r}") from None
+    return PerformerConfig(**values)
+
+
+def _performer_from_toml(i: int, entry: object, p: Path) -> PerformerConfig:
+    if not isinstance(entry, dict):
+        raise ConfigError(f"performer must be a list of tables ([[performer]]), got {type(entry).__name__}", source=p)
+    values: dict[str, Any] = {}
+    for key, value in entry.items():
+        name = _checked_key(key, value, _PERFORMER_TYPES, PERFORMER_KEYS, p, f"performer {i + 1}: ")
+        if name == "osc":
+            value = _string_list(key, value, '"HOST:PORT"', p, f"performer {i + 1}: ")
+        if name in ("checkpoint", "record"):
+            value = (p.parent / value) if not Path(value).is_absolute() else Path(value)
+        values[name] = value
+    if "name" not in values:
+        raise ConfigError(f"performer {i + 1} has no name (name = \"...\")", source=p)
+    return PerformerConfig(**values)
 
 
 @dataclass
@@ -74,6 +178,7 @@ class RunConfig:
     ws_origin: list[str] = field(default_factory=list)
     control_osc: str | None = None
     control_allow: list[str] = field(default_factory=list)
+    performer: list[PerformerConfig] = field(default_factory=list)
 
     def validate(self) -> "RunConfig":
         """Check ranges and combinations; raise ConfigError naming the option."""
@@ -114,7 +219,79 @@ class RunConfig:
             raise ConfigError("--control-allow limits the OSC control input: it needs --control-osc [HOST:]PORT")
         self.control_endpoint()
         self.control_networks()
+        self.performer_specs()
         return self
+
+    def performer_specs(self) -> list[PerformerSpec]:
+        """The ensemble's performers with every setting resolved (empty without ``performer``).
+
+        Unset keys take the top level's ``checkpoint``, ``style``, ``seed``, ``smoothing`` and
+        ``offset_ms``. ``osc``: performer ``i`` (from 0) sends to the top level's targets with
+        each port raised by ``i`` (none with ``no_osc``); ``ws_path``: ``/ws/NAME``;
+        ``record``: the top level's ``record`` with ``-NAME`` added to its name, if set.
+        ConfigError naming the performer for a missing or repeated name, a style that is not
+        one of :data:`STYLE_CHOICES`, two performers on one OSC target, WebSocket path or
+        recording, or a value out of range.
+        """
+        if not self.performer:
+            return []
+        from realtime.engine import check_performer_name
+        from realtime.recorder import record_paths
+        from realtime.ws_server import check_ws_path
+
+        if len(self.performer) > MAX_PERFORMERS:
+            raise ConfigError(f"at most {MAX_PERFORMERS} performers in one process, got {len(self.performer)}")
+        top_osc = self.osc_targets()
+        out: list[PerformerSpec] = []
+        seen: dict[str, dict[object, str]] = {"name": {}, "osc": {}, "ws_path": {}, "record": {}}
+        for i, p in enumerate(self.performer):
+            if p.name is None:
+                raise ConfigError(f"performer {i + 1} has no name (name = \"...\", or --performer NAME,...)")
+            name = check_performer_name(p.name)
+            what = f"performer {name!r}"
+            style = self.style if p.style is None else p.style
+            if style not in STYLE_CHOICES:
+                raise ConfigError(f"{what}: style must be one of {STYLE_CHOICES}, got {style!r}")
+            smoothing = self.smoothing if p.smoothing is None else float(p.smoothing)
+            offset = self.offset_ms if p.offset_ms is None else float(p.offset_ms)
+            if not 0.0 <= smoothing < 1.0:
+                raise ConfigError(f"{what}: smoothing must be [0, 1), got {smoothing!r}")
+            if not -10000 <= offset <= 10000:
+                raise ConfigError(f"{what}: offset_ms must be -10000..10000 ms, got {offset!r}")
+            if p.phase is not None and not 0 <= p.phase < 1024:
+                raise ConfigError(f"{what}: phase must be 0..1023 frames, got {p.phase!r}")
+            if p.osc is not None:
+                osc = [parse_endpoint(e, f"{what}: osc") for e in p.osc]
+            else:
+                osc = [(host, port + i) for host, port in top_osc]
+                if any(port > 65535 for _, port in osc):
+                    raise ConfigError(f"{what}: its default OSC port (the top level's + {i}) is above 65535; "
+                                      "give it osc = \"HOST:PORT\"")
+            ws_path = f"/ws/{name}" if p.ws_path is None else p.ws_path
+            try:
+                check_ws_path(ws_path)
+            except ConfigError as exc:
+                raise ConfigError(f"{what}: {exc}") from None
+            record = p.record
+            if record is None and self.record is not None:
+                npz = record_paths(self.record)[0]
+                record = npz.with_name(f"{npz.stem}-{name}{npz.suffix}")
+            keys: dict[str, list] = {"name": [name], "osc": [f"{h}:{port}" for h, port in osc],
+                                     "ws_path": [ws_path],
+                                     "record": [] if record is None else [str(record_paths(record)[0])]}
+            for kind, values in keys.items():
+                for value in values:
+                    other = seen[kind].get(value)
+                    if other is not None:
+                        if kind == "name":
+                            raise ConfigError(f"performer name {name!r} is given twice")
+                        raise ConfigError(f"performers {other!r} and {name!r} both use {kind} {value}; "
+                                          "give each its own")
+                    seen[kind][value] = name
+            out.append(PerformerSpec(name, self.checkpoint if p.checkpoint is None else Path(p.checkpoint),
+                                     style, self.seed if p.seed is None else int(p.seed), osc, ws_path,
+                                     smoothing, offset, record, p.phase))
+        return out
 
     def osc_targets(self) -> list[tuple[str, int]]:
         """(host, port) of every OSC destination (empty with no_osc)."""
@@ -146,7 +323,7 @@ _TYPES: dict[str, tuple[type, ...]] = {
     "record": (str,), "threads": (int,), "offset_ms": (int, float), "smoothing": (int, float),
     "warmup": (int, float), "fallback_audio": (str,), "fallback_after": (int, float), "ws_token": (str,),
     "ws_viewers_open": (bool,), "ws_max_clients": (int,), "ws_origin": (list, str),
-    "control_osc": (str, int), "control_allow": (list, str),
+    "control_osc": (str, int), "control_allow": (list, str), "performer": (list,),
 }
 assert set(_TYPES) == set(_FIELDS)
 
@@ -158,6 +335,27 @@ def parse_endpoint(text: str, what: str = "endpoint") -> tuple[str, int]:
     if not sep or not host or not (port.isascii() and port.isdigit()) or not 1 <= int(port) <= 65535:
         raise ConfigError(f"{what} address must be HOST:PORT with a port in 1..65535, got {text!r}")
     return host, int(port)
+
+
+def _checked_key(key: str, value: object, types: dict[str, tuple[type, ...]], known, p: Path, where: str = "") -> str:
+    """``key`` of a TOML table as a field name (``-`` -> ``_``), its value type-checked; ConfigError
+    naming the file (and ``where``, e.g. which performer) otherwise."""
+    name = key.replace("-", "_")
+    if name not in types:
+        raise ConfigError(f"{where}unknown key {key!r} (known: {', '.join(known)})", source=p)
+    allowed = types[name]
+    if isinstance(value, bool) and bool not in allowed or not isinstance(value, allowed):
+        want = " or ".join(t.__name__ for t in allowed)
+        raise ConfigError(f"{where}key {key!r} must be {want}, got {type(value).__name__} {value!r}", source=p)
+    return name
+
+
+def _string_list(key: str, value: object, what: str, p: Path, where: str = "") -> list[str]:
+    """A string or a list of strings as a list; ConfigError otherwise."""
+    value = [value] if isinstance(value, str) else value
+    if not all(isinstance(v, str) for v in value):
+        raise ConfigError(f"{where}key {key!r} must be a list of {what} strings", source=p)
+    return value
 
 
 def load_run_config(path: str | Path) -> dict[str, Any]:
@@ -175,22 +373,16 @@ def load_run_config(path: str | Path) -> dict[str, Any]:
         raise ConfigError("invalid TOML: arrays or tables nested too deeply", source=p) from None
     out: dict[str, Any] = {}
     for key, value in raw.items():
-        name = key.replace("-", "_")
-        if name not in _FIELDS:
-            raise ConfigError(f"unknown key {key!r} (known: {', '.join(sorted(_FIELDS))})", source=p)
-        types = _TYPES[name]
-        if isinstance(value, bool) and bool not in types or not isinstance(value, types):
-            want = " or ".join(t.__name__ for t in types)
-            raise ConfigError(f"key {key!r} must be {want}, got {type(value).__name__} {value!r}", source=p)
+        name = _checked_key(key, value, _TYPES, sorted(_FIELDS), p)
         if name in ("osc", "ws_origin", "control_allow"):
-            value = [value] if isinstance(value, str) else value
-            if not all(isinstance(v, str) for v in value):
-                what = {"osc": '"HOST:PORT"', "ws_origin": "origin", "control_allow": "network"}[name]
-                raise ConfigError(f"key {key!r} must be a list of {what} strings", source=p)
+            what = {"osc": '"HOST:PORT"', "ws_origin": "origin", "control_allow": "network"}[name]
+            value = _string_list(key, value, what, p)
         if name in _PATHS:
             value = (p.parent / value) if not Path(value).is_absolute() else Path(value)
         if name == "control_osc":
             value = str(value)
+        if name == "performer":
+            value = [_performer_from_toml(i, entry, p) for i, entry in enumerate(value)]
         out[name] = value
     return out
 
@@ -203,6 +395,8 @@ def resolve_run_config(args: argparse.Namespace) -> RunConfig:
     for name in _FIELDS:
         v = getattr(args, name, None)
         if v is not None:
+            if name == "performer":  # --performer flags replace the file's [[performer]] list
+                v = [p if isinstance(p, PerformerConfig) else parse_performer(p) for p in v]
             values[name] = Path(v) if name in _PATHS else v
     device = values.get("input_device")
     if device is not None and str(device).isascii() and str(device).isdigit():
@@ -229,4 +423,30 @@ def live_changes(old: RunConfig, new: RunConfig) -> tuple[dict[str, float], list
 
     live = {k: float(getattr(new, k)) for k in LIVE_SETTINGS if getattr(new, k) != getattr(old, k)}
     other = [f for f in _FIELDS if f not in LIVE_SETTINGS and getattr(new, f) != getattr(old, f)]
+    return live, other
+
+
+def performer_live_changes(old: RunConfig, new: RunConfig) -> tuple[dict[str, dict[str, float]], list[str]]:
+    """What a reload changes in an ensemble: ``({performer: {live setting: new value}}, [other
+    changes])``. Live: each performer's resolved ``offset_ms`` and ``smoothing`` (its own, or
+    the top level's it takes); a performer added, removed or otherwise changed, and the
+    non-live top-level fields, need a restart."""
+    from realtime.engine import LIVE_SETTINGS
+
+    olds = {p.name: p for p in old.performer_specs()}
+    news = {p.name: p for p in new.performer_specs()}
+    live: dict[str, dict[str, float]] = {}
+    other = [f for f in _FIELDS if f not in LIVE_SETTINGS and f != "performer" and getattr(new, f) != getattr(old, f)]
+    if list(olds) != list(news):
+        other.append("performer (names)")
+    for name, p in news.items():
+        q = olds.get(name)
+        if q is None:
+            continue
+        changed = {k: float(getattr(p, k)) for k in LIVE_SETTINGS if getattr(p, k) != getattr(q, k)}
+        if changed:
+            live[name] = changed
+        rest = [k for k in ("checkpoint", "style", "seed", "osc", "ws_path", "record", "phase")
+                if getattr(p, k) != getattr(q, k)]
+        other += [f"performer {name}: {k}" for k in rest]
     return live, other

@@ -1,4 +1,4 @@
-"""The real-time engine: audio source → streaming features → causal pose model → sinks.
+"""The real-time engine: audio source → streaming features → causal pose model(s) → sinks.
 
 One worker thread reads the source's :class:`~realtime.audio_input.RingBuffer`,
 mixes down to mono, pushes the samples through a streaming feature extractor (30
@@ -6,6 +6,12 @@ frames per second of audio, any input rate) and a streaming pose model, checks a
 optionally smooths each pose, stamps it as a :class:`~realtime.frame.PoseFrame` and
 hands it to every sink. Nothing on this thread waits on the network or the disk:
 sinks queue or drop.
+
+An ensemble (several :class:`Performer` on one input) splits that work into one *input
+stage* (mixdown, sanitising, one extractor per distinct feature configuration) and one
+*lane* per performer (model, guard, smoothing, idle fade, offset, sinks), run one after
+the other on the same worker thread; the lanes' expensive frames are staggered
+(:attr:`Performer.phase`).
 
 Time stamps of frame ``i`` (counted from the last :meth:`Engine.start` /
 :meth:`Engine.reset`, whose stream position is the *origin*):
@@ -30,7 +36,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -325,6 +331,127 @@ def check_style_name(value: object) -> str:
     return value
 
 
+#: Longest performer name, characters (names appear in OSC addresses and WebSocket paths).
+MAX_NAME_CHARS: int = 32
+_NAME_CHARS = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-")
+
+
+def check_performer_name(value: object) -> str:
+    """A performer name: 1..:data:`MAX_NAME_CHARS` ASCII letters, digits, ``_`` or ``-`` (it becomes
+    part of OSC addresses and WebSocket paths); :class:`ConfigError` otherwise."""
+    if not isinstance(value, str) or not value or len(value) > MAX_NAME_CHARS or not set(value) <= _NAME_CHARS:
+        raise ConfigError(f"performer name must be 1..{MAX_NAME_CHARS} letters, digits, '_' or '-', "
+                          f"got {short_repr(value)}")
+    return value
+
+
+def cycle_frames(model: object) -> int:
+    """The period, in frames, of a pose model's cost: ``cycle_frames`` when the model declares it,
+    else a :class:`~models.networks.dance_stream.DanceStream`'s ``seg`` (its code step, the
+    expensive frame, comes once every ``seg`` frames), else 1 (an even cost: nothing to stagger)."""
+    for attr in ("cycle_frames", "seg"):
+        value = getattr(model, attr, None)
+        if isinstance(value, int) and not isinstance(value, bool) and value >= 1:
+            return value
+    return 1
+
+
+def silence_features(extractor_factory: ExtractorFactory) -> np.ndarray | None:
+    """The feature frame a fresh extractor gives for digital silence (built for 22050 Hz, so
+    the same whatever the input rate): what a staggered performer hears before the input's
+    first frame (:attr:`Performer.phase`). None if the extractor gives no frame for 1 s of it."""
+    feats = np.asarray(extractor_factory(SAMPLE_RATE).push(np.zeros(SAMPLE_RATE, dtype=np.float32)))
+    return feats[0].astype(np.float32, copy=True) if len(feats) else None
+
+
+def stagger_lead(model: PoseModel, extractor_factory: ExtractorFactory, phase: int) -> np.ndarray | None:
+    """The feature frames a performer with this ``phase`` hears after a reset, before the input:
+    ``phase % cycle_frames(model)`` copies of :func:`silence_features` ((k, D); None for none). Its
+    stream then equals the offline pass on these frames followed by the input's, from frame k on."""
+    k = int(phase) % cycle_frames(model)
+    row = silence_features(extractor_factory) if k else None
+    return None if row is None else np.repeat(row[None], k, axis=0)
+
+
+@dataclass
+class Performer:
+    """One performer of an :class:`Engine`: a pose model and everything after it.
+
+    ``extractor_factory`` builds its feature stream; performers whose ``feature_key`` is
+    equal (and not None) share one extractor (:func:`realtime.pipeline.build_pipeline`
+    sets it to the feature config's fingerprint), the others get one each.
+    ``smoothing`` / ``offset_ms``: None takes :class:`EngineConfig`'s. ``phase``: feature
+    frames of silence the model hears after every reset, before the input's first frame
+    (taken modulo :func:`cycle_frames`), so that the expensive frames of the performers'
+    cycles fall on different hops; None spreads the engine's performers evenly (performer
+    ``i`` of ``n``: ``i * cycle // n``). Phase 0 is today's single performer exactly.
+    """
+
+    name: str
+    model: PoseModel
+    extractor_factory: ExtractorFactory
+    sinks: list = field(default_factory=list)
+    feature_key: object = None
+    smoothing: float | None = None
+    offset_ms: float | None = None
+    phase: int | None = None
+
+
+class _FeatureGroup:
+    """The input stage's part for one feature configuration: one extractor, the performers it
+    feeds, and the frame numbering and time stamps of its frames."""
+
+    def __init__(self, factory: ExtractorFactory, key: object) -> None:
+        self.factory = factory
+        self.key = key
+        self.extractor: FeatureStream | None = None
+        self.lanes: list[_Lane] = []
+        self.index = 0  # frames emitted since the last full reset
+        self.seg_index0 = 0  # frame index where the current extractor segment began
+        self.time0 = 0.0  # stream audio time (s) where it began
+        self._silence: list[np.ndarray | None] = []
+
+    def silence_row(self) -> np.ndarray | None:
+        """:func:`silence_features` of this group's extractor, computed once."""
+        if not self._silence:
+            self._silence.append(silence_features(self.factory))
+        return self._silence[0]
+
+
+class _Lane:
+    """One performer inside the engine: its model, guard, smoothing, idle fade, offset queue,
+    sinks and counters (all touched on the worker thread only, but for the settings)."""
+
+    def __init__(self, spec: Performer, config: EngineConfig, phase: int) -> None:
+        self.name = check_performer_name(spec.name)
+        self.model = spec.model
+        self.sinks: list[Sink] = spec.sinks if isinstance(spec.sinks, list) else list(spec.sinks)
+        self.offset_ms = float(config.offset_ms if spec.offset_ms is None else
+                               check_live_setting("offset_ms", spec.offset_ms))
+        self.smoother = PoseSmoother(config.smoothing if spec.smoothing is None else
+                                     check_live_setting("smoothing", spec.smoothing))
+        self.fader = IdleFader(idle_pose(), max(1, round(config.idle_fade_s * FPS)))
+        self.cycle = cycle_frames(spec.model)
+        if phase < 0:
+            raise ConfigError(f"performer {self.name!r}: phase must be >= 0, got {phase}")
+        self.phase = int(phase) % self.cycle
+        self.idle = False
+        self.group: _FeatureGroup | None = None
+        self.last_good = rest_pose()
+        self.delayed: deque[tuple[float, PoseFrame, float]] = deque()
+        self.sink_errors: dict[str, int] = {}
+        self.compute_ms = RollingStats(config.stats_size)
+        self.latency_ms = RollingStats(config.stats_size)
+        self.reset_requested = threading.Event()
+        self.last_frame: PoseFrame | None = None
+        self.zero()
+
+    def zero(self) -> None:
+        self.frames_out = 0
+        self.nan_frames = 0
+        self.resets = 0
+
+
 @dataclass
 class _SourceState:
     """The engine's view of one audio source: its ring and its failure/restart state."""
@@ -336,7 +463,15 @@ class _SourceState:
 
 
 class Engine:
-    """Runs one audio source through features and a pose model to a set of sinks.
+    """Runs one audio source through features and one or more pose models to their sinks.
+
+    One performer: ``Engine(source, extractor_factory, model, sinks, config)``. An
+    ensemble: ``Engine(source, config=config, performers=[Performer(...), ...])``: one
+    *input stage* (the source, its ring, mixdown, sanitising, and one streaming feature
+    extractor per distinct ``feature_key``) feeds one *lane* per performer (its model,
+    NaN guard, smoothing, idle fade, offset, sinks and counters), all on the one worker
+    thread, lanes in the order given. The lanes' expensive frames are staggered
+    (:attr:`Performer.phase`). One performer is today's engine exactly.
 
     ``start()`` warms the pipeline up on silence, clears state and starts the source
     and the worker thread; ``stop()`` stops both (restartable: a file source resumes,
@@ -355,67 +490,153 @@ class Engine:
     for the other sample rate); before the extractor, input samples that are NaN, inf or
     beyond ``MAX_SAMPLE`` become 0 (counted in ``bad_samples``, logged once); an exception
     in the extractor or model stops the engine and is kept in ``error`` (re-raised by
-    :meth:`wait`).
+    :meth:`wait`). Each performer's sinks, counters and settings are its own: a failing
+    or slow output of one performer never holds up another.
     """
 
     def __init__(
         self,
         source: AudioSource,
-        extractor_factory: ExtractorFactory,
-        model: PoseModel,
+        extractor_factory: ExtractorFactory | None = None,
+        model: PoseModel | None = None,
         sinks: Sequence[Sink] = (),
         config: EngineConfig | None = None,
         *,
         fallback_source: AudioSource | None = None,
+        performers: Sequence[Performer] | None = None,
     ) -> None:
         self.source = source
         self.fallback_source = fallback_source
-        self.extractor_factory = extractor_factory
-        self.model = model
-        self.sinks: list[Sink] = list(sinks)
         self.config = config or EngineConfig()
         if self.config.offset_ms is None or not math.isfinite(self.config.offset_ms):
             raise ValueError(f"offset_ms must be a finite number, got {self.config.offset_ms}")
-        self.smoother = PoseSmoother(self.config.smoothing)
         if not 0.0 < self.config.idle_fade_s <= 60.0:
             raise ValueError(f"idle_fade_s must be in (0, 60] seconds, got {self.config.idle_fade_s}")
-        self.idle = False  # the last idle state set through control("idle", ...)
-        self._fader = IdleFader(idle_pose(), max(1, round(self.config.idle_fade_s * FPS)))
+        if performers is None:
+            if extractor_factory is None or model is None:
+                raise TypeError("Engine needs an extractor_factory and a model, or performers")
+            specs = [Performer("performer", model, extractor_factory, list(sinks), phase=0)]
+        else:
+            if extractor_factory is not None or model is not None or len(sinks):
+                raise TypeError("give Engine either performers or extractor_factory, model and sinks")
+            specs = list(performers)
+            if not specs:
+                raise ConfigError("an engine needs at least one performer")
+        n = len(specs)
+        self._lanes = [_Lane(s, self.config, s.phase if s.phase is not None else i * cycle_frames(s.model) // n)
+                       for i, s in enumerate(specs)]
+        self._by_name: dict[str, _Lane] = {}
+        for lane in self._lanes:
+            if lane.name in self._by_name:
+                raise ConfigError(f"performer names must differ: {lane.name!r} is given twice")
+            self._by_name[lane.name] = lane
+        self._groups: list[_FeatureGroup] = []
+        keyed: dict[object, _FeatureGroup] = {}
+        for lane, spec in zip(self._lanes, specs):
+            group = keyed.get(spec.feature_key) if spec.feature_key is not None else None
+            if group is None:
+                group = _FeatureGroup(spec.extractor_factory, spec.feature_key)
+                self._groups.append(group)
+                if spec.feature_key is not None:
+                    keyed[spec.feature_key] = group
+            group.lanes.append(lane)
+            lane.group = group
         self._states: dict[int, _SourceState] = {}
         self._active: AudioSource = source
         self.ring = self._state(source).ring
-        self.compute_ms = RollingStats(self.config.stats_size)
-        self.latency_ms = RollingStats(self.config.stats_size)
-        self.extractor: FeatureStream | None = None
+        self.compute_ms = RollingStats(self.config.stats_size)  # the whole hop, every performer
+        self.features_ms = RollingStats(self.config.stats_size)  # the input stage's share of it
+        self.latency_ms = RollingStats(self.config.stats_size)  # every performer's frames
         self.error: BaseException | None = None
         self.state = "idle"
-        self.last_frame: PoseFrame | None = None
         self.warmup_seconds = 0.0
         self._chunk = np.zeros((self.config.max_read, source.channels), dtype=np.float32)
         self._mono = np.zeros(self.config.max_read, dtype=np.float32)
         self._settings_lock = threading.Lock()
-        self._pending: dict[str, float] = {}
-        self._last_good = rest_pose()
-        self._delayed: deque[tuple[float, PoseFrame, float]] = deque()
+        self._pending: list[tuple[str | None, str, float]] = []
         self._stop = threading.Event()
         self._done = threading.Event()
         self._reset_requested = threading.Event()
+        self._lane_reset_requested = threading.Event()
         self._thread: threading.Thread | None = None
-        self._sink_errors: dict[str, int] = {}
         self._zero_counters()
 
+    # -- the performers (the first one's for the single-performer attributes) -----------
+    @property
+    def performers(self) -> list[str]:
+        """The performers' names, in lane order."""
+        return [lane.name for lane in self._lanes]
+
+    @property
+    def model(self) -> PoseModel:
+        return self._lanes[0].model
+
+    @property
+    def sinks(self) -> list[Sink]:
+        """The first performer's sinks (a list the caller may append to before ``start``)."""
+        return self._lanes[0].sinks
+
+    @property
+    def smoother(self) -> PoseSmoother:
+        return self._lanes[0].smoother
+
+    @property
+    def extractor(self) -> FeatureStream | None:
+        return self._groups[0].extractor
+
+    @property
+    def extractor_factory(self) -> ExtractorFactory:
+        return self._groups[0].factory
+
+    @property
+    def extractors(self) -> list[FeatureStream | None]:
+        """The input stage's feature extractors, one per distinct feature configuration."""
+        return [g.extractor for g in self._groups]
+
+    @property
+    def frames_out(self) -> int:
+        """Frames sent by the first performer (every performer sends one per frame)."""
+        return self._lanes[0].frames_out
+
+    @property
+    def nan_frames(self) -> int:
+        return sum(lane.nan_frames for lane in self._lanes)
+
+    @property
+    def last_frame(self) -> PoseFrame | None:
+        return self._lanes[0].last_frame
+
+    @property
+    def idle(self) -> bool:
+        """True when every performer was sent to its idle pose (``control("idle", 1)``)."""
+        return all(lane.idle for lane in self._lanes)
+
+    @property
+    def phases(self) -> dict[str, int]:
+        """Each performer's stagger: silence frames its model hears after a reset (see :class:`Performer`)."""
+        return {lane.name: lane.phase for lane in self._lanes}
+
+    def performer_compute_ms(self, name: str) -> RollingStats:
+        """One performer's own part of each hop (its model, guard, smoothing, stamps and sends),
+        ms per frame; ``compute_ms`` is the whole hop."""
+        return self._lane(name).compute_ms
+
+    @property
+    def _time0(self) -> float:
+        return self._groups[0].time0
+
     def _zero_counters(self) -> None:
-        self.frames_out = 0
-        self.nan_frames = 0
         self.bad_samples = 0
         self.source_errors = 0
         self.stalls = 0
         self.resets = 0
         self.fallbacks = 0
-        self._index = 0
-        self._seg_index0 = 0  # frame index where the current extractor segment began
-        self._origin = 0  # ring position where it began
-        self._time0 = 0.0  # stream audio time (s) where it began
+        for lane in self._lanes:
+            lane.zero()
+        for g in self._groups:
+            g.index = g.seg_index0 = 0
+            g.time0 = 0.0
+        self._origin = 0  # ring position where the current extractor segment began
         self._consumed = 0
         self._started_at = time.monotonic()
         for st in self._states.values():
@@ -442,7 +663,8 @@ class Engine:
         self.ring = self._state(self.source).ring
         if self._chunk.shape[1] != self.source.channels:
             self._chunk = np.zeros((self.config.max_read, self.source.channels), dtype=np.float32)
-        self.extractor = self.extractor_factory(self.source.sample_rate)
+        for g in self._groups:
+            g.extractor = g.factory(self.source.sample_rate)
         self.error = None
         self._stop.clear()
         self._done.clear()
@@ -455,8 +677,9 @@ class Engine:
                 raise self.error
             self.ring.clear()
             self._zero_counters()
-            self.smoother.reset()
-            self._delayed.clear()
+            for lane in self._lanes:
+                lane.smoother.reset()
+                lane.delayed.clear()
             self._reset_requested.clear()
             self.source.start(self.ring)
         except BaseException:
@@ -483,18 +706,23 @@ class Engine:
             self.state = "stopped"
 
     def close(self) -> None:
-        """Stop, then close every sink (a recorder writes its file here)."""
+        """Stop, then close every performer's sinks (a recorder writes its file here)."""
         self.stop()
-        for sink in self.sinks:
-            try:
-                sink.close()
-            except Exception as exc:  # noqa: BLE001 - one bad sink must not keep others open
-                log.warning("closing output %s failed: %s", getattr(sink, "name", sink), exc)
+        closed: set[int] = set()
+        for lane in self._lanes:
+            for sink in lane.sinks:
+                if id(sink) in closed:
+                    continue
+                closed.add(id(sink))
+                try:
+                    sink.close()
+                except Exception as exc:  # noqa: BLE001 - one bad sink must not keep others open
+                    log.warning("closing output %s failed: %s", getattr(sink, "name", sink), exc)
 
     def reset(self) -> None:
         """Clear extractor, model and smoothing state; frame indices restart at 0.
 
-        Thread-safe: while running, the worker does it before its next step.
+        Every performer. Thread-safe: while running, the worker does it before its next step.
         """
         if self._thread is not None:
             self._reset_requested.set()
@@ -502,52 +730,82 @@ class Engine:
         else:
             self._do_reset()
 
-    def update(self, **settings: float) -> None:
-        """Change live settings (``offset_ms``, ``smoothing``) without stopping.
+    def reset_performer(self, name: str) -> None:
+        """Restart one performer's dance: its model and smoothing state (the shared input stage,
+        the frame numbering and the other performers go on; its stagger is kept). Thread-safe."""
+        lane = self._lane(name)
+        if len(self._lanes) == 1:
+            self.reset()
+        elif self._thread is not None:
+            lane.reset_requested.set()
+            self._lane_reset_requested.set()
+            self.ring.wake()
+        else:
+            self._reset_lane(lane)
+
+    def update(self, performer: str | None = None, **settings: float) -> None:
+        """Change live settings (``offset_ms``, ``smoothing``) without stopping, of every
+        performer (``performer`` None or ``"*"``) or of the one named.
 
         Validated here (:class:`ConfigError` naming the setting, nothing applied); applied
         on the worker thread before its next step. Smoothing keeps its state. A new
         offset applies to frames made from then on; frames already held back keep their
         send time, and no frame overtakes another. Thread-safe.
         """
-        checked = {name: check_live_setting(name, value) for name, value in settings.items()}
+        who = self._lane(performer).name if self._named(performer) else None
+        if len(self._lanes) == 1:
+            who = None  # one performer: its settings are the engine's
+        checked = [(who, name, check_live_setting(name, value)) for name, value in settings.items()]
         with self._settings_lock:
-            self._pending.update(checked)
+            self._pending.extend(checked)
         if self._thread is None or not self._thread.is_alive():
             self._apply_settings()
         else:
             self.ring.wake()
 
-    def control(self, action: str, value: object = None) -> None:
+    def control(self, action: str, value: object = None, performer: str | None = None) -> None:
         """One control command, as the WebSocket and OSC control inputs send them.
 
         Actions (:data:`CONTROL_ACTIONS`): ``reset``; ``set_offset`` (ms) and
         ``set_smoothing`` (through :meth:`update`); ``idle`` (0/1, see :meth:`set_idle`);
         ``style`` (a name) and ``energy`` (a number), passed to the pose model's
-        ``set_style`` / ``set_energy`` when it has them and refused otherwise. Every value
-        is checked before anything changes; a bad one, an unknown action or a control the
-        model does not offer raises :class:`ConfigError` (one line) and changes nothing.
-        Thread-safe; never waits on the worker.
+        ``set_style`` / ``set_energy`` when it has them and refused otherwise. ``performer``:
+        None or ``"*"`` acts on every performer (``reset``: the whole engine, as
+        :meth:`reset`), a name on that one (``reset``: :meth:`reset_performer`). Every value
+        is checked, against every performer it goes to, before anything changes; a bad one,
+        an unknown action or performer, or a control a model does not offer raises
+        :class:`ConfigError` (one line) and changes nothing. Thread-safe; never waits on the worker.
         """
+        lanes = [self._lane(performer)] if self._named(performer) else self._lanes
         if action == "reset":
-            self.reset()
+            if self._named(performer):
+                self.reset_performer(lanes[0].name)
+            else:
+                self.reset()
         elif action == "set_offset":
-            self.update(offset_ms=value)
+            self.update(performer, offset_ms=value)
         elif action == "set_smoothing":
-            self.update(smoothing=value)
+            self.update(performer, smoothing=value)
         elif action == "idle":
-            self.set_idle(check_switch("idle", value))
+            idle = check_switch("idle", value)
+            for lane in lanes:
+                self._set_lane_idle(lane, idle)
         elif action == "style":
-            set_style = self._model_control("set_style", "style")
-            set_style(check_style_name(value))
+            fns = [self._model_control(lane, "set_style", "style") for lane in lanes]
+            style = check_style_name(value)
+            for fn in fns:
+                fn(style)
         elif action == "energy":
-            set_energy = self._model_control("set_energy", "energy")
-            set_energy(check_finite("energy", value))
+            fns = [self._model_control(lane, "set_energy", "energy") for lane in lanes]
+            energy = check_finite("energy", value)
+            for fn in fns:
+                fn(energy)
         else:
             raise ConfigError(f"unknown control action {short_repr(action)}; use {', '.join(CONTROL_ACTIONS)}")
 
-    def set_idle(self, idle: bool) -> None:
-        """Settle into the idle pose and hold it (True), or dance again (False), without a jump.
+    def set_idle(self, idle: bool, performer: str | None = None) -> None:
+        """Settle into the idle pose and hold it (True), or dance again (False), without a jump;
+        every performer, or the one named.
 
         A pose model with ``set_idle`` does it itself; otherwise the engine crossfades its
         output over ``idle_fade_s`` (1 s) towards :func:`idle_pose` and holds that while
@@ -555,20 +813,38 @@ class Engine:
         model keeps listening meanwhile, so it comes back in time with the music). The
         state survives :meth:`reset`. Thread-safe.
         """
-        set_model_idle = getattr(self.model, "set_idle", None)
+        for lane in [self._lane(performer)] if self._named(performer) else self._lanes:
+            self._set_lane_idle(lane, bool(idle))
+
+    def _set_lane_idle(self, lane: _Lane, idle: bool) -> None:
+        set_model_idle = getattr(lane.model, "set_idle", None)
         if callable(set_model_idle):
             set_model_idle(bool(idle))
         else:
-            self._fader.idle = bool(idle)
-        if self.idle != bool(idle):
-            log.info("idle %s", "on" if idle else "off")
-        self.idle = bool(idle)
+            lane.fader.idle = bool(idle)
+        if lane.idle != bool(idle):
+            log.info("%sidle %s", self._who(lane), "on" if idle else "off")
+        lane.idle = bool(idle)
 
-    def _model_control(self, method: str, what: str) -> Callable:
+    @staticmethod
+    def _named(performer: object) -> bool:
+        return performer is not None and performer != "*"
+
+    def _lane(self, name: object) -> _Lane:
+        lane = self._by_name.get(name) if isinstance(name, str) else None
+        if lane is None:
+            raise ConfigError(f"unknown performer {short_repr(name)} (performers: {', '.join(self._by_name)})")
+        return lane
+
+    def _who(self, lane: _Lane) -> str:
+        """``"performer NAME: "`` in an ensemble, ``""`` for a single performer (log prefixes)."""
+        return f"performer {lane.name}: " if len(self._lanes) > 1 else ""
+
+    def _model_control(self, lane: _Lane, method: str, what: str) -> Callable:
         """The pose model's ``method`` or :class:`ConfigError` "this model offers no ``what`` control"."""
-        fn = getattr(self.model, method, None)
+        fn = getattr(lane.model, method, None)
         if not callable(fn):
-            raise ConfigError(f"this model offers no {what} control")
+            raise ConfigError(f"{self._who(lane)}this model offers no {what} control")
         return fn
 
     @property
@@ -588,16 +864,43 @@ class Engine:
         return self._thread is not None and not self._done.is_set()
 
     # -- statistics --------------------------------------------------------------------
-    def stats(self) -> dict:
-        """Counters for the status line: frames, idle, the live settings (offset_ms, smoothing),
-        compute/latency p50/p99 (ms), faults, sinks."""
+    @staticmethod
+    def _sink_stats(lane: _Lane) -> dict[str, dict]:
         sinks = {}
-        for s in self.sinks:
+        for s in lane.sinks:
             try:
                 sinks[s.name] = dict(s.stats())
             except Exception as exc:  # noqa: BLE001
                 sinks[s.name] = {"stats_error": 1.0}
                 log.debug("stats() of %s failed: %s", s.name, exc)
+        return sinks
+
+    def stats(self) -> dict:
+        """Counters for the status line: frames, idle, the live settings (offset_ms, smoothing),
+        compute/latency p50/p99 (ms), faults, sinks; and per performer under ``performers``
+        (its frames, settings, stagger, compute and latency, faults and sinks)."""
+        per: dict[str, dict] = {}
+        sinks: dict[str, dict] = {}
+        for lane in self._lanes:
+            lane_sinks = self._sink_stats(lane)
+            sinks.update(lane_sinks if len(self._lanes) == 1 else
+                         {f"{lane.name}/{k}": v for k, v in lane_sinks.items()})
+            per[lane.name] = {
+                "frames": lane.frames_out,
+                "idle": lane.idle,
+                "offset_ms": lane.offset_ms,
+                "smoothing": lane.smoother.alpha,
+                "phase": lane.phase,
+                "cycle": lane.cycle,
+                "compute_ms_p50": lane.compute_ms.percentile(50),
+                "compute_ms_p99": lane.compute_ms.percentile(99),
+                "latency_ms_p50": lane.latency_ms.percentile(50),
+                "latency_ms_p99": lane.latency_ms.percentile(99),
+                "nan_frames": lane.nan_frames,
+                "sink_errors": sum(lane.sink_errors.values()),
+                "resets": lane.resets,
+                "sinks": lane_sinks,
+            }
         src = {}
         try:
             src = dict(self.source.stats())
@@ -607,67 +910,107 @@ class Engine:
             "state": self.state,
             "frames": self.frames_out,
             "idle": self.idle,
-            "offset_ms": self.config.offset_ms,
-            "smoothing": self.config.smoothing,
+            "offset_ms": self._common("offset_ms"),
+            "smoothing": self._common("smoothing"),
             "audio_seconds": self._time0 + (self._consumed - self._origin) / self._active.sample_rate,
             "uptime_s": time.monotonic() - self._started_at,
             "compute_ms_p50": self.compute_ms.percentile(50),
             "compute_ms_p99": self.compute_ms.percentile(99),
+            "features_ms_p50": self.features_ms.percentile(50),
+            "features_ms_p99": self.features_ms.percentile(99),
             "latency_ms_p50": self.latency_ms.percentile(50),
             "latency_ms_p99": self.latency_ms.percentile(99),
             "nan_frames": self.nan_frames,
             "bad_samples": self.bad_samples,
             "fallbacks": self.fallbacks,
             "input": self._active.name,
-            "sink_errors": sum(self._sink_errors.values()),
+            "sink_errors": sum(p["sink_errors"] for p in per.values()),
             "overruns": self.ring.overruns,
             "dropped_samples": self.ring.dropped_samples,
             "source_errors": self.source_errors,
             "stalls": self.stalls,
             "warmup_s": self.warmup_seconds,
+            "extractors": len(self._groups),
             "source": src,
             "sinks": sinks,
+            "performers": per,
         }
+
+    def _common(self, setting: str) -> float | None:
+        """A live setting every performer shares (the engine's, for one performer), else None."""
+        values = {lane.offset_ms if setting == "offset_ms" else lane.smoother.alpha for lane in self._lanes}
+        return values.pop() if len(values) == 1 else None
 
     # -- internals ---------------------------------------------------------------------
     def _warm_up(self) -> None:
-        """Run ``warmup_s`` of silence through extractor and model, then reset them."""
+        """Run ``warmup_s`` of silence through the extractors and every model, then reset them."""
         t0 = time.perf_counter()
         n = int(self.config.warmup_s * self.source.sample_rate)
         block = np.zeros(min(self.config.max_read, max(n, 1)), dtype=np.float32)
         done = 0
         while done < n:
             k = min(len(block), n - done)
-            feats = self.extractor.push(block[:k])
-            if len(feats):
-                poses = self.model.push(feats)
-                for row in np.asarray(poses, dtype=np.float32):
-                    self.smoother(row.copy())
+            for g in self._groups:
+                feats = g.extractor.push(block[:k])
+                if len(feats):
+                    for lane in g.lanes:
+                        poses = lane.model.push(feats)
+                        for row in np.asarray(poses, dtype=np.float32):
+                            lane.smoother(row.copy())
             done += k
         self._do_reset()
         self.warmup_seconds = time.perf_counter() - t0
 
     def _do_reset(self) -> None:
         self._reset_requested.clear()
-        if self.extractor is not None:
-            self.extractor.reset()
-        self.model.reset()
-        self.smoother.reset()
-        self._time0 += (self._consumed - self._origin) / self._active.sample_rate
-        self._index = self._seg_index0 = 0
+        for g in self._groups:
+            if g.extractor is not None:
+                g.extractor.reset()
+            g.time0 += (self._consumed - self._origin) / self._active.sample_rate
+            g.index = g.seg_index0 = 0
+        for lane in self._lanes:
+            lane.reset_requested.clear()
+            self._reset_lane(lane)
         self._origin = self._consumed
         self.resets += 1
 
+    def _reset_lane(self, lane: _Lane) -> None:
+        """Restart one lane's model and smoothing; then its stagger: as many silence feature frames
+        as put its cycle at ``phase`` frames ahead of the group's frame numbering."""
+        lane.model.reset()
+        lane.smoother.reset()
+        lead = (lane.phase + lane.group.index) % lane.cycle
+        if lead:
+            row = lane.group.silence_row()
+            if row is not None:
+                lane.model.push(np.repeat(row[None], lead, axis=0))
+
+    def _reset_lanes(self) -> None:
+        self._lane_reset_requested.clear()
+        for lane in self._lanes:
+            if lane.reset_requested.is_set():
+                lane.reset_requested.clear()
+                self._reset_lane(lane)
+                lane.resets += 1
+                log.info("%sreset", self._who(lane))
+
     def _apply_settings(self) -> None:
         with self._settings_lock:
-            pending, self._pending = self._pending, {}
-        for name, value in pending.items():
-            old = getattr(self.config, name)
-            setattr(self.config, name, value)
-            if name == "smoothing":
-                self.smoother.alpha = value
-            if old != value:
-                log.info("%s changed from %g to %g", name, old, value)
+            pending, self._pending = self._pending, []
+        for who, name, value in pending:
+            if who is None:
+                old = getattr(self.config, name)
+                setattr(self.config, name, value)
+                if old != value:
+                    log.info("%s changed from %g to %g", name, old, value)
+            for lane in self._lanes if who is None else [self._by_name[who]]:
+                old = lane.smoother.alpha if name == "smoothing" else lane.offset_ms
+                if name == "smoothing":
+                    lane.smoother.alpha = value
+                else:
+                    lane.offset_ms = value
+                if who is not None and old != value:
+                    log.info("performer %s: %s changed from %g to %g", who, name, old, value)
 
     def _state(self, source: AudioSource) -> _SourceState:
         """The ring and failure state of ``source`` (made on first use, remade if its format changed)."""
@@ -696,12 +1039,20 @@ class Engine:
         finally:
             self._done.set()
 
+    def _next_release(self) -> float | None:
+        """The earliest send instant of a frame held back by an offset, or None."""
+        due = [lane.delayed[0][0] for lane in self._lanes if lane.delayed]
+        return min(due) if due else None
+
     def _loop(self) -> None:
         cfg = self.config
         acc = 0.0  # compute seconds since the last emitted frame
+        acc_in = 0.0  # of which the input stage (mixdown, sanitising, features)
         while not self._stop.is_set():
             if self._reset_requested.is_set():
                 self._do_reset()
+            if self._lane_reset_requested.is_set():
+                self._reset_lanes()
             if self._pending:
                 self._apply_settings()
             now = time.monotonic()
@@ -727,8 +1078,9 @@ class Engine:
                     log.warning("no audio from %s for %.1f s; holding the last pose", src.name,
                                 now - self._last_audio)
                 timeout = 0.05
-                if self._delayed:
-                    timeout = min(timeout, max(0.0, self._delayed[0][0] - now))
+                due = self._next_release()
+                if due is not None:
+                    timeout = min(timeout, max(0.0, due - now))
                 self.ring.wait(timeout)
                 continue
             live = "running" if src is self.source else "fallback"
@@ -742,14 +1094,24 @@ class Engine:
             block = self._sanitize(self._mixdown(n))
             p0 = self._consumed
             self._consumed += n
-            feats = self.extractor.push(block)
-            if len(feats):
-                poses = np.asarray(self.model.push(feats), dtype=np.float32)
-                acc += time.perf_counter() - t0
-                self._emit(poses, p0, acc)
-                acc = 0.0
-            else:
-                acc += time.perf_counter() - t0
+            ready = []
+            for g in self._groups:
+                feats = g.extractor.push(block)
+                if len(feats):
+                    ready.append((g, feats))
+            t_in = time.perf_counter() - t0
+            if not ready:
+                acc += t_in
+                acc_in += t_in
+                continue
+            frames = max(len(feats) for _, feats in ready)
+            self._run_lanes(ready, p0)
+            per_frame_ms = (acc + time.perf_counter() - t0) * 1000.0 / frames
+            in_ms = (acc_in + t_in) * 1000.0 / frames
+            for _ in range(frames):
+                self.compute_ms.add(per_frame_ms)
+                self.features_ms.add(in_ms)
+            acc = acc_in = 0.0
 
     def _sanitize(self, block: np.ndarray) -> np.ndarray:
         """In place: samples that are NaN, inf or beyond +-MAX_SAMPLE become 0 (a dropout),
@@ -776,69 +1138,96 @@ class Engine:
         np.mean(self._chunk[:n], axis=1, out=self._mono[:n])
         return self._mono[:n]
 
-    def _emit(self, poses: np.ndarray, p0: int, compute_s: float) -> None:
-        """Guard, smooth, stamp and send (or hold back) the poses produced by one push."""
+    def _frame_samples(self, g: _FeatureGroup, count: int, p0: int) -> list[int]:
+        """The completing input sample of the group's next ``count`` frames (this step read
+        samples ``p0`` up to ``_consumed``)."""
         sr = self._active.sample_rate
-        needed = getattr(self.extractor, "samples_needed", None)
-        lat = int(getattr(self.extractor, "latency_samples", 0) or 0)
-        offset_s = self.config.offset_ms / 1000.0
-        per_frame_s = compute_s / len(poses)
-        t_send = time.perf_counter()
-        for row in poses:
-            if row.shape != (POSE_DIM,) or not np.isfinite(row).all():
-                self.nan_frames += 1
-                if self.nan_frames == 1:
-                    log.warning("model produced a non-finite pose; sending the last good pose instead")
-                pose = self._last_good.copy()
-            else:
-                pose = self.smoother(row.copy())
-                self._last_good[:] = pose
-            if self._fader.active:  # after _last_good: smoothing and the NaN guard keep the dance
-                pose = self._fader(pose)
-            i = self._index
-            self._index += 1
-            j = i - self._seg_index0  # frame number within the current extractor segment
+        needed = getattr(g.extractor, "samples_needed", None)
+        lat = int(getattr(g.extractor, "latency_samples", 0) or 0)
+        out = []
+        for k in range(count):
+            j = g.index + k - g.seg_index0  # frame number within the current extractor segment
             if needed is not None:
                 need = self._origin + int(needed(j))
             else:
                 need = self._origin + math.ceil((j + 1) * HOP * sr / SAMPLE_RATE) + lat
-            sample = min(max(need, p0 + 1), self._consumed) - 1
-            audio_time = self._time0 + (j + 1) * HOP / SAMPLE_RATE + offset_s
-            frame = PoseFrame(index=i, audio_sample=sample, audio_time=audio_time, wall_time=0.0, pose=pose)
-            released = self.ring.release_time(sample)
-            if offset_s > 0 or self._delayed:  # after an offset decrease, frames still queue: order is kept
-                send_at = time.monotonic() + max(offset_s, 0.0)
-                if self._delayed:
-                    send_at = max(send_at, self._delayed[-1][0])
-                self._delayed.append((send_at, frame, released))
+            out.append(min(max(need, p0 + 1), self._consumed) - 1)
+        return out
+
+    def _run_lanes(self, ready: list[tuple[_FeatureGroup, np.ndarray]], p0: int) -> None:
+        """Every lane of every group that has frames: model, then guard, smoothing, stamps and sends."""
+        plans = [(g, feats, self._frame_samples(g, len(feats), p0)) for g, feats in ready]
+        if len(plans) == 1:
+            released = {s: self.ring.release_time(s) for s in plans[0][2]}
+        else:  # the ring's lookup only walks forward: ask in sample order across the groups
+            released = {s: self.ring.release_time(s) for s in sorted({s for *_, ss in plans for s in ss})}
+        for g, feats, samples in plans:
+            rel = [released[s] for s in samples]
+            for lane in g.lanes:
+                t = time.perf_counter()
+                poses = np.asarray(lane.model.push(feats), dtype=np.float32)
+                if len(poses) != len(feats):
+                    raise ValueError(f"{self._who(lane)}the pose model returned {len(poses)} poses for "
+                                     f"{len(feats)} feature frames")
+                self._emit(lane, g, poses, samples, rel)
+                lane_ms = (time.perf_counter() - t) * 1000.0 / len(poses)
+                for _ in range(len(poses)):
+                    lane.compute_ms.add(lane_ms)
+            g.index += len(feats)
+
+    def _emit(self, lane: _Lane, g: _FeatureGroup, poses: np.ndarray, samples: list[int],
+              released: list[float]) -> None:
+        """Guard, smooth, stamp and send (or hold back) one lane's poses from one push."""
+        offset_s = lane.offset_ms / 1000.0
+        for k, row in enumerate(poses):
+            if row.shape != (POSE_DIM,) or not np.isfinite(row).all():
+                lane.nan_frames += 1
+                if lane.nan_frames == 1:
+                    log.warning("%smodel produced a non-finite pose; sending the last good pose instead",
+                                self._who(lane))
+                pose = lane.last_good.copy()
             else:
-                self._send(frame, released)
-        # the send loop above is part of the hop's cost: spread it over its frames
-        per_frame_s += (time.perf_counter() - t_send) / len(poses)
-        for _ in range(len(poses)):
-            self.compute_ms.add(per_frame_s * 1000.0)
+                pose = lane.smoother(row.copy())
+                lane.last_good[:] = pose
+            if lane.fader.active:  # after last_good: smoothing and the NaN guard keep the dance
+                pose = lane.fader(pose)
+            i = g.index + k
+            j = i - g.seg_index0  # frame number within the current extractor segment
+            audio_time = g.time0 + (j + 1) * HOP / SAMPLE_RATE + offset_s
+            frame = PoseFrame(index=i, audio_sample=samples[k], audio_time=audio_time, wall_time=0.0, pose=pose)
+            if offset_s > 0 or lane.delayed:  # after an offset decrease, frames still queue: order is kept
+                send_at = time.monotonic() + max(offset_s, 0.0)
+                if lane.delayed:
+                    send_at = max(send_at, lane.delayed[-1][0])
+                lane.delayed.append((send_at, frame, released[k]))
+            else:
+                self._send(lane, frame, released[k])
 
     def _release_delayed(self, now: float) -> None:
-        while self._delayed and self._delayed[0][0] <= now:
-            _, frame, released = self._delayed.popleft()
-            self._send(frame, released)
+        for lane in self._lanes:
+            while lane.delayed and lane.delayed[0][0] <= now:
+                _, frame, released = lane.delayed.popleft()
+                self._send(lane, frame, released)
 
-    def _send(self, frame: PoseFrame, released: float) -> None:
+    def _send(self, lane: _Lane, frame: PoseFrame, released: float) -> None:
         frame.wall_time = time.monotonic()
-        for sink in self.sinks:
+        frame.released = released
+        for sink in lane.sinks:
             try:
                 sink.send(frame)
             except Exception as exc:  # noqa: BLE001 - an output fault never stops the engine
                 name = getattr(sink, "name", repr(sink))
-                n = self._sink_errors.get(name, 0) + 1
-                self._sink_errors[name] = n
+                n = lane.sink_errors.get(name, 0) + 1
+                lane.sink_errors[name] = n
                 if n == 1:
-                    log.warning("output %s failed (%s: %s); counting further failures silently",
-                                name, type(exc).__name__, exc)
-        self.frames_out += 1
-        self.last_frame = frame
+                    log.warning("%soutput %s failed (%s: %s); counting further failures silently",
+                                self._who(lane), name, type(exc).__name__, exc)
+        lane.frames_out += 1
+        lane.last_frame = frame
         if released == released:  # not NaN
-            self.latency_ms.add((frame.wall_time - released) * 1000.0)
+            ms = (frame.wall_time - released) * 1000.0
+            lane.latency_ms.add(ms)
+            self.latency_ms.add(ms)
 
     def _revive(self, src: AudioSource, st: _SourceState, now: float) -> None:
         """Report a failed source once, stop it, and try to restart it every ``retry_s``.
@@ -885,7 +1274,7 @@ class Engine:
             self._switch_to(main, now)
 
     def _switch_to(self, src: AudioSource, now: float) -> bool:
-        """Make ``src`` the active source without resetting the model (frame numbers and
+        """Make ``src`` the active source without resetting the models (frame numbers and
         audio time continue on the 30 fps grid). The fallback is started on a clear ring
         when switched to and stopped when left. False (logged) if it cannot start."""
         st = self._state(src)
@@ -901,12 +1290,13 @@ class Engine:
             self.fallbacks += 1
         else:
             self.fallback_source.stop()  # type: ignore[union-attr]
-        self._time0 += (self._index - self._seg_index0) * HOP / SAMPLE_RATE
-        self._seg_index0 = self._index
+        for g in self._groups:
+            g.time0 += (g.index - g.seg_index0) * HOP / SAMPLE_RATE
+            g.seg_index0 = g.index
+            g.extractor = g.factory(src.sample_rate)
         self._active, self.ring = src, st.ring
         if self._chunk.shape[1] != src.channels:
             self._chunk = np.zeros((self.config.max_read, src.channels), dtype=np.float32)
-        self.extractor = self.extractor_factory(src.sample_rate)
         self._consumed = self._origin = st.ring.read_position
         self._last_audio = now
         self.state = "running" if src is self.source else "fallback"
@@ -914,8 +1304,11 @@ class Engine:
 
     def _finish(self) -> None:
         """End of input: send what ``offset_ms`` still holds back, then mark done."""
-        while self._delayed and not self._stop.is_set():
-            wait = self._delayed[0][0] - time.monotonic()
+        while not self._stop.is_set():
+            due = self._next_release()
+            if due is None:
+                break
+            wait = due - time.monotonic()
             if wait > 0:
                 self._stop.wait(wait)
             self._release_delayed(time.monotonic())
@@ -923,7 +1316,8 @@ class Engine:
 
 
 __all__ = [
-    "Engine", "EngineConfig", "FeatureStream", "PoseModel", "ExtractorFactory", "PoseSmoother", "IdleFader",
-    "RollingStats", "rest_pose", "idle_pose", "LIVE_SETTINGS", "CONTROL_ACTIONS", "MAX_SAMPLE", "MAX_STYLE_CHARS",
-    "check_live_setting", "check_switch", "check_finite", "check_style_name",
+    "Engine", "EngineConfig", "Performer", "FeatureStream", "PoseModel", "ExtractorFactory", "PoseSmoother",
+    "IdleFader", "RollingStats", "rest_pose", "idle_pose", "cycle_frames", "silence_features", "stagger_lead", "LIVE_SETTINGS", "CONTROL_ACTIONS",
+    "MAX_SAMPLE", "MAX_STYLE_CHARS", "MAX_NAME_CHARS", "check_live_setting", "check_switch", "check_finite",
+    "check_style_name", "check_performer_name",
 ]

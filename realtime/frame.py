@@ -22,6 +22,9 @@ class PoseFrame:
         pose: (POSE_DIM,) float32, the flat layout of :mod:`models.rig.motion`: root
             position (metres) then one local quaternion x, y, z, w per humanoid bone,
             project frame (right-handed, Y up, faces +Z).
+        released: ``time.monotonic()`` seconds when the audio block holding
+            ``audio_sample`` was released (the engine sets it when sending; NaN: unknown),
+            so a sink can measure block release -> its own work.
     """
 
     index: int
@@ -29,6 +32,7 @@ class PoseFrame:
     audio_time: float
     wall_time: float
     pose: np.ndarray
+    released: float = float("nan")
 
 
 class Sink(Protocol):

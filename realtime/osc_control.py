@@ -13,6 +13,11 @@ WebSocket control channel uses too (docs/show.md has the desk setups)::
     /performer/style      s           a style name, for models that offer styles
     /performer/energy     n           a number, for models that offer it
 
+In an ensemble (several performers in one ``performer run``) each of these addresses acts
+on every performer, and ``/performer/NAME/reset``, ``/performer/NAME/offset``, ... on the
+performer called NAME only (its reset restarts that performer's dance; the shared input
+and the others go on). An unknown NAME is a bad message like any other.
+
 ``n`` is a number of any OSC numeric type (``i``, ``h``, ``f``, ``d``; QLab sends
 ``/performer/offset 40`` as ``i``, a TouchOSC fader sends ``f``); ``idle`` also takes
 ``T``/``F``; ``s`` is ``s`` or ``S``. Bundles are unpacked and their messages applied
@@ -43,9 +48,10 @@ from models.errors import ConfigError, NetworkError, PerformerError, short_repr
 
 log = logging.getLogger(__name__)
 
-ControlHandler = Callable[[str, object], None]
-"""Applies one control action (:meth:`realtime.engine.Engine.control`); raises
-:class:`PerformerError` for a bad value. Called on the control thread."""
+ControlHandler = Callable[..., None]
+"""Applies one control action, ``control(action, value)``, or for one performer of an
+ensemble ``control(action, value, performer=NAME)`` (:meth:`realtime.engine.Engine.control`);
+raises :class:`PerformerError` for a bad value. Called on the control thread."""
 
 IpNetwork = ipaddress.IPv4Network | ipaddress.IPv6Network
 
@@ -288,10 +294,19 @@ class OscControl:
 
     def _apply(self, address: str, tags: str, args: list) -> bool:
         """Check one message and apply it; True if applied, False if it asked for nothing."""
+        performer = None
         entry = ADDRESSES.get(address)
+        if entry is None:  # /performer/NAME/<control>: one performer of an ensemble
+            parts = address.split("/")
+            if len(parts) == 4 and parts[1] == "performer" and parts[2]:
+                entry = ADDRESSES.get(f"/performer/{parts[3]}")
+                performer = parts[2]
         if entry is None:
-            raise ConfigError(f"unknown address (known: {', '.join(ADDRESSES)})")
+            raise ConfigError(f"unknown address (known: {', '.join(ADDRESSES)}, and /performer/NAME/... "
+                              "in an ensemble)")
         action, kind = entry
+        control = self.control if performer is None else (
+            lambda action, value: self.control(action, value, performer=performer))
         if kind == "trigger":
             if len(args) > 1:
                 raise ConfigError(f"takes {_WANT[kind]}, got {len(args)} arguments ({tags})")
@@ -301,11 +316,11 @@ class OscControl:
                     raise ConfigError(f"takes {_WANT[kind]}, got {short_repr(value)}")
                 if not value:
                     return False  # a button's release
-            self.control(action, None)
+            control(action, None)
             return True
         if len(args) != 1:
             raise ConfigError(f"takes {_WANT[kind]}, got {len(args)} arguments ({tags or 'none'})")
-        self.control(action, args[0])
+        control(action, args[0])
         return True
 
     def _allowed(self, host: str) -> bool:

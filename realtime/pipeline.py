@@ -28,17 +28,26 @@ from realtime.engine import ExtractorFactory, PoseModel
 
 @dataclass
 class Pipeline:
-    """What :func:`build_pipeline` returns: the engine's two model-side inputs, plus provenance."""
+    """What :func:`build_pipeline` returns: the engine's two model-side inputs, plus provenance.
+
+    ``feature_key``: the feature config's fingerprint; an ensemble's performers with equal
+    keys share one extractor (:class:`realtime.engine.Performer`)."""
 
     extractor_factory: ExtractorFactory
     model: PoseModel
     checkpoint: Path
     meta: dict = field(default_factory=dict)
+    feature_key: str | None = None
 
 
 def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, hop: int = 64, seed: int = 0,
-                   style: str | None = None) -> Pipeline:
+                   style: str | None = None, loaded: dict | None = None) -> Pipeline:
     """Load ``checkpoint`` (default: the packaged one) into an extractor factory and a pose model.
+
+    ``loaded``: a dict kept by the caller across calls (an ensemble's performers): a
+    checkpoint already loaded through it is reused (its network is read-only while
+    streaming; each call still builds its own stream with its own state), so N performers
+    of one checkpoint load it once and hold its weights once.
 
     Raises :class:`CheckpointError` naming the file if it is missing, unreadable, not a
     causal model, or made for another rig or feature code. A model that declares
@@ -50,7 +59,14 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
     from models.features.streaming import StreamingFeatureExtractor
     from models.networks.streaming import StreamingGenerator
 
-    loaded = load_model(checkpoint)
+    if loaded is None:
+        loaded_model = load_model(checkpoint)
+    else:
+        key = str(Path(checkpoint).resolve()) if checkpoint is not None else None
+        if key not in loaded:
+            loaded[key] = load_model(checkpoint)
+        loaded_model = loaded[key]
+    loaded = loaded_model
     path, meta, cfg = loaded.path, loaded.meta, loaded.features
     if getattr(loaded.model, "offline_only", False):  # e.g. dtm: needs the whole song's beats up front
         reason = getattr(loaded.model, "offline_reason", "it needs the whole song")
@@ -74,7 +90,7 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
     def extractor_factory(input_sr: int) -> StreamingFeatureExtractor:
         return StreamingFeatureExtractor(cfg, input_sr)
 
-    return Pipeline(extractor_factory, generator, path, meta)
+    return Pipeline(extractor_factory, generator, path, meta, feature_key=cfg.fingerprint())
 
 
 def random_pipeline(seed: int = 0) -> Pipeline:
@@ -89,7 +105,8 @@ def random_pipeline(seed: int = 0) -> Pipeline:
     torch.manual_seed(seed)
     cfg = FeatureConfig()
     generator = StreamingGenerator(build_model("causal", {"feature_dim": cfg.dim}))
-    return Pipeline(lambda sr: StreamingFeatureExtractor(cfg, sr), generator, Path("random-weights"), {})
+    return Pipeline(lambda sr: StreamingFeatureExtractor(cfg, sr), generator, Path("random-weights"), {},
+                    feature_key=cfg.fingerprint())
 
 
 def _bench(pipeline: Pipeline, seconds: float, threads: int, sample_rate: int, block: int, paced: bool) -> dict:

@@ -14,7 +14,10 @@ behind, plus input overflows the device reported (*underruns*, shown when not 0:
 input underflows the device reported). Shown only when they apply: *idle* (the
 performer holds its idle pose), *offset* (ms) and *smoothing* when not 0, and with
 ``--control-osc`` *control N ok M bad* (OSC control messages applied / rejected), plus
-*refused* (senders outside ``--control-allow``) and *rate-limited* when not 0.
+*refused* (senders outside ``--control-allow``) and *rate-limited* when not 0. An
+ensemble adds *N performers* after the frame count (hop: the whole hop, every performer;
+drops, nan: summed over the performers; *idle k/N* when only some are idle; offset and
+smoothing when every performer has the same).
 """
 
 from __future__ import annotations
@@ -40,6 +43,12 @@ def format_status(stats: dict, fps: float | None = None) -> str:
         f"{stats.get('state', '?'):<8} {stats.get('frames', 0):>6} frames"
         + (f" {fps:4.1f} fps" if fps is not None else ""),
     ]
+    performers = stats.get("performers") or {}
+    if len(performers) > 1:
+        parts.append(f"{len(performers)} performers")
+        idle = sum(1 for p in performers.values() if p.get("idle"))
+        if idle and idle < len(performers):
+            parts.append(f"idle {idle}/{len(performers)}")
     if stats.get("idle"):
         parts.append("idle")
     if stats.get("offset_ms"):

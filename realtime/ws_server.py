@@ -1,10 +1,15 @@
 """WebSocket output: broadcasts pose frames to any number of clients, and serves the web viewer.
 
 One port carries both: ``http://HOST:PORT/`` serves the web client's static files
-and ``ws://HOST:PORT/ws`` (or ``/``) is the pose stream. The server runs an asyncio
+and ``ws://HOST:PORT/ws`` (or ``/``) is the pose stream. An ensemble (several performers
+in one process) shares one server: :meth:`WebSocketSink.route` adds one performer's
+stream at its own path (``/ws/NAME`` by default), and ``/ws`` and ``/`` carry the first
+performer's (:class:`WebSocketRoute`). The server runs an asyncio
 loop in its own daemon thread; :meth:`WebSocketSink.send`, called on the engine
-thread, encodes the frame (:mod:`realtime.wire`), hands it to the loop with
-``call_soon_threadsafe`` and returns at once. On the loop, a frame goes straight into
+thread, encodes the frame (:mod:`realtime.wire`), appends it to an outbox the loop
+empties, waking the loop with ``call_soon_threadsafe`` only when it is not already due
+to run (an ensemble's performers hand over a frame each per hop: one wake-up serves
+them all), and returns at once. On the loop, a frame goes straight into
 a client's socket buffer while that buffer is under ``write_limit`` and nothing is
 queued for the client; otherwise into the client's bounded queue, which drops its
 OLDEST frame when full, so a slow or stalled client only loses its own frames. The protocol (query string, client messages, close codes) is in
@@ -106,6 +111,7 @@ class _Client:
     sending: bool = False  # the writer task is inside ws.send (a direct write now would reorder)
     controller: bool = False  # authenticated with the token: may send control messages
     rate: TokenBucket | None = None  # message-rate limit, set when the client is served
+    route: str | None = None  # the path of the performer it watches (None: the server's own stream)
 
 
 def parse_client_message(message: str | bytes) -> dict:
@@ -132,7 +138,61 @@ def parse_client_message(message: str | bytes) -> dict:
         raise NetworkError(f"unknown control action {_short(msg.get('action'))}; use {', '.join(CONTROL_ACTIONS)}")
     if kind == "ping" and not isinstance(msg.get("id"), str | int | float | bool | None):
         raise NetworkError("ping 'id' must be a string, number or null")
+    if kind == "control" and not isinstance(msg.get("performer", ""), str):
+        raise NetworkError("control 'performer' must be a performer's name or \"*\"")
     return msg
+
+
+#: Characters allowed in a performer's WebSocket path (after its leading "/").
+_PATH_CHARS = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-./")
+
+
+def check_ws_path(path: object) -> str:
+    """A performer's WebSocket path: ``/`` then letters, digits, ``_ - . /`` (at most 100
+    characters), not ``/`` or ``/ws`` (the first performer's), no ``..``; ConfigError otherwise."""
+    if not isinstance(path, str) or not path.startswith("/") or len(path) > 100 or not set(path) <= _PATH_CHARS \
+            or path in WS_PATHS or ".." in path or "//" in path:
+        raise ConfigError(f"ws_path must be a path like /ws/NAME (letters, digits, _ - . /; not / or /ws), "
+                          f"got {_short(path)}")
+    return path
+
+
+class WebSocketRoute:
+    """One performer's pose stream on a shared :class:`WebSocketSink` (a :class:`realtime.frame.Sink`):
+    clients that connect to ``ws://HOST:PORT<path>`` get this performer's hello (with
+    ``"performer": NAME``) and frames, and their control messages act on this performer.
+    ``close()`` releases the route; the server closes with its last route."""
+
+    def __init__(self, server: "WebSocketSink", path: str, performer: str | None) -> None:
+        self.server = server
+        self.path = path
+        self.performer = performer
+        self.name = f"ws:{server.host}:{server.port}{path}"
+        self.frames = self.skipped = 0
+        self._closed = False
+
+    @property
+    def ws_url(self) -> str:
+        """The stream's WebSocket address: the server's with this performer's path."""
+        return self.server.ws_url.removesuffix("/ws") + self.path
+
+    @property
+    def url(self) -> str:
+        """The web viewer's address, showing this performer (its ``?ws=`` parameter)."""
+        return f"{self.server.url}?ws={self.ws_url}"
+
+    def send(self, frame: PoseFrame) -> None:
+        """Encode one frame and hand it to the server thread for this route's clients; returns at once."""
+        self.server._send(frame, self.path, self)
+
+    def stats(self) -> dict[str, float]:
+        """clients (on this path), frames (sent by the engine), drops (of its clients), skipped."""
+        return self.server._route_stats(self)
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self.server._route_closed()
 
 
 class WebSocketSink:
@@ -219,6 +279,12 @@ class WebSocketSink:
         self._stalled = 0
         self._connections = 0
         self._rate_limited = self._controls = 0
+        self._routes: dict[str, WebSocketRoute] = {}
+        self._default_route: str | None = None  # the route "/" and "/ws" clients get (None: the server's own)
+        self._open_routes = 0
+        self._route_drops: dict[str | None, int] = {}
+        self._outbox: deque[tuple[bytes, str | None]] = deque()  # engine thread -> loop (deque ops are atomic)
+        self._wake_pending = False
 
         self._loop = asyncio.new_event_loop()
         self._ready = threading.Event()
@@ -257,17 +323,67 @@ class WebSocketSink:
 
     def send(self, frame: PoseFrame) -> None:
         """Encode one frame and hand it to the server thread; returns immediately."""
+        self._send(frame, None, None)
+
+    def _send(self, frame: PoseFrame, key: str | None, route: WebSocketRoute | None) -> None:
         if self._closed:
             return
         if not np.isfinite(frame.pose).all():
             self._skipped += 1
+            if route is not None:
+                route.skipped += 1
             return
         data = encode_frame(frame.index, frame.audio_time, time.time(), frame.pose)
         self._frames += 1
+        if route is not None:
+            route.frames += 1
+        self._outbox.append((data, key))
+        if self._wake_pending:  # the loop has not taken the last hand-off yet: it takes this one too
+            return
+        self._wake_pending = True
         try:
-            self._loop.call_soon_threadsafe(self._broadcast, data)
+            self._loop.call_soon_threadsafe(self._flush)
         except RuntimeError:  # loop already closed
             pass
+
+    def _flush(self) -> None:
+        """On the loop: broadcast every frame handed over since the last flush, in order. An
+        ensemble's performers hand over one frame each per hop; one wake-up of the server
+        thread (a self-pipe write, a GIL hand-off) then serves all of them."""
+        self._wake_pending = False  # before popping: a frame appended from now on schedules a flush
+        while self._outbox:
+            self._broadcast(*self._outbox.popleft())
+
+    def route(self, path: str, performer: str | None = None, *, default: bool = False) -> WebSocketRoute:
+        """Add one performer's stream at ``path`` (:func:`check_ws_path`; ConfigError naming a
+        path given twice). ``default``: clients of ``/ws`` and ``/`` get this stream too. Call
+        before the engine starts sending."""
+        path = check_ws_path(path)
+        if path in self._routes:
+            raise ConfigError(f"ws_path {path!r} is given twice; give each performer its own")
+        route = WebSocketRoute(self, path, performer)
+        self._routes[path] = route
+        self._open_routes += 1
+        if default:
+            self._default_route = path
+        return route
+
+    @property
+    def routes(self) -> dict[str, WebSocketRoute]:
+        return dict(self._routes)
+
+    def _route_closed(self) -> None:
+        self._open_routes -= 1
+        if self._open_routes <= 0:
+            self.close()
+
+    def _route_stats(self, route: WebSocketRoute) -> dict[str, float]:
+        with self._lock:
+            clients = [c for c in self._clients.values() if c.route == route.path]
+        out: dict[str, float] = {"clients": len(clients), "frames": route.frames, "skipped": route.skipped,
+                                 "drops": self._route_drops.get(route.path, 0)}
+        out.update({f"drops.{c.peer}": c.drops for c in clients})
+        return out
 
     def stats(self) -> dict[str, float]:
         """clients, frames (sent by the engine), messages and bytes delivered, drops
@@ -345,9 +461,11 @@ class WebSocketSink:
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(self._server.wait_closed(), 5)
 
-    def _broadcast(self, data: bytes) -> None:
+    def _broadcast(self, data: bytes, key: str | None = None) -> None:
         text = None
         for c in self._clients.values():
+            if c.route != key:
+                continue
             if c.fmt == "json":
                 if text is None:
                     text = frame_json(decode_frame(data))
@@ -391,6 +509,8 @@ class WebSocketSink:
         if len(c.queue) == c.queue.maxlen:
             c.drops += 1
             self._drops += 1
+            if c.route is not None:
+                self._route_drops[c.route] = self._route_drops.get(c.route, 0) + 1
             if not c.aborted and self._loop.time() - c.progress > self.stall_timeout:
                 # Not reading at all: a close frame could not get through either.
                 c.aborted = True
@@ -402,7 +522,9 @@ class WebSocketSink:
 
     async def _handle(self, ws: ServerConnection) -> None:
         self._connections += 1
-        query = parse_qs(urlsplit(ws.request.path).query)  # type: ignore[union-attr]
+        url = urlsplit(ws.request.path)  # type: ignore[union-attr]
+        query = parse_qs(url.query)
+        route = url.path if url.path in self._routes else self._default_route
         fmt = query.get("format", ["binary"])[-1]
         if fmt not in FORMATS:
             await ws.close(CLOSE_POLICY, f"unknown format {fmt!r}; use binary or json")
@@ -420,7 +542,7 @@ class WebSocketSink:
                     await ws.close(CLOSE_POLICY, "invalid or missing token")
                     return
                 controller = True
-            await self._serve_client(ws, fmt, controller)
+            await self._serve_client(ws, fmt, controller, route)
         except ConnectionClosed:
             pass
         finally:
@@ -443,13 +565,18 @@ class WebSocketSink:
             return False
         return hmac.compare_digest(given.encode("utf-8", "surrogatepass"), self._token)
 
-    async def _serve_client(self, ws: ServerConnection, fmt: str, controller: bool = False) -> None:
+    async def _serve_client(self, ws: ServerConnection, fmt: str, controller: bool = False,
+                            route: str | None = None) -> None:
         host, port, *_ = ws.remote_address
-        client = _Client(ws, fmt, deque(maxlen=self.queue_frames), f"{host}:{port}", controller=controller)
+        client = _Client(ws, fmt, deque(maxlen=self.queue_frames), f"{host}:{port}", controller=controller,
+                         route=route)
         sock = ws.transport.get_extra_info("socket")
         if sock is not None:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self._socket_buffer)
-        hello = json.dumps({**self._hello, "format": fmt, "control": controller and self.control is not None})
+        hello = {**self._hello, "format": fmt, "control": controller and self.control is not None}
+        if route is not None and self._routes[route].performer is not None:
+            hello["performer"] = self._routes[route].performer
+        hello = json.dumps(hello)
         await ws.send(hello)
         self._messages += 1
         self._bytes += len(hello)
@@ -532,8 +659,14 @@ class WebSocketSink:
         if not c.controller:
             return _error("control needs the server token (send an auth message first)")
         action = msg["action"]
+        target = msg.get("performer")
+        if target is None and c.route is not None:
+            target = self._routes[c.route].performer
         try:
-            self.control(action, msg.get("value"))
+            if target is None:
+                self.control(action, msg.get("value"))
+            else:  # a performer's path, or a "performer" field (its name, or "*": every performer)
+                self.control(action, msg.get("value"), performer=target)
         except PerformerError as exc:
             return _error(f"control {action}: {exc}")
         except Exception as exc:  # noqa: BLE001 - a bug in the handler must not end the server
@@ -541,14 +674,18 @@ class WebSocketSink:
             return _error(f"control {action} failed")
         self._controls += 1
         log.info("control %s %s from %s", action, _short(msg.get("value", "")), c.peer)
-        return {"type": "control_ok", "action": action, "value": msg.get("value")}
+        reply = {"type": "control_ok", "action": action, "value": msg.get("value")}
+        if target is not None:
+            reply["performer"] = target
+        return reply
 
     async def _process_request(self, connection: ServerConnection, request: Request) -> Response | None:
         url = urlsplit(request.path)
         if "websocket" in request.headers.get("Upgrade", "").lower():
-            if url.path in WS_PATHS:
+            if url.path in WS_PATHS or url.path in self._routes:
                 return None
-            return connection.respond(404, f"no pose stream at {url.path}; connect to /ws\n")
+            known = ", ".join(["/ws", *self._routes])
+            return connection.respond(404, f"no pose stream at {url.path}; connect to {known}\n")
         return await self._static(connection, url.path)
 
     async def _static(self, connection: ServerConnection, path: str) -> Response:

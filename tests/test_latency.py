@@ -118,7 +118,7 @@ def test_timing_sink_records_release_and_send_of_every_frame(checkpoint):
     asked = []
     src = ScheduledSource(FileSource(audio, 44100, block_size=512, realtime=False), lambda: asked.append(1) or 0.0)
     eng = Engine(src, p.extractor_factory, p.model, [], EngineConfig(warmup_s=0.1, stats_size=128))
-    timing = TimingSink(eng, 100)
+    timing = TimingSink(100)
     eng.sinks.append(timing)
     eng.start()
     eng.wait(30)
@@ -280,3 +280,31 @@ def test_stream_sweep_runs_concurrent_performers(tmp_path, checkpoint):
     assert row["streams"] == 2 and row["frames"] == 2 * (3 * FPS - 1) and row["lost_frames"] <= 2
     assert row["worst_p99_e2e_ms"] < 150.0  # guard, not the 33.3 ms criterion
     assert r["sustained_streams"] == (2 if row["pass"] else 0)
+
+
+@pytest.mark.latency
+@pytest.mark.slow
+def test_ensemble_bench_runs_performers_in_one_process_and_apart(tmp_path, capsys):
+    """``performer bench ensemble``: 2 dance_vq performers in one process (one extractor, code
+    steps staggered 0 and 4) and as 2 processes, every frame received, the markdown table, and
+    each stagger phase's stream equal to its offline pass."""
+    from tests.test_dance_vq import tiny_checkpoint
+
+    vq, _, _ = tiny_checkpoint(tmp_path / "vq.pt")
+    out = tmp_path / "out"
+    budgets = tmp_path / "b.toml"
+    budgets.write_text("[ensemble]\nstream_offline_max_abs = { max = 1e-4 }\nlost_frames = { max = 0 }\n"
+                       "per_hop_ms_p99_2 = { max = 150 }\n")
+    code = main(["bench", "ensemble", "--counts", "2", "--unstaggered", "--seconds", "3", "--warmup", "0.5",
+                 "--checkpoint", str(vq), "--out", str(out), "--budgets", str(budgets)])
+    printed = capsys.readouterr().out
+    assert code == 0, printed
+    r = json.loads((out / "ensemble.json").read_text())
+    one, apart = r["rows"]
+    assert (one["mode"], apart["mode"]) == ("one process", "separate processes")
+    assert one["extractors"] == 1 and apart["extractors"] == 2 and one["phases"] == [0, 4]
+    assert one["frames"] == apart["frames"] == 2 * (3 * FPS - 1) and one["lost_frames"] == 0
+    assert one["per_hop_ms_p99"] >= one["features_ms_p50"] > 0 and len(one["performer_part_ms_p50"]) == 2
+    assert [c["phase"] for c in r["stream_vs_offline"]] == [0, 4] and r["metrics"]["stream_offline_max_abs"] < 1e-4
+    assert "| 2 | one process |" in printed and "| 2 | separate processes |" in printed
+    assert (out / "ensemble.md").stat().st_size > 0 and (out / "ensemble.png").stat().st_size > 0

@@ -8,6 +8,8 @@ for the sweep), each ``{ max = X }`` (measured must be <= X) or ``{ min = X }``:
     per_hop_ms_p99 = { max = 5.0 }
     [streams]
     sustained_streams = { min = 8 }
+    [ensemble]
+    per_hop_ms_p99_4 = { max = 5.0 }
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from pathlib import Path
 
 from models.errors import ConfigError
 
-KINDS: tuple[str, ...] = ("latency", "streams")
+KINDS: tuple[str, ...] = ("latency", "streams", "ensemble")
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,11 @@ tail of its stderr, and every child process this module started is killed):
    the same instant) and replays from then on;
 5. the receiver's logs are matched to each performer's frames by frame index.
 
+With ``ensemble=True`` the N performers run in ONE process instead, one engine on the
+first spec's audio (an ensemble: one input, N performers, each its own VMC port and
+WebSocket path ``/ws/pJ`` on one server, seed J), and the result adds that process's
+whole-hop figures under ``process``.
+
 CPU affinity is inherited: pin the calling process first (``performer bench --cores``).
 """
 
@@ -104,8 +109,12 @@ def child_env(threads: int) -> dict:
     return env
 
 
-def run_performers(specs: list[StreamSpec], settings: RunSettings, workdir: Path | None = None) -> dict:
+def run_performers(specs: list[StreamSpec], settings: RunSettings, workdir: Path | None = None, *,
+                   ensemble: bool = False, stagger: bool = True) -> dict:
     """Run ``len(specs)`` performers concurrently; returns per-stream frame records.
+
+    ``ensemble``: all in one process on ``specs[0]``'s audio (see the module docstring);
+    ``stagger`` False gives them all phase 0 (their code steps on the same hops).
 
     Result: ``{"streams": [record, ...], "wall_s", "machine_busy_percent", "receiver_cpu_s"}``
     where a record is the worker's JSON (:mod:`realtime.bench.worker`) plus
@@ -131,20 +140,28 @@ def run_performers(specs: list[StreamSpec], settings: RunSettings, workdir: Path
         children.append(rx)
         ports = rx.hear("udp_ports")["udp_ports"]
         workers = []
-        for j, (spec, port) in enumerate(zip(specs, ports)):
-            out = workdir / f"stream{j:02d}.json"
-            wspec = {
-                "checkpoint": str(settings.checkpoint), "audio_npy": str(spec.audio_npy),
-                "sample_rate": spec.sample_rate, "block_size": settings.block_size,
-                "seconds": settings.seconds, "threads": settings.threads, "warmup_s": settings.warmup_s,
-                "model": settings.model, "osc_port": port, "out": str(out), "name": spec.name,
-            }
+        common = {"checkpoint": str(settings.checkpoint), "block_size": settings.block_size,
+                  "seconds": settings.seconds, "threads": settings.threads, "warmup_s": settings.warmup_s,
+                  "model": settings.model}
+        if ensemble:
+            wspecs = [{**common, "audio_npy": str(specs[0].audio_npy), "sample_rate": specs[0].sample_rate,
+                       "name": specs[0].name, "out": str(workdir / "ensemble.json"),
+                       "performers": [{"name": f"p{j}", "osc_port": port, "seed": j, "phase": None if stagger else 0}
+                                      for j, port in enumerate(ports)]}]
+        else:
+            wspecs = [{**common, "audio_npy": str(spec.audio_npy), "sample_rate": spec.sample_rate,
+                       "osc_port": port, "out": str(workdir / f"stream{j:02d}.json"), "name": spec.name}
+                      for j, (spec, port) in enumerate(zip(specs, ports))]
+        for j, wspec in enumerate(wspecs):
             w = _Child([sys.executable, "-m", "realtime.bench.worker", json.dumps(wspec)],
                        workdir / f"stream{j:02d}.log", env)
             children.append(w)
-            workers.append((w, out))
-        ws_ports = [w.hear("ready")["ws_port"] for w, _ in workers]
-        rx.tell({"connect": ws_ports})
+            workers.append((w, Path(wspec["out"])))
+        ready = [w.hear("ready") for w, _ in workers]
+        if ensemble:
+            rx.tell({"connect": [[ready[0]["ws_port"], path] for path in ready[0]["ws_paths"]]})
+        else:
+            rx.tell({"connect": [r["ws_port"] for r in ready]})
         rx.hear("connected")
         for w, _ in workers:
             w.tell({"warm_up": True})
@@ -160,6 +177,10 @@ def run_performers(specs: list[StreamSpec], settings: RunSettings, workdir: Path
             w.hear("done")
             records.append(json.loads(out.read_text()))
         cpu1 = _machine_cpu()
+        process = None
+        if ensemble:
+            process = records[0]
+            records = process.pop("streams")
         rx.tell({"stop": str(workdir / "receiver.json")})
         rx.hear("done")
         rx.proc.wait(10)
@@ -170,12 +191,15 @@ def run_performers(specs: list[StreamSpec], settings: RunSettings, workdir: Path
             for kind in ("osc", "ws"):
                 log = np.asarray(received[kind][j], dtype=np.float64).reshape(-1, 2)
                 rec[f"{kind}_received"] = match_receipts(rec["index"], log[:, 0], log[:, 1]).tolist()
-        return {
+        result = {
             "streams": records,
             "wall_s": max(r["wall_s"] for r in records),
             "machine_busy_percent": _busy_percent(cpu0, cpu1),
             "receiver_cpu_s": received["cpu_s"],
         }
+        if process is not None:
+            result["process"] = process
+        return result
     finally:
         watchdog.cancel()
         for c in children:

@@ -4,7 +4,8 @@
 N UDP sockets on 127.0.0.1, prints ``{"udp_ports": [...]}`` and then follows stdin lines:
 
 * ``{"connect": [ws_port, ...]}`` — opens one WebSocket client per performer (binary
-  frames), waits for every hello message, prints ``{"connected": true}``;
+  frames) at ``/ws``, waits for every hello message, prints ``{"connected": true}``; an
+  entry may be ``[ws_port, path]`` instead (an ensemble's performers share one port);
 * ``{"stop": OUT}`` — writes OUT (JSON: per stream, ``osc`` and ``ws`` lists of
   ``[frame_index, receipt_time]``), prints ``{"done": OUT}`` and exits.
 
@@ -41,8 +42,8 @@ class _VmcLog(asyncio.DatagramProtocol):
             self.log.append((i, t))
 
 
-async def _ws_client(port: int, log: list, hello: asyncio.Event) -> None:
-    async with connect(f"ws://127.0.0.1:{port}/ws", compression=None, max_size=1 << 20) as ws:
+async def _ws_client(port: int, path: str, log: list, hello: asyncio.Event) -> None:
+    async with connect(f"ws://127.0.0.1:{port}{path}", compression=None, max_size=1 << 20) as ws:
         await ws.recv()  # the hello message
         hello.set()
         async for message in ws:
@@ -79,10 +80,11 @@ class Receiver:
         for s, log in zip(self.socks, self.osc):
             await self.loop.create_datagram_endpoint(lambda log=log: _VmcLog(log), sock=s)
 
-    async def _connect(self, ports: list[int]) -> None:
+    async def _connect(self, ports: list) -> None:
         hellos = [asyncio.Event() for _ in ports]
         for port, log, ev in zip(ports, self.ws, hellos):
-            task = asyncio.create_task(_ws_client(port, log, ev))
+            port, path = (port, "/ws") if isinstance(port, int) else (int(port[0]), str(port[1]))
+            task = asyncio.create_task(_ws_client(port, path, log, ev))
             task.add_done_callback(self._done)
             self._tasks.append(task)
         await asyncio.wait_for(asyncio.gather(*(e.wait() for e in hellos)), 20)
@@ -91,7 +93,7 @@ class Receiver:
         if not task.cancelled() and task.exception() is not None:
             self.errors.append(f"{type(task.exception()).__name__}: {task.exception()}")
 
-    def connect(self, ports: list[int]) -> None:
+    def connect(self, ports: list) -> None:
         self._call(self._connect(ports))
 
     def dump(self) -> dict:
@@ -111,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     for line in sys.stdin:
         msg = json.loads(line)
         if "connect" in msg:
-            rx.connect([int(p) for p in msg["connect"]])
+            rx.connect([p if isinstance(p, list) else int(p) for p in msg["connect"]])
             _say({"connected": True})
         elif "stop" in msg:
             time.sleep(0.2)  # let the last datagrams in flight land

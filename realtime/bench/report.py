@@ -4,6 +4,7 @@ Latency run → ``latency.json``, ``latency.md``, ``latency_hist.png`` (distribu
 per-hop compute and end-to-end latency), ``latency_timeline.png`` (the same per frame
 over the run, plus send-time jitter), ``frames.npz`` (the per-frame arrays).
 Stream sweep → ``streams.json``, ``streams.md``, ``streams.png``.
+Ensemble → ``ensemble.json``, ``ensemble.md``, ``ensemble.png``.
 """
 
 from __future__ import annotations
@@ -43,6 +44,9 @@ def write_result(result: dict, out: Path, budgets: list[Budget] | None = None) -
         if series is not None:
             np.savez(out / "frames.npz", **series)
             paths += [out / "frames.npz", *plot_latency(result, series, out)]
+    elif kind == "ensemble":
+        paths[1].write_text(ensemble_markdown(result, budgets))
+        paths.append(plot_ensemble(result, out))
     else:
         paths[1].write_text(streams_markdown(result, budgets))
         paths.append(plot_streams(result, out))
@@ -260,6 +264,101 @@ def streams_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
+def ensemble_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
+    """The ensemble table: N performers in one process against N processes (docs/latency.md)."""
+    notes = _budget_notes(r, budgets)
+    st = r["settings"]
+    lines = [
+        f"# Ensemble: N performers on one input, one process against N processes ({r['label']})",
+        "",
+        f"Command: `{r.get('command', '?')}`",
+        "",
+        f"* Audio: `{r['audio']}`, {st['seconds']:g} s replayed in real time at {st['sample_rate']} Hz in blocks of "
+        f"{st['block_size']}; model {r.get('model', '?')} ({r['checkpoint_source']}), cost cycle "
+        f"{r.get('cycle_frames', '?')} frames; {st['threads']} torch thread(s) per process",
+        "* One process: one `performer run`-style engine, one audio input and feature extractor, N performers "
+        "(seeds 0..N-1, code steps staggered unless said), each with its own VMC receiver and WebSocket path "
+        "`/ws/pJ` on one server",
+        "* Separate processes: N single-performer processes, each replaying the same audio with its own extractor "
+        "(the streams sweep's harness)",
+        f"* Machine: {machine_line(r)}",
+        "",
+        "| performers | mode | per-hop p50 ms | per-hop p99 ms | of which features p50 | CPU ms per frame (all "
+        "performer processes) | worst e2e OSC p99 ms | worst e2e WS p99 ms | lost | peak RSS MB (sum) | "
+        "all CPUs busy % |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in r["rows"]:
+        p99 = _f(row["per_hop_ms_p99"])
+        note = notes.get(f"per_hop_ms_p99_{row['performers']}", "") if row["mode"] == "one process" else ""
+        p99 = f"{p99} {note}".rstrip()
+        lines.append(
+            f"| {row['performers']} | {row['mode']} | {_f(row['per_hop_ms_p50'])} | {p99} | "
+            f"{_f(row['features_ms_p50'])} | {_f(row['cpu_ms_per_frame'])} | {_f(row['worst_e2e_osc_ms_p99'])} | "
+            f"{_f(row['worst_e2e_ws_ms_p99'])} | {row['lost_frames']} / {row['frames']} | "
+            f"{_f(row['peak_rss_mb'], 0)} | {_f(row['machine_busy_percent'], 0)} |")
+    lines += ["", "Separate processes: per-hop p50 is the median of the processes' p50, p99 the worst process's "
+              "(each process's hop includes its own features).", ""]
+    if r["marginal"]:
+        lines += ["## Cost of each added performer", "",
+                  "| mode | per-hop p50 ms | per-hop p99 ms | CPU ms per frame | peak RSS MB |",
+                  "|---|---|---|---|---|"]
+        for mode, fig in r["marginal"].items():
+            cells = []
+            for key in ("per_hop_ms_p50", "per_hop_ms_p99", "cpu_ms_per_frame", "peak_rss_mb"):
+                per_n = ", ".join(f"{_f(v)} at {n}" for n, v in fig[key]["per_n"].items())
+                cells.append(f"**{_f(fig[key]['slope'])}** ({per_n})")
+            lines.append(f"| {mode} | " + " | ".join(cells) + " |")
+        lines += ["", "Bold: the least-squares slope over the counts; in brackets `(figure(N) - figure(1)) / (N - 1)`.",
+                  ""]
+    parts = [row for row in r["rows"] if row.get("performer_part_ms_p50")]
+    if parts:
+        lines += ["## Where the one-process hop goes (p50, ms per frame)", "",
+                  "| performers | mode | features (input stage) | each performer's part, in lane order (model, "
+                  "guard, smoothing, sends) | phases |", "|---|---|---|---|---|"]
+        for row in parts:
+            lines.append(f"| {row['performers']} | {row['mode']} | {_f(row['features_ms_p50'])} | "
+                         f"{' '.join(_f(v) for v in row['performer_part_ms_p50'])} | "
+                         f"{' '.join(str(p) for p in row['phases'])} |")
+        lines.append("")
+    checks = r["stream_vs_offline"]
+    lines += [f"Streaming against offline, per stagger phase ({', '.join(str(c['phase']) for c in checks)}): each "
+              f"performer's model fed its lead-in of silence frames and then the first {checks[0]['frames']} "
+              f"feature frames {checks[0]['chunks']}, against the offline pass on the same frames: largest "
+              f"difference {max(c['max_abs'] for c in checks):.2g} {notes.get('stream_offline_max_abs', '')}.", ""]
+    return "\n".join(lines) + "\n"
+
+
+def plot_ensemble(r: dict, out: Path) -> Path:
+    """Per-hop p50/p99 and CPU per frame against the number of performers, per mode."""
+    plt = _plt()
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4))
+    for mode, style in (("one process", "o-"), ("separate processes", "s--"), ("one process, not staggered", "x:")):
+        rows = sorted((row for row in r["rows"] if row["mode"] == mode), key=lambda row: row["performers"])
+        if not rows:
+            continue
+        n = [row["performers"] for row in rows]
+        ax.plot(n, [row["per_hop_ms_p99"] for row in rows], style, label=f"{mode}, p99")
+        ax.plot(n, [row["per_hop_ms_p50"] for row in rows], style, alpha=0.5, label=f"{mode}, p50")
+        ax2.plot(n, [row["cpu_ms_per_frame"] for row in rows], style, label=mode)
+    ax.axhline(5.0, color="r", lw=0.8, label="5 ms budget (4 performers, one process)")
+    ax.set_xlabel("performers")
+    ax.set_ylabel("per-hop compute, ms")
+    ax.legend(fontsize=7)
+    ax2.set_xlabel("performers")
+    ax2.set_ylabel("CPU ms per frame, all performer processes")
+    ax2.legend(fontsize=7)
+    fig.suptitle(f"{r['label']}: ensemble in one process vs separate processes", fontsize=10)
+    return _save(plt, fig, out / "ensemble.png")
+
+
+def _save(plt, fig, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def _plt():
     import matplotlib
 
@@ -332,11 +431,7 @@ def plot_streams(r: dict, out: Path) -> Path:
     ax2.set_ylim(0, 105)
     ax.legend(fontsize=8, loc="upper left")
     ax.set_title(f"sustained: {r['sustained_streams']} streams", fontsize=10)
-    fig.tight_layout()
-    path = out / "streams.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, out / "streams.png")
 
 
 def summary_markdown(results: list[dict]) -> str:
@@ -368,6 +463,15 @@ def summary_markdown(results: list[dict]) -> str:
     for r in (r for r in results if r.get("kind") == "streams"):
         lines.append(f"Concurrent streams sustained (every stream's p99 end-to-end < {FRAME_PERIOD_MS:.1f} ms): "
                      f"**{r['sustained_streams']}** (`{r.get('command', '')}`)")
+        lines.append("")
+    for r in (r for r in results if r.get("kind") == "ensemble"):
+        m = r["metrics"]
+        hops = ", ".join(f"{row['performers']}: {_f(row['per_hop_ms_p99'])}" for row in r["rows"]
+                         if row["mode"] == "one process")
+        lines.append(f"Ensemble in one process, per-hop p99 ms by performers ({hops}); each added performer "
+                     f"+{_f(m.get('added_performer_hop_ms_p50'))} ms per-hop p50, +{_f(m.get('added_performer_cpu_ms'))} "
+                     f"ms CPU per frame (a separate process: +{_f(m.get('added_process_cpu_ms'))}) "
+                     f"(`{r.get('command', '')}`)")
         lines.append("")
     cmds = [r.get("command") for r in lat if r.get("command")]
     if cmds:

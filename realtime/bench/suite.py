@@ -1,12 +1,14 @@
-"""The latency suite (:func:`run_latency`) and the concurrency sweep (:func:`run_streams`).
+"""The latency suite (:func:`run_latency`), the concurrency sweep (:func:`run_streams`) and
+the ensemble comparison (:func:`run_ensemble`).
 
-Both replay recorded audio in real time through whole performer processes
+All replay recorded audio in real time through whole performer processes
 (:mod:`realtime.bench.harness`) and return JSON-able dicts; :mod:`realtime.bench.report`
 writes them out. Every figure is defined in docs/latency.md.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import platform
@@ -278,18 +280,29 @@ def model_step_costs(checkpoint: Path, features: np.ndarray, frames: int = 240, 
     }
 
 
-def stream_vs_offline(checkpoint: Path, features: np.ndarray, seed: int = 0) -> dict:
+def stream_vs_offline(checkpoint: Path, features: np.ndarray, seed: int = 0, phase: int = 0) -> dict:
     """Streaming equals offline: the engine's pose model fed ``features`` a few frames per push
     (0-3 frames, seeded: the engine pushes 0, 1 or 2 per audio block) against the offline pass
     (:func:`models.generate.run_model`: ``offline_windowed`` for a causal U-Net,
     ``DanceVQ.generate`` for dance_vq) on the same features. Returns frames, the chunking
-    and the largest absolute difference of any pose value."""
+    and the largest absolute difference of any pose value.
+
+    ``phase``: a staggered performer of an ensemble (:attr:`realtime.engine.Performer.phase`):
+    its model first hears :func:`~realtime.engine.stagger_lead`'s silence frames, as the engine
+    feeds them after a reset, and the offline pass runs on those frames followed by
+    ``features``; the frames after the lead-in are compared."""
     from models.generate import run_model
+    from realtime.engine import stagger_lead
     from realtime.pipeline import build_pipeline
 
     pipeline = build_pipeline(checkpoint)
     x = features.astype(np.float32)
-    offline = run_model(pipeline.model.model, x)
+    lead = stagger_lead(pipeline.model, pipeline.extractor_factory, phase)
+    if lead is not None:
+        pipeline.model.push(lead)
+        offline = run_model(pipeline.model.model, np.concatenate([lead, x]))[len(lead):]
+    else:
+        offline = run_model(pipeline.model.model, x)
     rng = np.random.default_rng(seed)
     parts, i = [], 0
     while i < len(x):
@@ -297,7 +310,8 @@ def stream_vs_offline(checkpoint: Path, features: np.ndarray, seed: int = 0) -> 
         parts.append(pipeline.model.push(x[i : i + k]))
         i += k
     live = np.concatenate(parts)
-    return {"frames": int(len(x)), "chunks": "0-3 frames per push, seeded",
+    return {"frames": int(len(x)), "chunks": "0-3 frames per push, seeded", "phase": int(phase),
+            "lead_frames": 0 if lead is None else len(lead),
             "max_abs": float(np.abs(live - offline).max()) if len(x) else 0.0}
 
 
@@ -423,6 +437,19 @@ def offline_rtf(audio: Path, checkpoint: Path, baseline_checkpoint: Path | None 
 
 # -- the two suites ---------------------------------------------------------------------------
 
+@contextlib.contextmanager
+def _sweep(cfg: BenchConfig):
+    """A sweep's setup: pin to ``cfg.cores``, a scratch directory, the checkpoint and the machine
+    (its end load average added on the way out); yields (workdir, checkpoint, how chosen, machine)."""
+    cores = pin_cores(cfg.cores)
+    with tempfile.TemporaryDirectory(prefix="performer-bench-") as tmp:
+        work = Path(tmp)
+        checkpoint, how = resolve_checkpoint(cfg.checkpoint, work)
+        info = machine_info(cores)
+        yield work, checkpoint, how, info
+        info["loadavg_end"] = list(os.getloadavg())
+
+
 def _settings(cfg: BenchConfig, checkpoint: Path, seconds: float, model: str = "streaming") -> RunSettings:
     return RunSettings(checkpoint, seconds, cfg.block_size, cfg.threads, cfg.warmup_s, model)
 
@@ -541,12 +568,8 @@ def run_streams(audios: Sequence[Path], cfg: BenchConfig, counts: Sequence[int] 
     """
     if not audios:
         raise ConfigError("the stream sweep needs at least one --audio file")
-    cores = pin_cores(cfg.cores)
     rows = []
-    with tempfile.TemporaryDirectory(prefix="performer-bench-") as tmp:
-        work = Path(tmp)
-        checkpoint, how = resolve_checkpoint(cfg.checkpoint, work)
-        info = machine_info(cores)
+    with _sweep(cfg) as (work, checkpoint, how, info):
         segs: dict[int, Path] = {}
         for n in counts:
             specs = []
@@ -561,7 +584,6 @@ def run_streams(audios: Sequence[Path], cfg: BenchConfig, counts: Sequence[int] 
             rows.append(_sweep_row(n, run))
             if stop_on_fail and not rows[-1]["pass"]:
                 break
-        info["loadavg_end"] = list(os.getloadavg())
     sustained = 0
     for row in rows:
         if not row["pass"]:
@@ -603,3 +625,153 @@ def _sweep_row(n: int, run: dict) -> dict:
         "overruns": sum(m["overruns"] for m in per),
         "pass": bool(math.isfinite(worst) and worst < FRAME_PERIOD_MS),
     }
+
+
+# -- the ensemble: N performers in one process against N processes ---------------------------
+
+def run_ensemble(audio: Path, cfg: BenchConfig, counts: Sequence[int] = (1, 2, 4, 8), seconds: float = 20.0,
+                 separate: bool = True, unstaggered: Sequence[int] = (4,), label: str | None = None) -> dict:
+    """The ensemble comparison on one recording: for each N in ``counts``, N performers (seeds
+    0..N-1, the engine's stagger) in ONE process on the one audio input, and, with
+    ``separate``, the same N as N single-performer processes each replaying the same audio
+    (the streams sweep's machinery, :func:`~realtime.bench.harness.run_performers`); for each
+    N in ``unstaggered``, one process again with every performer at phase 0 (their code steps
+    on the same hops). Every performer has its own loopback VMC receiver and WebSocket client.
+
+    Figures per row (:func:`_ensemble_row`): the whole hop (one process: the engine's timer
+    over every performer; separate: each process's own hop, median p50 and worst p99), the
+    CPU time per frame of all performer processes together, the worst performer's end-to-end
+    latency, lost frames, memory. The cost of each added performer is
+    ``(figure(N) - figure(1)) / (N - 1)`` and the least-squares slope over ``counts``.
+    Streaming equals offline for every phase the largest N uses (:func:`stream_vs_offline`,
+    first 60 s).
+    """
+    import torch
+
+    from models.features.audio_io import load_audio
+    from models.features.spectral import extract_features
+    from models.generate import load_model
+    from realtime.engine import cycle_frames
+    from realtime.pipeline import build_pipeline
+
+    if not counts or min(counts) < 1:
+        raise ConfigError(f"--counts must be positive, got {list(counts)}")
+    audio = Path(audio)
+    rows = []
+    with _sweep(cfg) as (work, checkpoint, how, info):
+        seg = audio_segment(audio, cfg.sample_rate, seconds, 0.0, work / "audio.npy")
+        settings = _settings(cfg, checkpoint, seconds)
+        plan = [(n, "one process", True) for n in counts]
+        if separate:
+            plan = [step for n in counts for step in ((n, "one process", True), (n, "separate processes", True))]
+        plan += [(n, "one process, not staggered", False) for n in unstaggered]
+        for n, mode, stagger in plan:
+            specs = [StreamSpec(label or audio.stem, seg, cfg.sample_rate)] * n
+            run = run_performers(specs, settings, work / f"n{n}-{len(rows)}", ensemble=mode != "separate processes",
+                                 stagger=stagger)
+            rows.append(_ensemble_row(n, mode, run))
+        pipeline = build_pipeline(checkpoint)
+        cycle = cycle_frames(pipeline.model)
+        phases = sorted({j * cycle // max(counts) for j in range(max(counts))})
+        loaded = load_model(checkpoint)
+        torch.set_num_threads(cfg.threads)
+        x, _ = load_audio(audio, SAMPLE_RATE)
+        feats = extract_features(x[: 60 * SAMPLE_RATE], loaded.features)
+        checks = [stream_vs_offline(checkpoint, feats, phase=p) for p in phases]
+    result = {
+        "kind": "ensemble",
+        "label": label or audio.stem,
+        "audio": str(audio),
+        "checkpoint_source": how,
+        "model": loaded.name,
+        "cycle_frames": cycle,
+        "machine": info,
+        "settings": {"seconds": seconds, "counts": list(counts), "separate": separate,
+                     "unstaggered": list(unstaggered),
+                     **{k: v for k, v in asdict(cfg).items() if k not in ("checkpoint", "notes")}},
+        "rows": rows,
+        "marginal": _marginal(rows),
+        "stream_vs_offline": checks,
+    }
+    result["metrics"] = ensemble_metrics(result)
+    return result
+
+
+def _ensemble_row(n: int, mode: str, run: dict) -> dict:
+    """One row of the ensemble table from :func:`~realtime.bench.harness.run_performers`."""
+    per = [stream_metrics(r) for r in run["streams"]]
+    frames = per[0]["frames"]
+    if "process" in run:  # one process: its whole hop, its own CPU and memory
+        proc = run["process"]
+        hop = summarize(np.asarray(proc["compute_ms"]))
+        hop_p50, hop_p99 = hop["p50"], hop["p99"]
+        features_p50 = summarize(np.asarray(proc["features_ms"]))["p50"]
+        cpu_s, rss = proc["cpu_s"], proc["peak_rss_mb"]
+        extractors = proc["extractors"]
+    else:  # separate processes: each its own hop (features included); CPU and memory summed
+        hop_p50 = float(np.median([m["per_hop_ms"]["p50"] for m in per]))
+        hop_p99 = max(m["per_hop_ms"]["p99"] for m in per)
+        features_p50 = None
+        cpu_s, rss = sum(r["cpu_s"] for r in run["streams"]), sum(m["peak_rss_mb"] for m in per)
+        extractors = n
+    return {
+        "performers": n,
+        "mode": mode,
+        "per_hop_ms_p50": hop_p50,
+        "per_hop_ms_p99": hop_p99,
+        "features_ms_p50": features_p50,
+        "performer_part_ms_p50": [m["per_hop_ms"]["p50"] for m in per] if "process" in run else None,
+        "phases": [r.get("phase", 0) for r in run["streams"]],
+        "cpu_ms_per_frame": 1000.0 * cpu_s / max(frames, 1),
+        "peak_rss_mb": rss,
+        "extractors": extractors,
+        "worst_e2e_osc_ms_p99": max(m["e2e_osc_ms_p99_counting_losses"] for m in per),
+        "worst_e2e_ws_ms_p99": max(m["e2e_ws_ms_p99_counting_losses"] for m in per),
+        "lost_frames": sum(m["lost_osc"] + m["lost_ws"] for m in per),
+        "frames": sum(m["frames"] for m in per),
+        "overruns": sum(m["overruns"] for m in per) if "process" not in run else per[0]["overruns"],
+        "machine_busy_percent": run["machine_busy_percent"],
+        "receiver_cpu_percent": 100.0 * run["receiver_cpu_s"] / max(run["wall_s"], 1e-9),
+    }
+
+
+def _marginal(rows: list[dict]) -> dict:
+    """The cost of each added performer, per mode (staggered ones): per figure, the slope of
+    a least-squares line over the counts, and ``(figure(N) - figure(1)) / (N - 1)`` per N."""
+    out: dict = {}
+    for mode in ("one process", "separate processes"):
+        mine = sorted((r for r in rows if r["mode"] == mode), key=lambda r: r["performers"])
+        if len(mine) < 2:
+            continue
+        n = np.array([r["performers"] for r in mine], dtype=np.float64)
+        figures = {}
+        for key in ("per_hop_ms_p50", "per_hop_ms_p99", "cpu_ms_per_frame", "peak_rss_mb"):
+            y = np.array([r[key] for r in mine], dtype=np.float64)
+            first = mine[0]
+            per_n = {str(r["performers"]): (r[key] - first[key]) / (r["performers"] - first["performers"])
+                     for r in mine[1:]}
+            figures[key] = {"slope": float(np.polyfit(n, y, 1)[0]), "per_n": per_n}
+        out[mode] = figures
+    return out
+
+
+def ensemble_metrics(r: dict) -> dict[str, float]:
+    """The flat figures budgets are checked against (keys of ``[ensemble]`` in budgets.toml):
+    ``per_hop_ms_p99_N`` / ``per_hop_ms_p50_N`` (one process, staggered) for every N run,
+    the slopes of the added performer's cost in one process, lost frames (one process) and
+    the largest stream-vs-offline difference over the phases."""
+    m: dict[str, float] = {}
+    for row in r["rows"]:
+        if row["mode"] == "one process":
+            m[f"per_hop_ms_p99_{row['performers']}"] = row["per_hop_ms_p99"]
+            m[f"per_hop_ms_p50_{row['performers']}"] = row["per_hop_ms_p50"]
+    one = r["marginal"].get("one process")
+    if one is not None:
+        m["added_performer_hop_ms_p50"] = one["per_hop_ms_p50"]["slope"]
+        m["added_performer_cpu_ms"] = one["cpu_ms_per_frame"]["slope"]
+    sep = r["marginal"].get("separate processes")
+    if sep is not None:
+        m["added_process_cpu_ms"] = sep["cpu_ms_per_frame"]["slope"]
+    m["lost_frames"] = sum(row["lost_frames"] for row in r["rows"] if row["mode"] != "separate processes")
+    m["stream_offline_max_abs"] = max(c["max_abs"] for c in r["stream_vs_offline"])
+    return m

@@ -17,6 +17,14 @@
 
 SPEC keys: checkpoint, audio_npy, sample_rate, block_size, seconds, threads, warmup_s,
 model ("streaming" or "naive"), osc_port, out, name.
+
+An ensemble (``performer bench ensemble``): SPEC has ``performers``, a list of
+``{"name", "osc_port", "seed", "phase"}`` (phase null: the engine's stagger), instead of
+``osc_port`` and ``name``. One engine runs them all on the one audio input, each with its
+own VMC target and its own path ``/ws/NAME`` on one WebSocket server; ``ready`` carries
+``ws_paths``; ``out`` holds ``streams`` (one record as above per performer, its own
+compute: model to sends) and the process's figures: the whole hop per frame
+(``compute_ms``), the input stage's share (``features_ms``), CPU, RSS, extractors.
 """
 
 from __future__ import annotations
@@ -78,16 +86,14 @@ class ScheduledSource:
 class TimingSink:
     """Records, per frame sent, its index, completing sample, block release and send instants.
 
-    Runs on the engine's worker thread, right after the engine itself looked up the same
-    release time in its current ring (``engine.ring``), so the ring's forward-only cursor
-    is respected. Preallocated arrays of ``capacity`` frames; frames beyond it are
-    counted in ``overflow``.
+    Runs on the engine's worker thread; the release instant is the one the engine stamped
+    on the frame (``PoseFrame.released``). Preallocated arrays of ``capacity`` frames;
+    frames beyond it are counted in ``overflow``.
     """
 
     name = "timing"
 
-    def __init__(self, engine, capacity: int) -> None:
-        self.engine = engine
+    def __init__(self, capacity: int) -> None:
         self.index = np.zeros(capacity, dtype=np.int64)
         self.sample = np.zeros(capacity, dtype=np.int64)
         self.released = np.zeros(capacity, dtype=np.float64)
@@ -102,7 +108,7 @@ class TimingSink:
             return
         self.index[n] = frame.index
         self.sample[n] = frame.audio_sample
-        self.released[n] = self.engine.ring.release_time(frame.audio_sample)
+        self.released[n] = frame.released
         self.sent[n] = frame.wall_time
         self.count = n + 1
 
@@ -160,30 +166,47 @@ def run(spec: dict) -> dict:
     """Steps 1-5 of the module docstring; returns what it wrote to ``spec["out"]``."""
     import torch
 
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine, EngineConfig, Performer
     from realtime.osc_out import OscSink
     from realtime.pipeline import build_pipeline
     from realtime.ws_server import WebSocketSink
 
     threads = int(spec.get("threads", 1))
     torch.set_num_threads(threads)
-    pipeline = build_pipeline(spec["checkpoint"])
-    model = _model(pipeline, spec.get("model", "streaming"), spec["checkpoint"])
     samples = np.load(spec["audio_npy"])
     sr, block = int(spec["sample_rate"]), int(spec["block_size"])
     seconds = float(spec["seconds"])
     frames_max = int(seconds * 30) + 64
-    sinks = [OscSink("127.0.0.1", int(spec["osc_port"]), mode="vmc"), WebSocketSink("127.0.0.1", 0)]
-    _say({"ready": True, "ws_port": sinks[1].port, "pid": os.getpid()})
+    ensemble = spec.get("performers")
+    server = WebSocketSink("127.0.0.1", 0)
+    cfg = EngineConfig(threads=threads, warmup_s=float(spec.get("warmup_s", 3.0)), duration_s=seconds,
+                       stats_size=frames_max)
+    if ensemble is None:
+        pipeline = build_pipeline(spec["checkpoint"])
+        model = _model(pipeline, spec.get("model", "streaming"), spec["checkpoint"])
+        lanes = [(spec.get("name", "audio"), [OscSink("127.0.0.1", int(spec["osc_port"]), mode="vmc"), server,
+                                               TimingSink(frames_max)])]
+        _say({"ready": True, "ws_port": server.port, "pid": os.getpid()})
+    else:
+        loaded: dict = {}
+        performers = []
+        for k, p in enumerate(ensemble):
+            pipe = build_pipeline(spec["checkpoint"], seed=int(p.get("seed", 0)), loaded=loaded)
+            sinks = [OscSink("127.0.0.1", int(p["osc_port"]), mode="vmc"),
+                     server.route(f"/ws/{p['name']}", p["name"], default=k == 0), TimingSink(frames_max)]
+            performers.append(Performer(p["name"], pipe.model, pipe.extractor_factory, sinks,
+                                        feature_key=pipe.feature_key, phase=p.get("phase")))
+        lanes = [(p.name, p.sinks) for p in performers]
+        _say({"ready": True, "ws_port": server.port, "ws_paths": [f"/ws/{p['name']}" for p in ensemble],
+              "pid": os.getpid()})
 
     _hear("warm_up")
     source = ScheduledSource(FileSource(samples, sr, name=spec.get("name", "audio"), block_size=block),
                              lambda: (_say({"warmed": True}), _hear("start_at")["start_at"])[1])
-    cfg = EngineConfig(threads=threads, warmup_s=float(spec.get("warmup_s", 3.0)), duration_s=seconds,
-                       stats_size=frames_max)
-    engine = Engine(source, pipeline.extractor_factory, model, sinks, cfg)
-    timing = TimingSink(engine, frames_max)
-    engine.sinks.append(timing)
+    if ensemble is None:
+        engine = Engine(source, pipeline.extractor_factory, model, lanes[0][1], cfg)
+    else:
+        engine = Engine(source, config=cfg, performers=performers)
     engine.start()
     cpu0, wall0 = _cpu_s(), time.monotonic()
     try:
@@ -192,31 +215,47 @@ def run(spec: dict) -> dict:
         cpu1, wall1 = _cpu_s(), time.monotonic()
         stats = engine.stats()
         engine.close()
-    n = timing.count
-    result = {
-        "name": spec.get("name", "audio"),
-        "model": spec.get("model", "streaming"),
+        server.close()
+    process = {
         "sample_rate": sr,
         "block_size": block,
         "threads": threads,
         "start_at": source.start_at,
         "started_at": source.started_at,
-        "index": timing.index[:n].tolist(),
-        "audio_sample": timing.sample[:n].tolist(),
-        "released": timing.released[:n].tolist(),
-        "sent": timing.sent[:n].tolist(),
-        "compute_ms": engine.compute_ms.values()[:n].tolist(),
         "cpu_s": cpu1 - cpu0,
         "wall_s": wall1 - wall0,
         "peak_rss_mb": peak_rss_mb(),
         "late_blocks": int(source.inner.late_blocks),
         "overruns": int(stats["overruns"]),
-        "nan_frames": int(stats["nan_frames"]),
-        "sink_errors": int(stats["sink_errors"]),
-        "ws_drops": int(stats["sinks"].get(sinks[1].name, {}).get("drops", 0)),
-        "osc_errors": int(stats["sinks"].get(sinks[0].name, {}).get("errors", 0)),
-        "timing_overflow": timing.overflow,
     }
+    records = []
+    for name, (osc, ws, timing) in lanes:
+        lane = stats["performers"][engine.performers[len(records)]]
+        n = timing.count
+        records.append({
+            "name": name,
+            "model": spec.get("model", "streaming"),
+            **process,
+            "index": timing.index[:n].tolist(),
+            "audio_sample": timing.sample[:n].tolist(),
+            "released": timing.released[:n].tolist(),
+            "sent": timing.sent[:n].tolist(),
+            # one performer: the whole hop (the engine's own timer); in an ensemble: this performer's part
+            "compute_ms": (engine.compute_ms if ensemble is None else
+                           engine.performer_compute_ms(engine.performers[len(records)])).values()[:n].tolist(),
+            "nan_frames": int(lane["nan_frames"]),
+            "sink_errors": int(lane["sink_errors"]),
+            "ws_drops": int(lane["sinks"].get(ws.name, {}).get("drops", 0)),
+            "osc_errors": int(lane["sinks"].get(osc.name, {}).get("errors", 0)),
+            "timing_overflow": timing.overflow,
+            "phase": int(lane["phase"]),
+        })
+    if ensemble is None:
+        result = records[0]
+    else:
+        frames = len(records[0]["index"])
+        result = {"streams": records, **process, "compute_ms": engine.compute_ms.values()[:frames].tolist(),
+                  "features_ms": engine.features_ms.values()[:frames].tolist(), "extractors": stats["extractors"]}
     Path(spec["out"]).write_text(json.dumps(result))
     return result
 

@@ -1,4 +1,4 @@
-"""``performer bench``: the latency regression suite (latency, streams, check)."""
+"""``performer bench``: the latency regression suite (latency, streams, ensemble, check)."""
 
 from __future__ import annotations
 
@@ -15,6 +15,8 @@ separate process, and measures where the time goes. See docs/latency.md.
   latency   one recording: per-hop compute, end-to-end latency, algorithmic latency,
             jitter, CPU and memory, the naive baseline and the offline real-time factor
   streams   how many concurrent performer streams one machine sustains
+  ensemble  N performers on one input in one process against N processes: per-hop
+            p50/p99 and the cost of each added performer
   check     compare result files with a budgets file; exit 1 with a diff when over
 """
 
@@ -59,6 +61,29 @@ exit status: 0, 1 when --budgets is given and a budget is exceeded, 2 on bad inp
 """
 
 
+ENSEMBLE_HELP = """\
+For each N in --counts, N performers on the one recording replayed in real time:
+
+  one process          one engine (as `performer run --performer ...`): one audio input,
+                       one feature extractor, N performers (seeds 0..N-1, code steps
+                       staggered), each its own VMC receiver and WebSocket path /ws/pJ
+  separate processes   N single-performer processes, each replaying the same audio with
+                       its own extractor (the streams sweep's harness); --no-separate skips
+  not staggered        one process again for each N of --unstaggered (default 4), every
+                       performer at phase 0: their code steps on the same hops
+
+Figures: per-hop compute p50/p99 (one process: the whole hop over every performer;
+separate: each process's own), its input stage (features), CPU ms per frame of all
+performer processes, worst end-to-end p99 (OSC and WebSocket, lost frames counted as
+late), lost frames, memory; the cost of each added performer ((figure(N) - figure(1)) /
+(N - 1), and the slope over the counts); streaming equal to offline for every stagger
+phase. Budget (benchmarks/budgets.toml [ensemble]): per_hop_ms_p99_4.
+
+Writes OUT/ensemble.json, ensemble.md, ensemble.png.
+exit status: 0, 1 when --budgets is given and a budget is exceeded, 2 on bad input.
+"""
+
+
 def _cores(text: str) -> tuple[int, ...]:
     try:
         cores = tuple(int(c) for c in text.split(",") if c.strip())
@@ -86,7 +111,7 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("bench", help="latency regression suite (latency, streams, check)",
+    p = subparsers.add_parser("bench", help="latency regression suite (latency, streams, ensemble, check)",
                               description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="bench_command", metavar="SUITE")
 
@@ -114,6 +139,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     st.add_argument("--no-stop", action="store_true", help="try every count even after one fails")
     _common(st)
     st.set_defaults(func=streams)
+
+    en = sub.add_parser("ensemble", help="N performers on one input: one process against N processes",
+                        description=ENSEMBLE_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    en.add_argument("--audio", metavar="FILE", help="recording every performer dances to (default: the bundled clip)")
+    en.add_argument("--counts", type=int, nargs="+", default=[1, 2, 4, 8], metavar="N",
+                    help="performer counts, in order (default 1 2 4 8)")
+    en.add_argument("--seconds", type=float, default=20.0, metavar="S", help="seconds per run (default 20)")
+    en.add_argument("--no-separate", action="store_true", help="skip the separate-processes runs")
+    en.add_argument("--unstaggered", type=int, nargs="*", default=[4], metavar="N",
+                    help="counts also run in one process with the stagger off (default 4; none: give no N)")
+    en.add_argument("--label", help="name of the recording in reports (default: file name)")
+    _common(en)
+    en.set_defaults(func=ensemble)
 
     ck = sub.add_parser("check", help="compare result files with budgets; print a diff, exit 1 when over",
                         description="Apply a budgets file (benchmarks/budgets.toml) to latency.json / "
@@ -202,6 +240,19 @@ def streams(args: argparse.Namespace) -> int:
     return _finish(result, Path(args.out), budgets)
 
 
+def ensemble(args: argparse.Namespace) -> int:
+    from models.errors import ConfigError
+    from realtime.bench.suite import run_ensemble
+
+    cfg, audio, budgets = _config(args), _audio(args.audio), _budgets(args.budgets)
+    if any(n < 1 for n in args.counts + args.unstaggered):
+        raise ConfigError(f"--counts and --unstaggered must be positive, got {args.counts + args.unstaggered}")
+    result = run_ensemble(audio, cfg, counts=args.counts, seconds=args.seconds, separate=not args.no_separate,
+                          unstaggered=args.unstaggered, label=args.label)
+    result["command"] = _command()
+    return _finish(result, Path(args.out), budgets)
+
+
 def check(args: argparse.Namespace) -> int:
     import json
 
@@ -213,13 +264,13 @@ def check(args: argparse.Namespace) -> int:
     for r in args.results:
         p = Path(r)
         if p.is_dir():
-            files += sorted(p.rglob("latency.json")) + sorted(p.rglob("streams.json"))
+            files += sorted(p.rglob("latency.json")) + sorted(p.rglob("streams.json")) + sorted(p.rglob("ensemble.json"))
         elif p.is_file():
             files.append(p)
         else:
             raise ConfigError("result file or directory not found", source=p)
     if not files:
-        raise ConfigError(f"no latency.json or streams.json under {', '.join(args.results)}")
+        raise ConfigError(f"no latency.json, streams.json or ensemble.json under {', '.join(args.results)}")
     results = []
     for f in files:
         try:

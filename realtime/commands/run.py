@@ -36,6 +36,16 @@ show control (--control-osc, off by default; docs/show.md): OSC messages to
   /performer/energy     NUMBER     (only models that offer it)
 A bad message is logged once per address, counted in the status line
 ("control N ok M bad") and changes nothing; the stream never stops for it.
+In an ensemble these act on every performer, and /performer/NAME/reset (offset,
+smoothing, idle, style, energy) on the one called NAME.
+
+ensemble (several performers on one audio input; docs/show.md): repeat --performer,
+or give [[performer]] tables in --config. Each performer has its own checkpoint, style,
+seed, smoothing, offset, OSC targets and WebSocket path; the audio input and, where the
+checkpoints' feature configs agree, the feature extractor are shared. Unset keys take
+the top-level options; performer i (from 0) sends OSC to the --osc ports + i and streams
+on ws://HOST:PORT/ws/NAME (/ws is the first performer). Keys: name, checkpoint, style,
+seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase.
 
 examples:
   performer run --audio song.wav --record take1.npz
@@ -43,6 +53,7 @@ examples:
   performer run --audio song.wav --fast --no-ws --osc-mode plain --osc 127.0.0.1:9000
   performer run --input-device "USB Audio" --control-osc 0.0.0.0:9100 --control-allow 192.168.10.0/24
   oscsend 127.0.0.1 9100 /performer/offset f 40       # liblo-tools; QLab, TouchOSC: docs/show.md
+  performer run --audio song.wav --performer alice,style=waltz --performer bob,style=rumba,seed=7
 """
 
 
@@ -109,6 +120,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="positive: delay output by MS and add MS to audio_time; negative: only subtract from "
                         "audio_time (a lead is only possible for receivers that schedule by audio_time)")
     m.add_argument("--warmup", type=float, metavar="S", help="seconds of silence run at start (default 3)")
+    e = p.add_argument_group("ensemble (docs/show.md)")
+    e.add_argument("--performer", action="append", metavar="NAME[,KEY=VALUE...]",
+                   help="one performer of an ensemble on the same audio input; repeat for each. Keys: checkpoint, "
+                        "style, seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase; unset keys take "
+                        "the options above (OSC: their ports + the performer's position from 0; WebSocket path "
+                        "/ws/NAME). Replaces the [[performer]] tables of --config")
     p.add_argument("--quiet", action="store_true", help="no status line")
     p.set_defaults(func=run)
 
@@ -163,6 +180,70 @@ def _open_control(cfg, engine):
     return OscControl(*endpoint, control=engine.control, allow=cfg.control_networks())
 
 
+def _open_ensemble(cfg, specs, source, fallback):
+    """The engine of an ensemble: one pipeline per performer (a checkpoint loaded once however
+    many performers use it), its sinks (recorder, OSC targets, a route on the one WebSocket
+    server). Returns (engine, every sink, the server or None, description lines).
+    Closes what it opened if anything fails."""
+    from models.errors import PerformerError
+    from realtime.engine import Engine, EngineConfig, Performer
+    from realtime.osc_out import OscSink
+    from realtime.pipeline import build_pipeline
+    from realtime.recorder import Recorder
+    from realtime.ws_server import WebSocketSink
+
+    loaded: dict = {}
+    pipelines = []
+    for spec in specs:
+        try:
+            pipelines.append(build_pipeline(spec.checkpoint, seed=spec.seed, loaded=loaded,
+                                            style=None if spec.style == "auto" else spec.style))
+        except PerformerError as exc:
+            raise type(exc)(f"performer {spec.name!r}: {exc}") from None
+    opened: list = []
+    server = None
+    try:
+        ws = cfg.ws_endpoint()
+        if ws is not None:
+            server = WebSocketSink(*ws, token=cfg.ws_token, viewers_open=cfg.ws_viewers_open,
+                                   max_clients=cfg.ws_max_clients, allowed_origins=cfg.ws_origin or None)
+        performers = []
+        for k, (spec, pipe) in enumerate(zip(specs, pipelines)):
+            sinks: list = []
+            if spec.record is not None:
+                sinks.append(Recorder(spec.record, input_sample_rate=source.sample_rate))
+                opened.append(sinks[-1])
+            for host, port in spec.osc:
+                sinks.append(OscSink(host, port, mode=cfg.osc_mode))
+                opened.append(sinks[-1])
+            if server is not None:
+                sinks.append(server.route(spec.ws_path, spec.name, default=k == 0))
+            performers.append(Performer(spec.name, pipe.model, pipe.extractor_factory, sinks,
+                                        feature_key=pipe.feature_key, smoothing=spec.smoothing,
+                                        offset_ms=spec.offset_ms, phase=spec.phase))
+        engine = Engine(
+            source, config=EngineConfig(smoothing=cfg.smoothing, offset_ms=cfg.offset_ms, threads=cfg.threads,
+                                        warmup_s=cfg.warmup, duration_s=cfg.duration,
+                                        fallback_after_s=cfg.fallback_after),
+            fallback_source=fallback, performers=performers)
+    except BaseException:
+        _discard(opened)
+        if server is not None:
+            server.close()
+        raise
+    if server is not None:
+        server.control = engine.control  # only token-authenticated clients can use it
+    phases = engine.phases
+    lines = [f"{source.name} at {source.sample_rate} Hz -> {len(specs)} performers, "
+             f"{len(engine.extractors)} feature extractor{'s' if len(engine.extractors) != 1 else ''}"
+             + (f"; WebSocket {server.url} (/ws: {specs[0].name})" if server is not None else "")]
+    for spec, pipe, perf in zip(specs, pipelines, performers):
+        outs = [f"{s.name} (viewer {s.url})" if hasattr(s, "url") else s.name for s in perf.sinks]
+        lines.append(f"  {spec.name} [{pipe.checkpoint.name}, style {spec.style}, seed {spec.seed}, "
+                     f"phase {phases[spec.name]}] -> {', '.join(outs) or 'no outputs'}")
+    return engine, [s for perf in performers for s in perf.sinks], server, lines
+
+
 def _describe(sinks, source, pipeline, control=None) -> str:
     outs = []
     for s in sinks:
@@ -188,24 +269,36 @@ def run(args: argparse.Namespace) -> int:
 
         fallback = FileSource.open(cfg.fallback_audio, sample_rate=cfg.sample_rate, block_size=cfg.block_size,
                                    realtime=True, loop=True)
-    pipeline = build_pipeline(cfg.checkpoint, seed=cfg.seed, style=None if cfg.style == "auto" else cfg.style)
-    sinks = _open_sinks(cfg, source.sample_rate)
-    engine = Engine(
-        source, pipeline.extractor_factory, pipeline.model, sinks,
-        EngineConfig(smoothing=cfg.smoothing, offset_ms=cfg.offset_ms, threads=cfg.threads,
-                     warmup_s=cfg.warmup, duration_s=cfg.duration, fallback_after_s=cfg.fallback_after),
-        fallback_source=fallback,
-    )
-    for s in sinks:
-        if hasattr(s, "control"):
-            s.control = engine.control  # only token-authenticated clients can use it
+    specs = cfg.performer_specs()
+    server = None
+    if specs:
+        engine, sinks, server, lines = _open_ensemble(cfg, specs, source, fallback)
+    else:
+        pipeline = build_pipeline(cfg.checkpoint, seed=cfg.seed, style=None if cfg.style == "auto" else cfg.style)
+        sinks = _open_sinks(cfg, source.sample_rate)
+        engine = Engine(
+            source, pipeline.extractor_factory, pipeline.model, sinks,
+            EngineConfig(smoothing=cfg.smoothing, offset_ms=cfg.offset_ms, threads=cfg.threads,
+                         warmup_s=cfg.warmup, duration_s=cfg.duration, fallback_after_s=cfg.fallback_after),
+            fallback_source=fallback,
+        )
+        for s in sinks:
+            if hasattr(s, "control"):
+                s.control = engine.control  # only token-authenticated clients can use it
     try:
         control = _open_control(cfg, engine)
     except BaseException:
         _discard(sinks)
+        if server is not None:
+            server.close()
         raise
     if not args.quiet:
-        print(f"performer run: {_describe(sinks, source, pipeline, control)}", file=sys.stderr)
+        if specs:
+            if control is not None:
+                lines[0] += f"; OSC control on {control.host}:{control.port}"
+            print("\n".join(f"performer run: {line}" for line in lines), file=sys.stderr)
+        else:
+            print(f"performer run: {_describe(sinks, source, pipeline, control)}", file=sys.stderr)
     try:
         engine.start()
     except BaseException:
@@ -213,6 +306,8 @@ def run(args: argparse.Namespace) -> int:
         if control is not None:
             control.close()
         _discard(sinks)
+        if server is not None:
+            server.close()
         raise
     if control is not None:
         control.start()
@@ -233,6 +328,8 @@ def run(args: argparse.Namespace) -> int:
         if status is not None:
             status.stop(final=engine.frames_out > 0 or interrupted)
         engine.close()
+        if server is not None:
+            server.close()
     for s in sinks:
         for path in getattr(s, "written", ()):
             print(f"performer run: wrote {path}", file=sys.stderr)
@@ -254,22 +351,37 @@ def reload_settings(args: argparse.Namespace, engine, current):
     nothing; changed settings that need a restart are logged as warnings and ignored.
     """
     from models.errors import PerformerError
-    from realtime.config import live_changes, resolve_run_config
+    from realtime.config import live_changes, performer_live_changes, resolve_run_config
 
     log = logging.getLogger("realtime.reload")
     try:
         new = resolve_run_config(args)
-        live, other = live_changes(current, new)
-        engine.update(**live)
+        if current.performer:  # an ensemble: each performer's resolved settings
+            per, other = performer_live_changes(current, new)
+            for name in per:
+                engine.update(name, **per[name])  # validated by the file's own checks already
+        else:
+            live, other = live_changes(current, new)
+            engine.update(**live)
     except PerformerError as exc:
         log.error("config reload of %s failed, keeping the current settings: %s", args.config, exc)
         return current
     if other:
         log.warning("config reload: %s changed; applied at the next start only", ", ".join(other))
-    changes = ", ".join(f"{k} {getattr(current, k):g} -> {v:g}" for k, v in live.items()) or "no live changes"
-    log.warning("config reloaded from %s: %s", args.config, changes)
     import dataclasses
 
+    if current.performer:
+        changes = "; ".join(f"{name}: " + ", ".join(f"{k} -> {v:g}" for k, v in c.items()) for name, c in per.items())
+        log.warning("config reloaded from %s: %s", args.config, changes or "no live changes")
+        kept = {k: getattr(new, k) for k in ("offset_ms", "smoothing")}
+        if "performer (names)" in other:
+            return dataclasses.replace(current, **kept)
+        by_name = {p.name: p for p in new.performer}
+        return dataclasses.replace(current, **kept, performer=[
+            dataclasses.replace(p, offset_ms=by_name[p.name].offset_ms, smoothing=by_name[p.name].smoothing)
+            for p in current.performer])
+    changes = ", ".join(f"{k} {getattr(current, k):g} -> {v:g}" for k, v in live.items()) or "no live changes"
+    log.warning("config reloaded from %s: %s", args.config, changes)
     return dataclasses.replace(current, **live)
 
 
