@@ -219,3 +219,47 @@ def match_exemplar(cands, dips, cont, decay, beat_frame, beat_bonus, seg, vel_ca
                 out[j, c + k] = q[k] / qn
     _unit_rows(out)
     return best, out
+
+
+@njit(cache=True, nogil=True)
+def embed_token(audio_row, w_a1, b_a1, w_a2, b_a2, code_row):  # pragma: no cover - compiled
+    """A token's input (d,): the audio MLP (GELU) of its standardised frames ``audio_row``
+    (seg * D,) plus ``code_row`` (d,), the previous code's embedding."""
+    u = _vec_mat(audio_row, w_a1, b_a1)
+    for i in range(u.shape[0]):
+        u[i] = np.float32(0.5 * u[i] * (1.0 + math.erf(u[i] * _SQRT_HALF)))
+    out = _vec_mat(u, w_a2, b_a2)
+    for i in range(out.shape[0]):
+        out[i] += code_row[i]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def draw_code(logits, temperature, u):  # pragma: no cover - compiled
+    """The code whose interval of ``softmax(logits / temperature)``'s cumulative sum holds the
+    uniform variate ``u``: ``Generator.choice(p=...)``'s search, in float64 (the total is summed
+    in order, NumPy's pairwise: the two may differ in the last bit, which moves a draw only
+    when ``u`` lies within ~1e-16 of a boundary)."""
+    n = logits.shape[0]
+    z = np.empty(n)
+    top = -np.inf
+    for i in range(n):
+        z[i] = np.float64(logits[i]) / temperature
+        top = max(top, z[i])
+    total = 0.0
+    for i in range(n):
+        z[i] = math.exp(z[i] - top)
+        total += z[i]
+    acc = 0.0
+    for i in range(n):  # the cumulative sum of p / p.sum(), as NumPy's cumsum adds it
+        acc += z[i] / total
+        z[i] = acc
+    last = z[n - 1]
+    lo, hi = 0, n  # searchsorted(cdf / cdf[-1], u, side="right")
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if u < z[mid] / last:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo

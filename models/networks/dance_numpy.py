@@ -39,7 +39,7 @@ from collections.abc import Iterator
 import numpy as np
 from scipy.special import erf
 
-from models.networks.dance_jit import head, row_layer
+from models.networks.dance_jit import embed_token, head, row_layer
 
 _SQRT_HALF = np.float32(np.sqrt(0.5))
 _BLAS = None  # threadpoolctl's controller of the BLAS libraries, made on first use (about 2 ms)
@@ -257,8 +257,8 @@ class NumpyPredictor:
 
     def embed(self, audio_row: np.ndarray, prev: int) -> np.ndarray:
         """One token's input (d,): audio MLP of its standardised frames (seg * D,) + the previous code's embedding."""
-        a = np.asarray(audio_row, np.float32)
-        return _gelu(a @ self.w_a1 + self.b_a1) @ self.w_a2 + self.b_a2 + self.code[prev]
+        a = np.ascontiguousarray(audio_row, np.float32)
+        return embed_token(a, self.w_a1, self.b_a1, self.w_a2, self.b_a2, self.code[prev])  # one compiled call
 
     def logits(self, tokens: np.ndarray, style: int) -> np.ndarray:
         """Logits (K,) of the next code: ``tokens`` (n, d) from :meth:`embed`, n <= window_codes."""

@@ -345,14 +345,16 @@ class DanceStream:
             i = 0
             best = cands[0]
             self._segment = best[: self.seg].copy()
+            cont = _unit(best[self.seg:].copy())
         else:  # motion matching among the drawn codes' exemplars, placed on the beat (one compiled call)
             beat = self._next_beat()
             frame, clarity = beat if beat is not None else (-1, 0.0)
             i, best = match_exemplar(cands, dips, self._cont[:2], self._decay, frame, BEAT_WEIGHT * clarity,
                                      self.seg, VEL_CAP)
             self._segment = best[: self.seg].copy()
+            cont = best[self.seg:].copy()  # match_exemplar's quaternions are unit already
         self._commit(pairs[i][0])
-        self._cont = _unit(best[self.seg:].copy())
+        self._cont = cont
 
     def _commit(self, code: int) -> None:
         self._codes.append(code)

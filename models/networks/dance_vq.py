@@ -44,6 +44,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from models.errors import ConfigError
+from models.networks.dance_jit import draw_code
 from models.networks.generator import config_from_dict
 from models.rig.motion import POSE_DIM
 
@@ -337,6 +338,9 @@ class DanceVQ(nn.Module):
 
     def sample(self, logits: np.ndarray, rng: np.random.Generator) -> int:
         """One code drawn from ``softmax(logits / temperature)`` over the top_k codes."""
+        if not 0 < self.config.top_k < len(logits):  # every code: one compiled call (models/networks/dance_jit.py)
+            return int(draw_code(np.ascontiguousarray(logits, np.float32), float(self.config.temperature),
+                                 rng.random()))
         z = logits.astype(np.float64) / self.config.temperature
         if 0 < self.config.top_k < len(z):
             cut = np.partition(z, -self.config.top_k)[-self.config.top_k]
