@@ -92,7 +92,8 @@ def main(argv: list[str] | None = None) -> int:
         (WebSocketSink, "send", "outputs: WebSocket send"),
     ):
         _wrap(t, owner, name, label)
-    dance_stream.match_exemplar = _timed(t, "dance_vq: code step: motion matching", dance_stream.match_exemplar)
+    if hasattr(dance_stream, "match_exemplar"):  # (older trees: NumPy steps instead)
+        dance_stream.match_exemplar = _timed(t, "dance_vq: code step: motion matching", dance_stream.match_exemplar)
 
     try:
         pipe = build_pipeline(args.checkpoint)
