@@ -37,7 +37,6 @@ one (a new ``DanceStream``).
 from __future__ import annotations
 
 import contextlib
-import math
 from collections.abc import Iterator
 
 import numpy as np
@@ -95,15 +94,6 @@ def _layer_norm(x: np.ndarray, w: np.ndarray, b: np.ndarray, eps: float) -> np.n
     return xc / np.sqrt(var + eps) * w + b
 
 
-def _layer_norm_row(x: np.ndarray, w: np.ndarray, b: np.ndarray, eps: float) -> np.ndarray:
-    """:func:`_layer_norm` of one row (d,), in six array operations (the mean and variance as
-    Python floats, the variance by a dot product): the code step's row runs it seven times,
-    and on the live path every NumPy call costs several µs."""
-    d = len(x)
-    xc = x - float(np.add.reduce(x)) / d
-    return xc * (w / math.sqrt(float(np.dot(xc, xc)) / d + eps)) + b
-
-
 class _Layer:
     """One ``nn.TransformerEncoderLayer`` (norm_first, GELU, eval mode: no dropout)."""
 
@@ -156,18 +146,6 @@ class _Layer:
         One compiled call (:func:`models.networks.dance_jit.row_layer`)."""
         return row_layer(h, kh, vh, m, *self.n1, self.w_qkv, self.b_qkv, self.w_o, self.b_o, *self.n2,
                          self.w_1, self.b_1, self.w_2, self.b_2, self.scale)
-
-    def row_numpy(self, h: np.ndarray, kh: np.ndarray, vh: np.ndarray, m: int) -> np.ndarray:
-        """:meth:`row` in NumPy calls (the reference the compiled kernel is tested against)."""
-        d = self.d
-        qkv = _layer_norm_row(h, *self.n1) @ self.w_qkv + self.b_qkv  # (3d,)
-        kh[:, :, m] = qkv[d: 2 * d].reshape(self.heads, -1)
-        vh[:, m] = qkv[2 * d:].reshape(self.heads, -1)
-        s = (qkv[:d].reshape(self.heads, 1, -1) @ kh) * self.scale  # (H, 1, m + 1)
-        s = np.exp(s - s.max(-1, keepdims=True))
-        s /= s.sum(-1, keepdims=True)
-        h = h + (s @ vh).reshape(d) @ self.w_o + self.b_o
-        return h + _gelu(_layer_norm_row(h, *self.n2) @ self.w_1 + self.b_1) @ self.w_2 + self.b_2
 
     def __call__(self, h: np.ndarray, mask: np.ndarray, last_only: bool) -> np.ndarray:
         """Rows ``h`` (n, d) -> (n, d), or (1, d) for the last row only (``last_only``)."""
