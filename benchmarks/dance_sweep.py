@@ -1,7 +1,8 @@
 """How a dance_vq checkpoint's playback settings move its motion metrics (docs/training.md).
 
-For each setting ``DRAWS,BEAT_WEIGHT[,TEMPERATURE]`` (codes drawn per step, weight of a speed
-dip on the expected beat, sampling temperature; models/networks/dance_stream.py) and each
+For each setting ``DRAWS,BEAT_WEIGHT[,TEMPERATURE[,BEAT_WARP]]`` (codes drawn per step, weight
+of a speed dip on the expected beat, sampling temperature, depth of the beat warp;
+models/networks/dance_stream.py; TEMPERATURE 0 keeps the checkpoint's) and each
 seed, generates the 6 validation dances through the live stream and prints the dance-scale
 amplitude and jitter ratios (models.evaluation.metrics.band_ratios), the jerk against the
 real dances' and the pooled beat hit rate and coverage (the evaluate report's definitions)::
@@ -32,7 +33,7 @@ def jerk(pos: list[np.ndarray]) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("settings", nargs="*", default=["1,1"], help="DRAWS,BEAT_WEIGHT[,TEMPERATURE] (default 1,1)")
+    p.add_argument("settings", nargs="*", default=["1,1"], help="DRAWS,BEAT_WEIGHT[,TEMPERATURE[,BEAT_WARP]] (default 1,1)")
     p.add_argument("--checkpoint", default=None, help="a dance_vq checkpoint (default: the packaged one)")
     p.add_argument("--data", required=True, type=Path, help="the DWM dataset directory")
     p.add_argument("--cache", default=".cache/corpus", help="corpus cache (default .cache/corpus)")
@@ -51,10 +52,10 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(1)
     try:
         specs = [[float(v) for v in s.split(",")] for s in args.settings]
-        if any(len(s) not in (2, 3) or s[0] < 1 for s in specs):
+        if any(len(s) not in (2, 3, 4) or s[0] < 1 for s in specs):
             raise ValueError
     except ValueError:
-        print(f"dance_sweep: settings are DRAWS,BEAT_WEIGHT[,TEMPERATURE] with DRAWS >= 1, got {args.settings}",
+        print(f"dance_sweep: settings are DRAWS,BEAT_WEIGHT[,TEMPERATURE[,BEAT_WARP]] with DRAWS >= 1, got {args.settings}",
               file=sys.stderr)
         return 2
     try:
@@ -72,17 +73,20 @@ def main(argv: list[str] | None = None) -> int:
     rb = pooled_beats(real, beats)
     print(f"real dances: jerk {jerk(real):.1f} m/s^3, beat hit rate {rb['beat_hit_rate']:.4f}, "
           f"coverage {rb['beat_coverage']:.3f}, chance {rb['beat_hit_chance']:.4f}")
-    print("| draws | beat weight | temperature | seed | dance amp | jitter | jerk / real | beat hit rate | beat coverage |")
-    print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    print("| draws | beat weight | temperature | beat warp | seed | dance amp | jitter | jerk / real | beat hit rate "
+          "| beat coverage |")
+    print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     config0 = lm.model.config
+    warp0 = ds.BEAT_WARP
     for s in specs:
         ds.DRAWS, ds.BEAT_WEIGHT = int(s[0]), s[1]
-        temp = s[2] if len(s) == 3 else config0.temperature
+        temp = s[2] if len(s) >= 3 and s[2] > 0 else config0.temperature
+        ds.BEAT_WARP = s[3] if len(s) == 4 else warp0
         lm.model.config = dataclasses.replace(config0, temperature=temp)
         for seed in args.seeds:
             gen = [positions(run_model(lm.model, c.features, seed=seed)) for c in clips]
             r, b = band_ratios(gen, real), pooled_beats(gen, beats)
-            print(f"| {int(s[0])} | {s[1]:g} | {temp:g} | {seed} | {r['band_amp']:.3f} | {r['jitter']:.3f} | "
+            print(f"| {int(s[0])} | {s[1]:g} | {temp:g} | {ds.BEAT_WARP:g} | {seed} | {r['band_amp']:.3f} | {r['jitter']:.3f} | "
                   f"{jerk(gen) / jerk(real):.2f} | {b['beat_hit_rate']:.4f} | {b['beat_coverage']:.3f} |", flush=True)
     return 0
 

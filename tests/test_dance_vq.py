@@ -448,3 +448,82 @@ def test_inertialization_starts_on_the_motion_and_never_whips_a_bone():
         # a still exemplar: each frame turns by the offset's decay (<= 180 deg x max |dh0/dj| = 180 x 1.5 / 16)
         # plus the capped velocity's (0.4 rad x max |dh1/dj| = 0.4 x 1 -> 23 deg)
         assert steps.max() < 180 * 1.5 / 16 + 23 + 1
+
+
+BEAT = DanceVQConfig(feature_dim=20, codebook=16, code_dim=8, enc_width=16, dec_width=16, d_model=16, layers=1,
+                     heads=2, window_codes=4, energy_col=0, clarity_col=16, members=15)
+
+
+def beat_music(n: int, period: float = 15.0, clarity: float = 0.5, seed: int = 0) -> np.ndarray:
+    """Loud random features whose beat-tracker columns (14-17: c cos, c sin, c, log2 P/15) say a
+    beat every ``period`` frames, on frames 0, period, 2 period, ..."""
+    x = music(n, seed)[:, :1].repeat(BEAT.feature_dim, axis=1)
+    x[:, 1:14] = np.random.default_rng(seed).normal(size=(n, 13))
+    theta = 2 * np.pi * np.arange(n) / period
+    x[:, 14], x[:, 15], x[:, 16], x[:, 17] = clarity * np.cos(theta), clarity * np.sin(theta), clarity, np.log2(
+        period / 15.0)
+    x[:, 18:] = 0.0
+    return x
+
+
+def turning_exemplars(m: DanceVQ, deg_per_frame: float = 3.0) -> None:
+    """Give every code of ``m`` (whose config holds ``members = 360 / (seg * deg_per_frame)``)
+    the same exemplars: every bone turning about the vertical at a steady ``deg_per_frame``, one
+    exemplar starting at each multiple of ``seg * deg_per_frame`` degrees, so that motion
+    matching always finds the exact continuation: smooth motion at a constant speed."""
+    from scipy.spatial.transform import Rotation
+
+    c = m.config
+    f = np.arange(2 * c.seg)
+    with torch.no_grad():
+        for j in range(c.members):
+            angles = (j * c.seg * deg_per_frame + deg_per_frame * f)[:, None]
+            q = Rotation.from_euler("y", angles, degrees=True).as_quat()
+            pose = np.zeros((len(f), c.pose_dim), np.float32)
+            pose[:, 1] = 1.0
+            pose[:, 3:] = np.tile(q, (1, (c.pose_dim - 3) // 4))
+            m.member_poses[:, j] = torch.from_numpy(pose)
+        m.member_count[:] = c.members
+
+
+def test_beat_warp_slows_the_motion_into_every_beat_and_streams_like_the_whole_song(monkeypatch):
+    import models.networks.dance_stream as ds
+
+    m = DanceVQ(BEAT).eval()
+    turning_exemplars(m)
+    x = beat_music(900)
+    warped = m.generate(x, seed=2)
+    s, parts, i = DanceStream(m, seed=2), [], 0
+    for k in np.random.default_rng(1).integers(0, 13, size=900):
+        parts.append(s.push(x[i: i + k]))
+        i += k
+    parts.append(s.push(x[i:]))
+    np.testing.assert_allclose(np.concatenate(parts), warped, atol=1e-5)
+    monkeypatch.setattr(ds, "BEAT_WARP", 0.0)
+    plain = m.generate(x, seed=2)
+
+    def speed_by_phase(p: np.ndarray) -> np.ndarray:
+        """Mean bone rotation between frames t-1 and t (degrees), by the step's midpoint's frames
+        after a beat (0.5, 1.5, ... 14.5), once the dance has faded in (frame 60 on)."""
+        step = quat_angles_deg(p[61:], p[60:-1]).mean(1)
+        phase = (np.arange(61, len(p)) - 0.5) % 15
+        return np.array([step[np.abs(phase - h) < 0.1].mean() for h in np.arange(0.5, 15)])
+
+    v, v0 = speed_by_phase(warped), speed_by_phase(plain)
+    np.testing.assert_allclose(v0, 3.0, atol=0.3)  # the movements themselves turn steadily
+    np.testing.assert_allclose(v.mean(), 3.0, atol=0.3)  # the warp keeps the pace on average ...
+    assert v[[0, -1]].max() < 0.75 * 3.0 < 1.25 * 3.0 < v[7]  # ... slows into the beat, hurries between
+
+
+def test_warp_pose_reads_between_frames_as_nlerp_does():
+    from models.networks.dance_jit import warp_pose
+    from models.networks.dance_stream import _nlerp
+
+    rng = np.random.default_rng(0)
+    played = rng.normal(size=(16, POSE_DIM)).astype(np.float32)
+    np.testing.assert_array_equal(warp_pose(played, 5.0), played[5])  # on a frame: that frame, untouched
+    for x in (0.25, 7.5, 14.999):
+        i = int(x)
+        got = warp_pose(played, x)
+        np.testing.assert_allclose(got, _nlerp(played[i], played[i + 1], x - i), atol=1e-6)
+        np.testing.assert_allclose(np.linalg.norm(got[3:].reshape(-1, 4), axis=1), 1.0, atol=1e-6)

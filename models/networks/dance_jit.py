@@ -263,3 +263,34 @@ def draw_code(logits, temperature, u):  # pragma: no cover - compiled
         else:
             lo = mid + 1
     return lo
+
+
+@njit(cache=True, nogil=True)
+def warp_pose(played, x):  # pragma: no cover - compiled
+    """The pose (P,) at fractional frame ``x`` of ``played`` (F, P) float32: frame ``i = floor(x)``
+    itself when ``x`` is within 1e-6 above it, else the root lerped and every quaternion
+    nlerped (onto frame i's hemisphere, renormalised) from frame i to i + 1 by ``x - i``.
+    The beat warp's read-out (dance_stream.py); as ``_nlerp`` there, compiled because it
+    runs every frame of every performer (about 50 µs a frame in NumPy, 1-2 µs here)."""
+    i = int(math.floor(x))
+    f = np.float32(x - i)
+    p = played.shape[1]
+    out = played[i].copy()
+    if f < 1e-6:
+        return out
+    a, b = played[i], played[i + 1]
+    for c in range(3):
+        out[c] = (np.float32(1.0) - f) * a[c] + f * b[c]
+    for c in range(3, p, 4):
+        dot = np.float32(0.0)
+        for k in range(4):
+            dot += a[c + k] * b[c + k]
+        s = np.float32(-1.0) if dot < 0 else np.float32(1.0)
+        n = np.float32(0.0)
+        for k in range(4):
+            out[c + k] = (np.float32(1.0) - f) * a[c + k] + f * s * b[c + k]
+            n += out[c + k] * out[c + k]
+        n = max(np.float32(math.sqrt(n)), np.float32(1e-9))
+        for k in range(4):
+            out[c + k] /= n
+    return out

@@ -10,6 +10,10 @@ next code, draws it from the stream's own seeded generator, and decodes that cod
 out. :meth:`DanceVQ.generate` pushes a whole song through a fresh stream, so offline and
 live give the same poses for the same seed and style, however the frames are chunked.
 
+**On the beat.** The decided movement is played back through a beat warp: slower into
+every beat the causal beat tracker expects, faster between them (:data:`BEAT_WARP`), read
+between frames about :data:`WARP_LAG` frames late, so its speed dips land on the beats.
+
 **Idle between songs.** A gate decides whether music is playing: the log frame energy
 must be above a threshold (silence), and a logistic music detector on a 0.5-s running
 mean of the spectral shape (MFCC 1-12) and the beat tracker's pulse clarity must say
@@ -31,7 +35,7 @@ import numpy as np
 
 from models.errors import ConfigError
 from models.networks.blend import blend_track
-from models.networks.dance_jit import match_exemplar
+from models.networks.dance_jit import match_exemplar, warp_pose
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ, style_token
 from models.networks.streaming import sanitize_features
@@ -60,6 +64,20 @@ VEL_CAP: float = 0.4
 DRAWS: int = 1
 #: Weight of a speed dip on the expected beat against the continuity cost (median-normalised).
 BEAT_WEIGHT: float = 1.0
+#: Beat warp: the playback rate of the chosen movement is ``1 - BEAT_WARP * w * cos(theta)``,
+#: theta the beat tracker's phase (0 on a beat) and w its pulse clarity over
+#: :data:`WARP_CLARITY` (at most 1), so the motion slows into every expected beat and
+#: catches up between them: speed dips (kinematic beats) move onto the music's beats, as
+#: Dancing to Music warps its dance units to the beat. 0 plays every movement at its own pace.
+BEAT_WARP: float = 0.35
+#: Pulse clarity at which the beat warp is at full depth (a clean click track gives about 0.5).
+WARP_CLARITY: float = 0.3
+#: The warp plays the movement this many frames late on average (the slack it slows into
+#: and catches up from), and never more than twice that.
+WARP_LAG: float = 1.5
+#: Pull of the warp's lag back to :data:`WARP_LAG` per frame, so a drifting phase estimate
+#: cannot run it into either bound.
+WARP_PULL: float = 0.05
 #: Classifier-free guidance of a requested style (Ho & Salimans 2021): the logits move from
 #: the music-only ones ("auto") past the style-conditioned ones by this factor. The predictor
 #: was trained with the style token dropped to "auto" 40 % of the time, which is what it needs.
@@ -264,6 +282,8 @@ class DanceStream:
         self._codes: deque[int] = deque(maxlen=c.decoder_context)
         self._last = c.codebook  # "no code yet"
         self._segment = np.zeros((self.seg, self.pose_dim), np.float32)
+        self._played = np.zeros((2 * self.seg, self.pose_dim), np.float32)  # previous movement, then this one
+        self._lag = WARP_LAG  # frames the beat warp plays behind the movement
         self._cont: np.ndarray | None = None  # the playing exemplar's continuation (seg, P), offset included
         self._music = False
         self._ema = np.zeros(len(self._gcols))  # the music detector's running mean
@@ -328,9 +348,10 @@ class DanceStream:
             self._prefix_auto = Prefix(pred, nxt, 0) if guided else None
         draws = [m.sample(logits, self.rng) for _ in range(DRAWS)]
         if int(self._counts[draws[0]]) == 0:  # no exemplars (members = 0): the decoder writes the movement
-            code = draws[0]
-            self._commit(code)
+            self._codes.append(draws[0])  # the decoder reads the new code
             self._segment = m.decode_last(np.fromiter(self._codes, np.int64))
+            self._codes.pop()
+            self._commit(draws[0])
             self._cont = None
             return
         codes = list(dict.fromkeys(draws))
@@ -357,6 +378,12 @@ class DanceStream:
         self._cont = cont
 
     def _commit(self, code: int) -> None:
+        """Record ``code`` as played (``self._segment`` holds its movement now)."""
+        if not self.codes_drawn:  # before the first movement there is only its first pose to lag behind on
+            self._played[: self.seg] = self._segment[0]
+        else:
+            self._played[: self.seg] = self._played[self.seg:]
+        self._played[self.seg:] = self._segment
         self._codes.append(code)
         self._last = code
         self.codes_drawn.append(code)
@@ -373,6 +400,19 @@ class DanceStream:
         theta = np.arctan2(csin, ccos) % (2 * np.pi)  # 0 on a beat, rising 2 pi / period a frame
         ahead = int(round(period * (1 - theta / (2 * np.pi)))) % max(int(round(period)), 1)
         return (ahead, clarity) if ahead < self.seg else None
+
+    def _warped(self, j: int) -> np.ndarray:
+        """The pose (P,) of frame ``j`` of the current movement under the beat warp: frame
+        ``seg + j - lag`` of ``self._played``, between two frames nlerped (``warp_pose``; the lag moves by
+        ``1 - rate`` a frame; see :data:`BEAT_WARP`)."""
+        if self._beat_cols is None or BEAT_WARP <= 0.0:  # no beat tracker, or no warp: the movement as it is
+            return self._segment[j]
+        ccos, clarity = float(self._raw[self._beat_cols[0]]), float(self._raw[self._beat_cols[2]])
+        depth = BEAT_WARP * min(1.0, max(clarity, 0.0) / WARP_CLARITY)
+        cos = ccos / clarity if clarity > 1e-9 else 0.0
+        lag = self._lag + depth * cos - WARP_PULL * (self._lag - WARP_LAG)
+        self._lag = min(max(lag, 0.0), 2.0 * WARP_LAG)
+        return warp_pose(self._played, self.seg + j - self._lag)
 
     def push(self, features: np.ndarray) -> np.ndarray:
         """Consume k >= 0 feature frames (k, D); return their k poses (k, POSE_DIM) float32."""
@@ -395,7 +435,7 @@ class DanceStream:
                     if pre is not None and not pre.done:
                         with single_thread_blas():
                             pre.step()  # a piece a frame (models/networks/dance_numpy.py)
-            pose = self._segment[t % self.seg]
+            pose = self._warped(t % self.seg)
             self._gate(x[i])
             w = self._w_idle
             if w > 0.0:
