@@ -11,7 +11,7 @@ real dances' and the pooled beat hit rate and coverage (the evaluate report's de
         --data ../shared/data/dwm 1,1 2,1 4,2 1,1,0.8
 
 ``--members 0`` plays the codebook's decoder instead of the real exemplars (the design
-without choreographic memory).
+without choreographic memory); ``--style`` dances every song in one style.
 """
 
 from __future__ import annotations
@@ -39,6 +39,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cache", default=".cache/corpus", help="corpus cache (default .cache/corpus)")
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1], help="sampling seeds (default 0 1)")
     p.add_argument("--members", type=int, choices=(0,), help="0: play the decoder, not the exemplars")
+    p.add_argument("--style", default=None, choices=("auto", "chacha", "rumba", "waltz"),
+                   help="dance every song in this style (default: auto, the music decides)")
     args = p.parse_args(argv)
 
     import torch
@@ -73,6 +75,17 @@ def main(argv: list[str] | None = None) -> int:
     rb = pooled_beats(real, beats)
     print(f"real dances: jerk {jerk(real):.1f} m/s^3, beat hit rate {rb['beat_hit_rate']:.4f}, "
           f"coverage {rb['beat_coverage']:.3f}, chance {rb['beat_hit_chance']:.4f}")
+    if args.style not in (None, "auto"):  # the yardstick for a style: its own dancers against the validation dances
+        from models.data.dwm import dance_dirs
+        from models.networks.dance_vq import STYLE_TOKEN
+
+        letter = next(k for k, v in STYLE_TOKEN.items() if len(k) == 1 and v == STYLE_TOKEN[args.style])
+        own = [d.name for d in dance_dirs(args.data) if d.name.startswith(f"DANCE_{letter}_")]
+        mine = [positions(c.poses) for c in load_clips(args.data, own, lm.features,
+                                                       EvalOptions(cache_dir=args.cache, progress=False))]
+        r = band_ratios(mine, real)
+        print(f"real {args.style} dances (all {len(mine)} of the dataset) against the validation dances: "
+              f"dance amp {r['band_amp']:.3f}, jitter {r['jitter']:.3f}, jerk {jerk(mine) / jerk(real):.2f}x")
     print("| draws | beat weight | temperature | beat warp | seed | dance amp | jitter | jerk / real | beat hit rate "
           "| beat coverage |")
     print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
@@ -84,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
         ds.BEAT_WARP = s[3] if len(s) == 4 else warp0
         lm.model.config = dataclasses.replace(config0, temperature=temp)
         for seed in args.seeds:
-            gen = [positions(run_model(lm.model, c.features, seed=seed)) for c in clips]
+            gen = [positions(run_model(lm.model, c.features, seed=seed, style=args.style)) for c in clips]
             r, b = band_ratios(gen, real), pooled_beats(gen, beats)
             print(f"| {int(s[0])} | {s[1]:g} | {temp:g} | {ds.BEAT_WARP:g} | {seed} | {r['band_amp']:.3f} | {r['jitter']:.3f} | "
                   f"{jerk(gen) / jerk(real):.2f} | {b['beat_hit_rate']:.4f} | {b['beat_coverage']:.3f} |", flush=True)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace as dataclasses_replace
+
 import numpy as np
 import pytest
 import torch
@@ -527,3 +529,98 @@ def test_warp_pose_reads_between_frames_as_nlerp_does():
         got = warp_pose(played, x)
         np.testing.assert_allclose(got, _nlerp(played[i], played[i + 1], x - i), atol=1e-6)
         np.testing.assert_allclose(np.linalg.norm(got[3:].reshape(-1, 4), axis=1), 1.0, atol=1e-6)
+
+
+def test_style_memory_records_each_exemplars_style_and_which_codes_each_style_uses():
+    from models.training.dance_vq import fit_members, fit_style_prior, prior_from_counts
+
+    rng = np.random.default_rng(0)
+    cfg = DanceVQConfig(feature_dim=10, codebook=16, code_dim=8, enc_width=16, dec_width=16, d_model=16, layers=1,
+                        heads=2, window_codes=4, energy_col=0, clarity_col=-1, members=3)
+    torch.manual_seed(0)
+    m = DanceVQ(cfg)
+    cha, wal = _poses(400, rng), _poses(400, rng)
+    cha[:, 1], wal[:, 1] = 1.1, 0.7  # each style's dancers at their own hip height
+    both = np.concatenate([cha, wal])
+    m.pose_mean.copy_(torch.from_numpy(both.mean(0)))
+    m.pose_std.copy_(torch.from_numpy(np.maximum(both.std(0), 0.02)))
+    clips = [_Clip(cha, np.zeros((400, 10), np.float32), "C"), _Clip(wal, np.zeros((400, 10), np.float32), "W")]
+    fit_members(m, clips)
+    have = m.member_count.numpy()
+    style = m.member_style.numpy()
+    hips = m.member_poses[..., 0, 1].float().numpy()
+    for k in range(cfg.codebook):
+        for j in range(have[k]):  # every exemplar is labelled with the style of the dance it came from
+            assert style[k, j] == (1 if abs(hips[k, j] - 1.1) < 1e-3 else 3)
+    assert (style[:, :1] > 0).all()
+    counts = fit_style_prior(m, clips)
+    assert counts[:, 1].sum() > 0 and counts[:, 3].sum() > 0 and counts[:, [0, 2]].sum() == 0
+    prior = m.style_prior.numpy()
+    np.testing.assert_allclose(np.exp(prior[:, [1, 3]]).sum(1), 1.0, rtol=1e-5)  # p(style | code) over the styles
+    assert (prior[:, [0, 2]] == 0).all()
+    only_cha = (counts[:, 1] > 20) & (counts[:, 3] == 0)
+    if only_cha.any():
+        assert (prior[only_cha, 1] > np.log(0.9)).all()
+    # add-one smoothing: a code no style used is equally likely in each
+    np.testing.assert_allclose(prior_from_counts(np.array([[0, 0, 0, 0], [0, 50, 0, 50]])), 0.0 * 0 + np.array(
+        [[0, np.log(0.5), 0, np.log(0.5)], [0, np.log(0.5), 0, np.log(0.5)]]), atol=1e-6)
+
+
+def test_a_requested_style_dances_with_its_own_dancers_exemplars(monkeypatch):
+    from scipy.spatial.transform import Rotation
+
+    import models.networks.dance_stream as ds
+
+    torch.manual_seed(0)
+    m = DanceVQ(TINY).eval()
+    c = m.config
+    with torch.no_grad():
+        m.gate[0] = -50.0
+        f = np.arange(2 * c.seg)
+        for k in range(c.codebook):
+            for j, (hips, style) in enumerate(((1.1, 1), (0.7, 3))):  # one cha-cha and one waltz exemplar per code
+                q = Rotation.from_euler("y", (10 * k + 2 * f)[:, None], degrees=True).as_quat()
+                pose = np.concatenate([np.tile([0.0, hips, 0.0], (len(f), 1)), np.tile(q, (1, len(BONES)))], 1)
+                m.member_poses[k, j] = torch.from_numpy(pose.astype(np.float32))
+                m.member_style[k, j] = style
+        m.member_count[:] = 2
+    x = music(400)
+    hips = {s: m.generate(x, seed=0, style=s)[100:, 1] for s in ("chacha", "waltz")}
+    np.testing.assert_allclose(hips["chacha"], 1.1, atol=1e-3)  # only the cha-cha dancers' movements
+    np.testing.assert_allclose(hips["waltz"], 0.7, atol=1e-3)  # only the waltz dancers'
+    monkeypatch.setattr(ds, "STYLE_MEMBERS", False)  # without the filter motion matching keeps to the first
+    np.testing.assert_allclose(m.generate(x, seed=0, style="waltz")[100:, 1], 1.1, atol=1e-3)  # exemplar's kind
+
+
+def test_checkpoints_from_before_the_style_memory_still_load(tmp_path):
+    m = tiny_model()
+    state = {k: v for k, v in m.state_dict().items() if k not in ("member_style", "style_prior")}
+    m2 = DanceVQ(TINY)
+    m2.load_state_dict(state, strict=True)
+    assert int(m2.member_style.abs().sum()) == 0 and float(m2.style_prior.abs().sum()) == 0.0
+    np.testing.assert_array_equal(m2.eval().generate(music(64), seed=1), m.generate(music(64), seed=1))
+
+
+def test_style_memory_is_added_to_an_older_checkpoint_only_from_its_own_training_motion():
+    from models.errors import DataError
+    from models.training.dance_vq import fit_members
+    from models.training.style_memory import add_style_memory
+
+    rng = np.random.default_rng(1)
+    torch.manual_seed(0)
+    m = DanceVQ(dataclasses_replace(TINY, members=3))
+    poses = _poses(300, rng)
+    m.pose_mean.copy_(torch.from_numpy(poses.mean(0)))
+    m.pose_std.copy_(torch.from_numpy(np.maximum(poses.std(0), 0.02)))
+    clips = [_Clip(poses, np.zeros((300, TINY.feature_dim), np.float32), "R")]
+    fit_members(m, clips)
+    members = m.member_poses.clone()
+    m.member_style.zero_()  # as saved before the style memory existed
+    m.style_prior.zero_()
+    counts = add_style_memory(m, clips)
+    assert torch.equal(m.member_poses, members) and bool((m.member_style[m.member_count > 0][:, 0] == 2).all())
+    assert counts[:, 2].sum() > 0 and (m.style_prior[:, 2] == 0).all()  # one style: no preference among codes
+    other = [_Clip(_poses(300, np.random.default_rng(7)), clips[0].features, "R")]
+    with pytest.raises(DataError, match="other exemplars"):
+        add_style_memory(m, other)
+    assert torch.equal(m.member_poses, members)  # left as it was

@@ -82,6 +82,12 @@ WARP_PULL: float = 0.05
 #: the music-only ones ("auto") past the style-conditioned ones by this factor. The predictor
 #: was trained with the style token dropped to "auto" 40 % of the time, which is what it needs.
 STYLE_GUIDANCE: float = 3.0
+#: Weight of the style prior (``DanceVQ.style_prior``: how much likelier each code is in the
+#: requested style's training dances) added to a requested style's logits.
+STYLE_PRIOR: float = 3.0
+#: With a requested style, play only exemplars from that style's dancers where the drawn
+#: code has any (``DanceVQ.member_style``; a code without: all of its exemplars).
+STYLE_MEMBERS: bool = True
 #: Idle sway: (bone, axis, amplitude in degrees, period in s, phase in rad).
 SWAY: tuple[tuple[str, int, float, float, float], ...] = (
     ("Hips", 1, 4.0, 6.0, 0.0),  # a slow turn about the vertical
@@ -258,6 +264,8 @@ class DanceStream:
         self._gate_a_return = float(np.exp(-1.0 / GATE_TAU_RETURN))
         self._members = sign_continuous(model.member_poses.float().numpy())  # (K, M, 2 seg, P)
         self._counts = model.member_count.numpy()
+        self._style_prior = model.style_prior.numpy().astype(np.float32)  # (K, 4)
+        self._member_style = model.member_style.numpy()  # (K, M): 0 unknown, else a style token
         self._dips = _cached_dips(model, self._members, self.seg)  # (K, M, seg)
         cc = c.clarity_col
         self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None
@@ -341,6 +349,8 @@ class DanceStream:
                 auto = self._prefix_auto if self._prefix_auto is not None else Prefix(pred, list(self._tokens), 0)
                 base = pred.logits_after(auto, token)
                 logits = base + STYLE_GUIDANCE * (logits - base)
+            if self.style and STYLE_PRIOR != 0.0:  # codes the requested style's dancers use
+                logits = logits + STYLE_PRIOR * self._style_prior[:, self.style]
             self._tokens.append(token)
             # the next step's window but its newest token is known now: its layers run on the frames between
             nxt = list(self._tokens)[-(pred.window - 1):]
@@ -356,7 +366,10 @@ class DanceStream:
             return
         codes = list(dict.fromkeys(draws))
         pairs = [(c, j) for c in codes for j in range(int(self._counts[c]))]
-        if len(codes) == 1:  # one code (DRAWS = 1): its exemplars are a slice, no gathering
+        if self.style and STYLE_MEMBERS:  # a requested style: its own dancers' exemplars where the codes have some
+            own = [(c, j) for c, j in pairs if self._member_style[c, j] == self.style]
+            pairs = own or pairs
+        if len(codes) == 1 and len(pairs) == int(self._counts[codes[0]]):  # all of one code's: a slice, no gathering
             c, n = codes[0], len(pairs)
             cands, dips = self._members[c, :n], self._dips[c, :n]  # (n, 2 seg, P), (n, seg)
         else:

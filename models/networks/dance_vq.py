@@ -287,6 +287,21 @@ class DanceVQ(nn.Module):
         self.register_buffer("member_poses", torch.zeros(c.codebook, c.members, 2 * c.seg, c.pose_dim,
                                                          dtype=torch.float16))
         self.register_buffer("member_count", torch.zeros(c.codebook, dtype=torch.int64))
+        # what each style's dancers did (models.training.style_memory): every member's style token
+        # (1 C, 2 R, 3 W; 0 unknown), and per code and style token (auto, C, R, W) the log of how
+        # much likelier the code is in that style's training dances than in the others' (column 0
+        # and an unfitted prior: zeros). A requested style plays its own dancers' exemplars and
+        # adds the prior to the logits (models.networks.dance_stream).
+        self.register_buffer("member_style", torch.zeros(c.codebook, c.members, dtype=torch.int64))
+        self.register_buffer("style_prior", torch.zeros(c.codebook, 4))
+
+    def _load_from_state_dict(self, state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys,
+                              error_msgs) -> None:
+        """Checkpoints saved before the style memory existed load without one (zeros: unknown)."""
+        for name in ("member_style", "style_prior"):
+            state_dict.setdefault(prefix + name, torch.zeros_like(getattr(self, name)))
+        super()._load_from_state_dict(state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys,
+                                      error_msgs)
 
     # -- motion codebook -----------------------------------------------------------------
     def standardize_poses(self, poses: torch.Tensor) -> torch.Tensor:

@@ -247,12 +247,13 @@ def validate_codebook(model: DanceVQ, clips: list, offsets: torch.Tensor) -> dic
 def fit_members(model: DanceVQ, clips: list, phases: tuple[int, ...] = (0, 4), progress: bool = False) -> dict[str, float]:
     """Fill the choreographic memory: for every code, the ``members`` real windows of
     ``2 * seg`` valid frames (the code's movement and its continuation) whose encoding
-    lies nearest the code vector, from every clip at the grid ``phases``. Returns how
-    many codes got at least one member and the members' mean encoding distance."""
+    lies nearest the code vector, from every clip at the grid ``phases``, and each member's
+    style token (``member_style``: the style of the dance it comes from). Returns how many
+    codes got at least one member and how many windows were searched."""
     model.eval()
     c = model.config
     s = c.seg
-    z_all, windows = [], []
+    z_all, windows, styles = [], [], []
     for clip in clips:
         for p in phases:
             n = (clip.num_frames - p) // s
@@ -263,28 +264,69 @@ def fit_members(model: DanceVQ, clips: list, phases: tuple[int, ...] = (0, 4), p
             for k in np.flatnonzero(ok):
                 z_all.append(z[k])
                 windows.append(clip.poses[p + k * s: p + (k + 2) * s])
+                styles.append(STYLE_TOKEN.get(clip.style, 0))
     z = torch.stack(z_all)
     codes = model.quantizer.codes(z.T[None])[0]
     dist = (z - model.quantizer.embed[codes]).pow(2).sum(1)
     poses = np.stack(windows)
+    style = torch.tensor(styles, dtype=torch.int64)
     model.member_poses.zero_()
     model.member_count.zero_()
+    model.member_style.zero_()
     for code in codes.unique().tolist():
         idx = torch.nonzero(codes == code)[:, 0]
         keep = idx[dist[idx].argsort()[: c.members]].numpy()
         model.member_poses[code, : len(keep)] = torch.from_numpy(poses[keep]).half()
         model.member_count[code] = len(keep)
+        model.member_style[code, : len(keep)] = style[keep]
     have = torch.nonzero(model.member_count > 0)[:, 0]
     emb = model.quantizer.embed
     for code in torch.nonzero(model.member_count == 0)[:, 0].tolist():  # a code no window chose: its nearest neighbour's
         near = have[(emb[have] - emb[code]).pow(2).sum(1).argmin()]
         model.member_poses[code] = model.member_poses[near]
         model.member_count[code] = model.member_count[near]
+        model.member_style[code] = model.member_style[near]
     model.train()
     out = {"codes_with_members": len(have), "windows": len(windows)}
     if progress:
         print(f"choreographic memory: {out['codes_with_members']} codes with real exemplars from {len(windows)} windows")
     return out
+
+
+#: Style tokens the style prior has a column for (cha-cha, rumba, waltz); token 0 ("auto") stays 0.
+PRIOR_STYLES: tuple[int, ...] = (STYLE_TOKEN["C"], STYLE_TOKEN["R"], STYLE_TOKEN["W"])
+
+
+def style_counts(model: DanceVQ, clips: list) -> np.ndarray:
+    """(K, 4) int: per code, how many valid ``seg``-frame windows of each style token's clips
+    the model's encoder maps to it, at every grid phase."""
+    data = encode_clips(model, clips, range(model.config.seg))
+    counts = np.zeros((model.config.codebook, 4), np.int64)
+    for codes, valid, style in zip(data.codes, data.valid, data.style):
+        np.add.at(counts[:, style], codes[valid], 1)
+    return counts
+
+
+def prior_from_counts(counts: np.ndarray) -> np.ndarray:
+    """(K, 4) float32 ``log p(style | code)`` under equal style priors: ``p(code | style) =
+    (n + 1) / (N_style + K)`` (add-one smoothing) normalised over the styles of
+    :data:`PRIOR_STYLES` that have windows; column 0 and styles without windows are 0."""
+    k = counts.shape[0]
+    out = np.zeros(counts.shape, np.float64)
+    have = [s for s in PRIOR_STYLES if counts[:, s].sum() > 0]
+    if have:
+        lik = np.stack([(counts[:, s] + 1.0) / (counts[:, s].sum() + k) for s in have], axis=1)
+        out[:, have] = np.log(lik / lik.sum(axis=1, keepdims=True))
+    return out.astype(np.float32)
+
+
+@torch.no_grad()
+def fit_style_prior(model: DanceVQ, clips: list) -> np.ndarray:
+    """Set ``model.style_prior`` (how much likelier each code is in each style's dances) from
+    ``clips``, the motion the codebook learned from; returns the counts (K, 4)."""
+    counts = style_counts(model, clips)
+    model.style_prior.copy_(torch.from_numpy(prior_from_counts(counts)))
+    return counts
 
 
 @dataclass
@@ -353,14 +395,34 @@ def predictor_loss(model: DanceVQ, batch: tuple[torch.Tensor, ...]) -> tuple[tor
     return (ce * m).sum() / m.sum().clamp_min(1), float(acc)
 
 
+def training_dances(cfg, data_root: str | Path) -> tuple[list[str], list[str], list[str]]:
+    """(training dances whose audio alignment is trusted, the other training dances, the
+    validation dances) of ``data_root`` under ``cfg.exclude_unverified``."""
+    from models.data.alignment import UNVERIFIED_ALIGNMENT
+    from models.data.dwm import dance_dirs
+    from models.data.split import split_names
+
+    train_names, val_names = split_names([d.name for d in dance_dirs(data_root)])
+    verified = [n for n in train_names if n not in UNVERIFIED_ALIGNMENT] if cfg.exclude_unverified else train_names
+    return verified, [n for n in train_names if n not in verified], val_names
+
+
+def training_clips(cfg, fcfg, data_root: str | Path, cache_dir: str | Path | None, progress: bool) -> tuple[list, list]:
+    """(the predictor's clips: the trusted dances at every tempo of ``cfg.tempos``; the motion
+    clips the codebook and its memory learn from: those plus the other training dances at
+    tempo 1)."""
+    from models.training.corpus import build_corpus
+
+    verified, others, _ = training_dances(cfg, data_root)
+    train_clips = build_corpus(data_root, verified, fcfg, tuple(cfg.tempos), cache_dir, progress)
+    return train_clips, train_clips + build_corpus(data_root, others, fcfg, (1.0,), cache_dir, progress)
+
+
 def train_dance_vq(cfg, data_root: str | Path, out_dir: str | Path, cache_dir: str | Path | None = None,
                    progress: bool = True) -> Path:
     """Train ``dance_vq`` (``cfg``: :class:`~models.training.config.TrainConfig`) on DWM; returns ``best.pt``."""
     from tqdm import tqdm
 
-    from models.data.alignment import UNVERIFIED_ALIGNMENT
-    from models.data.dwm import dance_dirs
-    from models.data.split import split_names
     from models.features.spectral import FeatureConfig
     from models.networks.checkpoint import build_model, save_checkpoint
     from models.rig.humanoid import BONES
@@ -376,12 +438,8 @@ def train_dance_vq(cfg, data_root: str | Path, out_dir: str | Path, cache_dir: s
     opts = DanceVQTrainOptions.from_dict(cfg.dance)
     fcfg = FeatureConfig(**cfg.features)
 
-    names = [d.name for d in dance_dirs(data_root)]
-    train_names, val_names = split_names(names)
-    verified = [n for n in train_names if n not in UNVERIFIED_ALIGNMENT] if cfg.exclude_unverified else train_names
-    others = [n for n in train_names if n not in verified]
-    train_clips = build_corpus(data_root, verified, fcfg, tuple(cfg.tempos), cache_dir, progress)
-    motion_clips = train_clips + build_corpus(data_root, others, fcfg, (1.0,), cache_dir, progress)
+    verified, others, val_names = training_dances(cfg, data_root)
+    train_clips, motion_clips = training_clips(cfg, fcfg, data_root, cache_dir, progress)
     val_clips = build_corpus(data_root, val_names, fcfg, (1.0,), cache_dir, progress)
 
     model_cfg = {**cfg.model_config, "feature_dim": fcfg.dim, "pose_dim": POSE_DIM}
@@ -428,6 +486,7 @@ def train_dance_vq(cfg, data_root: str | Path, out_dir: str | Path, cache_dir: s
             if codes is None:
                 if model.config.members > 0 and int(model.member_count.sum()) == 0:
                     fit_members(model, motion_clips, progress=progress)
+                    fit_style_prior(model, motion_clips)
                 codes = encode_clips(model, train_clips, range(model.config.seg))
                 val_codes = encode_clips(model, val_clips, range(1))
             model.encoder.eval()
