@@ -47,6 +47,7 @@ from models.rig.motion import POSE_DIM
 from models.timebase import FPS, HOP, SAMPLE_RATE
 from realtime.audio_input import AudioSource, RingBuffer
 from realtime.frame import PoseFrame, Sink
+from realtime.pose_jit import guard_smooth
 
 log = logging.getLogger(__name__)
 
@@ -190,7 +191,8 @@ class PoseSmoother:
     about ``alpha / (1 - alpha)`` frames). Quaternions are blended by hemisphere-
     aligned nlerp (the result lies on the shortest arc between the two rotations;
     cheaper than slerp and indistinguishable at per-frame steps). Whether or not it
-    smooths, it renormalises every quaternion (a zero one becomes identity).
+    smooths, it renormalises every quaternion (a zero one becomes identity). One compiled
+    call a frame (:func:`realtime.pose_jit.guard_smooth`, NumPy's float32 arithmetic).
     """
 
     def __init__(self, alpha: float = 0.0) -> None:
@@ -199,34 +201,22 @@ class PoseSmoother:
         self.alpha = float(alpha)
         self._state = np.zeros(POSE_DIM, dtype=np.float32)
         self._has_state = False
-        self._dot = np.zeros(NUM_BONES, dtype=np.float32)
-        self._norm = np.zeros(NUM_BONES, dtype=np.float32)
 
     def reset(self) -> None:
         self._has_state = False
 
-    def _normalize(self, q: np.ndarray) -> None:
-        np.einsum("ij,ij->i", q, q, out=self._norm)
-        bad = self._norm < 1e-12
-        if bad.any():
-            q[bad] = (0.0, 0.0, 0.0, 1.0)
-            self._norm[bad] = 1.0
-        np.sqrt(self._norm, out=self._norm)
-        q /= self._norm[:, None]
+    def smooth_into(self, row: np.ndarray, pose: np.ndarray) -> bool:
+        """``pose`` (POSE_DIM,) float32 = ``row`` (POSE_DIM,) float32 smoothed; False, leaving both
+        and the state untouched, when ``row`` is not finite (the engine's guard)."""
+        if not guard_smooth(row, pose, self._state, self._has_state, self.alpha):
+            return False
+        self._has_state = True
+        return True
 
     def __call__(self, pose: np.ndarray) -> np.ndarray:
-        """Smooth ``pose`` ((POSE_DIM,) float32) in place and return it."""
-        q = pose[3:].reshape(NUM_BONES, 4)
-        self._normalize(q)
-        if self.alpha > 0.0 and self._has_state:
-            prev = self._state[3:].reshape(NUM_BONES, 4)
-            np.einsum("ij,ij->i", q, prev, out=self._dot)
-            q[self._dot < 0] *= -1.0
-            pose *= 1.0 - self.alpha
-            pose += self.alpha * self._state
-            self._normalize(q)
-        self._state[:] = pose
-        self._has_state = True
+        """Smooth ``pose`` ((POSE_DIM,) float32, finite) in place and return it."""
+        if not self.smooth_into(pose, pose):
+            raise ValueError("PoseSmoother needs a finite pose (the engine sends the last good pose instead)")
         return pose
 
 
@@ -1180,14 +1170,14 @@ class Engine:
         """Guard, smooth, stamp and send (or hold back) one lane's poses from one push."""
         offset_s = lane.offset_ms / 1000.0
         for k, row in enumerate(poses):
-            if row.shape != (POSE_DIM,) or not np.isfinite(row).all():
+            pose = np.empty(POSE_DIM, np.float32)
+            if row.shape != (POSE_DIM,) or not lane.smoother.smooth_into(row, pose):  # guard and smoothing: one call
                 lane.nan_frames += 1
                 if lane.nan_frames == 1:
                     log.warning("%smodel produced a non-finite pose; sending the last good pose instead",
                                 self._who(lane))
                 pose = lane.last_good.copy()
             else:
-                pose = lane.smoother(row.copy())
                 lane.last_good[:] = pose
             if lane.fader.active:  # after last_good: smoothing and the NaN guard keep the dance
                 pose = lane.fader(pose)
