@@ -549,6 +549,7 @@ class Engine:
         self._reset_requested = threading.Event()
         self._lane_reset_requested = threading.Event()
         self._thread: threading.Thread | None = None
+        self._hop_sinks: list[Sink] = []
         self._zero_counters()
 
     # -- the performers (the first one's for the single-performer attributes) -----------
@@ -655,6 +656,8 @@ class Engine:
             self._chunk = np.zeros((self.config.max_read, self.source.channels), dtype=np.float32)
         for g in self._groups:
             g.extractor = g.factory(self.source.sample_rate)
+        # sinks that hold their thread hand-offs while the hop's performers run (Sink's begin_hop / end_hop)
+        self._hop_sinks = [s for lane in self._lanes for s in lane.sinks if hasattr(s, "begin_hop")]
         self.error = None
         self._stop.clear()
         self._done.clear()
@@ -1151,6 +1154,16 @@ class Engine:
             released = {s: self.ring.release_time(s) for s in plans[0][2]}
         else:  # the ring's lookup only walks forward: ask in sample order across the groups
             released = {s: self.ring.release_time(s) for s in sorted({s for *_, ss in plans for s in ss})}
+        for sink in self._hop_sinks:
+            sink.begin_hop()
+        try:
+            self._run_groups(plans, released)
+        finally:
+            for sink in self._hop_sinks:
+                sink.end_hop()
+
+    def _run_groups(self, plans: list[tuple[_FeatureGroup, np.ndarray, list[int]]], released: dict[int, float]) -> None:
+        """Each group's lanes on its frames ``plans`` (group, features (k, D), completing samples)."""
         for g, feats, samples in plans:
             rel = [released[s] for s in samples]
             for lane in g.lanes:
