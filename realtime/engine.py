@@ -282,6 +282,13 @@ CONTROL_ACTIONS: tuple[str, ...] = ("reset", "set_offset", "set_smoothing", "idl
 MAX_STYLE_CHARS: int = 64
 
 
+def _cycle_start(lane: "_Lane", g: "_FeatureGroup", frames: int) -> bool:
+    """Whether one of the lane's next ``frames`` frames is the first of its model's cost cycle
+    (a dance_vq code step): its model's frame count is ``phase + g.index`` modulo the cycle
+    after every reset (:meth:`Engine._reset_lane`)."""
+    return lane.cycle > 1 and any((lane.phase + g.index + k) % lane.cycle == 0 for k in range(frames))
+
+
 def _cpus() -> int:
     """CPUs this process may run on (its affinity where the OS tells it)."""
     try:
@@ -1245,11 +1252,15 @@ class Engine:
         """Each group's lanes on its frames ``plans`` (group, features (k, D), completing samples).
 
         With a helper thread (``lane_threads`` 2, more than one performer) the worker and the
-        helper take lanes from one queue until it is empty; each lane's model, guard and sends
+        helper take lanes from one queue until it is empty, a lane on its expensive frame first
+        (so that neither thread starts it last); each lane's model, guard and sends
         stay on one thread, and the hop ends when both are done. A lane touches only its own
         state; the engine-wide latency stats are added to under a lock."""
-        jobs = iter([(g, feats, samples, [released[s] for s in samples], lane)
-                     for g, feats, samples in plans for lane in g.lanes])
+        jobs = [(g, feats, samples, [released[s] for s in samples], lane) for g, feats, samples in plans
+                for lane in g.lanes]
+        if self._helper is not None:  # the longest first: a lane on its cycle's expensive frame (a code step)
+            jobs.sort(key=lambda job: not _cycle_start(job[4], job[0], len(job[1])))
+        jobs = iter(jobs)
 
         def run() -> None:
             for job in jobs:  # next() on a list iterator is atomic: each lane runs once
