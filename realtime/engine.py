@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 import threading
 import time
 from collections import deque
@@ -265,7 +264,6 @@ class EngineConfig:
     stats_size: int = 2048  # frames kept for p50/p99
     fallback_after_s: float = 2.0  # no audio from the source this long -> switch to the fallback source
     idle_fade_s: float = 1.0  # the engine's own idle crossfade, each way (models without set_idle)
-    lane_threads: int = 2  # 2: an ensemble's performers run on the worker and one more thread at once; 1: in turn
 
 
 #: Input samples beyond +-MAX_SAMPLE (full scale = 1; 12 dB of headroom) are treated like NaN
@@ -280,32 +278,6 @@ CONTROL_ACTIONS: tuple[str, ...] = ("reset", "set_offset", "set_smoothing", "idl
 
 #: Longest style name :meth:`Engine.control` passes to a model, characters.
 MAX_STYLE_CHARS: int = 64
-
-
-def _cycle_start(lane: "_Lane", g: "_FeatureGroup", frames: int) -> bool:
-    """Whether one of the lane's next ``frames`` frames is the first of its model's cost cycle
-    (a dance_vq code step): its model's frame count is ``phase + g.index`` modulo the cycle
-    after every reset (:meth:`Engine._reset_lane`)."""
-    return lane.cycle > 1 and any((lane.phase + g.index + k) % lane.cycle == 0 for k in range(frames))
-
-
-def _cpus() -> int:
-    """CPUs this process may run on (its affinity where the OS tells it)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        return os.cpu_count() or 1
-
-
-def _one_blas_thread() -> None:
-    """Hold every BLAS library of the process to one thread (lane threads run their small
-    products side by side; the per-call limit of dance_numpy's ``single_thread_blas`` is
-    process-wide and would race between them)."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn (librosa)
-        return
-    threadpool_limits(limits=1, user_api="blas")
 
 
 def check_finite(name: str, value: object) -> float:
@@ -470,54 +442,6 @@ class _Lane:
         self.resets = 0
 
 
-class _LaneHelper:
-    """A second thread for an ensemble's hop: it runs ``fn`` when given one, while the engine's
-    worker runs the same ``fn`` (both take performers from one queue, :meth:`Engine._run_groups`).
-
-    Most of a performer's frame runs without the interpreter lock (the model's compiled
-    kernels are ``nogil``, BLAS and socket sends release it), so two performers' frames
-    overlap on two cores; their Python parts still take turns.
-    """
-
-    def __init__(self) -> None:
-        self._go = threading.Event()
-        self._done = threading.Event()
-        self._fn: Callable[[], None] | None = None
-        self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, name="engine lanes", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while True:
-            self._go.wait()
-            self._go.clear()
-            fn = self._fn
-            if fn is None:  # stop()
-                return
-            try:
-                fn()
-            except BaseException as exc:  # noqa: BLE001 - re-raised on the worker by join()
-                self._error = exc
-            self._done.set()
-
-    def start(self, fn: Callable[[], None]) -> None:
-        self._fn = fn
-        self._done.clear()
-        self._go.set()
-
-    def join(self) -> None:
-        """Wait for the running ``fn``; re-raise what it raised."""
-        self._done.wait()
-        if self._error is not None:
-            exc, self._error = self._error, None
-            raise exc
-
-    def stop(self) -> None:
-        self._fn = None
-        self._go.set()
-        self._thread.join(1.0)
-
-
 @dataclass
 class _SourceState:
     """The engine's view of one audio source: its ring and its failure/restart state."""
@@ -626,8 +550,6 @@ class Engine:
         self._lane_reset_requested = threading.Event()
         self._thread: threading.Thread | None = None
         self._hop_sinks: list[Sink] = []
-        self._helper: _LaneHelper | None = None  # the second lane thread, while the worker runs (lane_threads 2)
-        self._stats_lock = threading.Lock()  # the engine-wide latency stats, added to from both lane threads
         self._zero_counters()
 
     # -- the performers (the first one's for the single-performer attributes) -----------
@@ -1028,7 +950,7 @@ class Engine:
                         poses = lane.model.push(feats)
                         pose = np.empty(POSE_DIM, np.float32)
                         for row in np.asarray(poses, dtype=np.float32):
-                            if row.shape == pose.shape:
+                            if row.shape == pose.shape:  # a non-finite row is skipped, as the guard skips it
                                 lane.smoother.smooth_into(row, pose)
             done += k
         self._do_reset()
@@ -1104,18 +1026,12 @@ class Engine:
                 warmed.set()
             go.wait()
             if not self._stop.is_set():
-                if len(self._lanes) > 1 and self.config.lane_threads > 1 and _cpus() > 1:
-                    _one_blas_thread()
-                    self._helper = _LaneHelper()
                 self._loop()
         except BaseException as exc:  # noqa: BLE001 - kept and re-raised by start() / wait()
             self.error = exc
             self.state = "failed"
             log.error("engine stopped: %s: %s", type(exc).__name__, exc)
         finally:
-            if self._helper is not None:
-                self._helper.stop()
-                self._helper = None
             self._done.set()
 
     def _next_release(self) -> float | None:
@@ -1249,46 +1165,20 @@ class Engine:
                 sink.end_hop()
 
     def _run_groups(self, plans: list[tuple[_FeatureGroup, np.ndarray, list[int]]], released: dict[int, float]) -> None:
-        """Each group's lanes on its frames ``plans`` (group, features (k, D), completing samples).
-
-        With a helper thread (``lane_threads`` 2, more than one performer) the worker and the
-        helper take lanes from one queue until it is empty, a lane on its expensive frame first
-        (so that neither thread starts it last); each lane's model, guard and sends
-        stay on one thread, and the hop ends when both are done. A lane touches only its own
-        state; the engine-wide latency stats are added to under a lock."""
-        jobs = [(g, feats, samples, [released[s] for s in samples], lane) for g, feats, samples in plans
-                for lane in g.lanes]
-        if self._helper is not None:  # the longest first: a lane on its cycle's expensive frame (a code step)
-            jobs.sort(key=lambda job: not _cycle_start(job[4], job[0], len(job[1])))
-        jobs = iter(jobs)
-
-        def run() -> None:
-            for job in jobs:  # next() on a list iterator is atomic: each lane runs once
-                self._run_lane(*job)
-
-        if self._helper is None:
-            run()
-        else:
-            self._helper.start(run)
-            try:
-                run()
-            finally:
-                self._helper.join()
-        for g, feats, _ in plans:
+        """Each group's lanes on its frames ``plans`` (group, features (k, D), completing samples)."""
+        for g, feats, samples in plans:
+            rel = [released[s] for s in samples]
+            for lane in g.lanes:
+                t = time.perf_counter()
+                poses = np.asarray(lane.model.push(feats), dtype=np.float32)
+                if len(poses) != len(feats):
+                    raise ValueError(f"{self._who(lane)}the pose model returned {len(poses)} poses for "
+                                     f"{len(feats)} feature frames")
+                self._emit(lane, g, poses, samples, rel)
+                lane_ms = (time.perf_counter() - t) * 1000.0 / len(poses)
+                for _ in range(len(poses)):
+                    lane.compute_ms.add(lane_ms)
             g.index += len(feats)
-
-    def _run_lane(self, g: _FeatureGroup, feats: np.ndarray, samples: list[int], rel: list[float],
-                  lane: _Lane) -> None:
-        """One lane on one push of frames: its model, then guard, smoothing, stamps and sends."""
-        t = time.perf_counter()
-        poses = np.asarray(lane.model.push(feats), dtype=np.float32)
-        if len(poses) != len(feats):
-            raise ValueError(f"{self._who(lane)}the pose model returned {len(poses)} poses for "
-                             f"{len(feats)} feature frames")
-        self._emit(lane, g, poses, samples, rel)
-        lane_ms = (time.perf_counter() - t) * 1000.0 / len(poses)
-        for _ in range(len(poses)):
-            lane.compute_ms.add(lane_ms)
 
     def _emit(self, lane: _Lane, g: _FeatureGroup, poses: np.ndarray, samples: list[int],
               released: list[float]) -> None:
@@ -1342,8 +1232,7 @@ class Engine:
         if released == released:  # not NaN
             ms = (frame.wall_time - released) * 1000.0
             lane.latency_ms.add(ms)
-            with self._stats_lock:
-                self.latency_ms.add(ms)
+            self.latency_ms.add(ms)
 
     def _revive(self, src: AudioSource, st: _SourceState, now: float) -> None:
         """Report a failed source once, stop it, and try to restart it every ``retry_s``.

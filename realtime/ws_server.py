@@ -293,7 +293,6 @@ class WebSocketSink:
         self._outbox: deque[tuple[bytes, str | None]] = deque()  # engine thread -> loop (deque ops are atomic)
         self._wake_pending = False
         self._holding = False  # between begin_hop and end_hop: frames queue without waking the loop
-        self._send_lock = threading.Lock()
 
         self._loop = asyncio.new_event_loop()
         self._ready = threading.Event()
@@ -343,14 +342,13 @@ class WebSocketSink:
                 route.skipped += 1
             return
         data = encode_frame(frame.index, frame.audio_time, time.time(), frame.pose)
-        with self._send_lock:  # an ensemble's lanes may send from two threads (realtime.engine)
-            self._frames += 1
-            if route is not None:
-                route.frames += 1
-            self._outbox.append((data, key))
-            if self._wake_pending or self._holding:  # the loop takes this frame with the pending or held wake-up
-                return
-            self._wake()
+        self._frames += 1
+        if route is not None:
+            route.frames += 1
+        self._outbox.append((data, key))
+        if self._wake_pending or self._holding:  # the loop will take this frame with the pending or held wake-up
+            return
+        self._wake()
 
     def begin_hop(self) -> None:
         """Hold the hand-off to the server thread until :meth:`end_hop` (the engine's worker, around

@@ -146,18 +146,16 @@ def test_run_refuses_a_missing_checkpoint_and_a_style_the_model_lacks(capsys, cl
 
 # -- the engine: input stage and lanes ------------------------------------------------------------
 
-@pytest.mark.parametrize("lane_threads", [1, 2])
 def test_one_extractor_per_feature_config_and_each_staggered_stream_equals_its_own_offline_pass(
-        clip_audio, tiny_checkpoint, lane_threads):
+        clip_audio, tiny_checkpoint):
     """Three dance_vq performers share one extractor (a causal U-Net with other features gets its
     own); their code steps are spread over the 8-frame cycle; each performer's poses equal its
-    model fed its lead-in of silence frames and then the features of the same audio, whether the
-    performers run in turn or on two threads at once (``lane_threads``)."""
+    model fed its lead-in of silence frames and then the features of the same audio."""
     loaded: dict = {}
     perfs = _ensemble([("alice", 1, "waltz"), ("bob", 2, None), ("carol", 3, "rumba")], loaded)
     unet = build_pipeline(tiny_checkpoint)
     perfs.append(Performer("dave", unet.model, unet.extractor_factory, [ListSink()], feature_key=unet.feature_key))
-    eng = Engine(FileSource(clip_audio, SAMPLE_RATE, realtime=False), config=EngineConfig(warmup_s=0.5, lane_threads=lane_threads),
+    eng = Engine(FileSource(clip_audio, SAMPLE_RATE, realtime=False), config=EngineConfig(warmup_s=0.5),
                  performers=perfs)
     eng.start()
     eng.wait(60)
