@@ -178,11 +178,12 @@ class Prefix:
     depend on those n - 1 tokens only. Once a code is chosen, the next step's window is
     known but for its last token (the coming 8 frames of audio), so the stream computes
     the keys and values of the next window's other tokens on the frames between code
-    steps, one :meth:`step` a frame, and the code step runs the one new row
+    steps (a :meth:`step` or two a frame), and the code step runs the one new row
     (:meth:`NumpyPredictor.logits_after`). The pieces: per layer its keys, values and
     attention block, then the feed-forward block's two halves (the hidden layer with its
     GELU, then the output product), and for the last layer only its keys and values: 7
-    pieces of similar cost for 3 layers, one on each of the 7 frames between code steps.
+    pieces for 3 layers, spread over the frames between code steps
+    (:class:`~models.networks.dance_stream.DanceStream` says which).
     The numbers are those of the whole window at once (:meth:`NumpyPredictor.logits`),
     whichever frames compute them.
     """
@@ -204,6 +205,11 @@ class Prefix:
     @property
     def done(self) -> bool:
         return self._next == len(self._todo)
+
+    @property
+    def left(self) -> int:
+        """Pieces not computed yet."""
+        return len(self._todo) - self._next
 
     def step(self) -> None:
         """The next piece (see the class docstring)."""

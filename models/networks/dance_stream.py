@@ -243,6 +243,13 @@ class DanceStream:
         cc = c.clarity_col
         self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None
         self._decay = hermite_decay(DECAY_FRAMES * self.seg // 8)  # (2, D): match_exemplar's
+        # Frames of the cycle the next code step's prefix is computed on: all but the code step
+        # and the frame half a cycle from it, where the code step of a performer staggered by half
+        # a cycle falls (an ensemble of 2 or 4: realtime.engine's stagger). _free[j]: how many
+        # such frames are left from frame j on (0: none on j itself).
+        skip = {0, self.seg // 2} if self.seg > 2 else {0}
+        self._free = [0 if j in skip else sum(1 for i in range(j, self.seg) if i not in skip)
+                      for j in range(self.seg)]
         base = model.destandardize_poses(model.pose_mean * 0)  # the mean pose, unit quaternions
         self._idle_base = base.numpy().astype(np.float32)
         self._sway = IdleSway(self._idle_base)
@@ -388,11 +395,12 @@ class DanceStream:
             self._raw = x[i]
             if t % self.seg == 0:
                 self._next_code()
-            else:
+            elif self._free[t % self.seg]:
                 for pre in (self._prefix, self._prefix_auto):
                     if pre is not None and not pre.done:
-                        with single_thread_blas():
-                            pre.step()  # a piece a frame (models/networks/dance_numpy.py)
+                        with single_thread_blas():  # its pieces over this frame and the free ones after it
+                            for _ in range(-(-pre.left // self._free[t % self.seg])):
+                                pre.step()  # (models/networks/dance_numpy.py)
             pose = self._segment[t % self.seg]
             self._gate(x[i])
             w = self._w_idle
