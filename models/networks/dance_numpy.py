@@ -16,8 +16,8 @@ arrays, less of it, and most of it before it is needed:
   feed-forward, the final norm and the 512-way head run for that token alone;
 * causal attention: the other 15 tokens' rows do not depend on the newest token, and
   they are known as soon as the previous code is chosen. :class:`Prefix` computes their
-  keys and values in seven pieces on the seven frames between code steps, and the code
-  step runs the newest token's row alone (:meth:`NumpyPredictor.logits_after`).
+  keys and values in seven pieces on the frames between code steps, and the code step
+  runs the newest token's row alone (:meth:`NumpyPredictor.logits_after`).
 
 The code step's own work (the token's embedding, the newest row through each layer and
 the head) runs as compiled kernels (:mod:`models.networks.dance_jit`): as NumPy calls it
