@@ -184,7 +184,7 @@ def test_compiled_frame_kernels_give_the_numpy_arithmetic_bit_for_bit():
     ref, n_bad = sanitize_features(feats)
     assert sanitize_rows(feats, clean, FEATURE_LIMIT) == n_bad == 2
     np.testing.assert_array_equal(clean, ref)
-    hist, mean, std = np.zeros((8, 12), np.float32), feats.mean(0), feats.std(0) + 1
+    hist, mean, std = np.zeros((8, 12), np.float32), clean.mean(0), clean.std(0) + 1
     push_history(hist, clean[0], mean, std)
     push_history(hist, clean[1], mean, std)
     np.testing.assert_array_equal(hist[-2:], (clean[:2] - mean) / std)
