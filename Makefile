@@ -43,7 +43,8 @@ $(STAMP): pyproject.toml constraints.txt
 
 # The live path's numba kernels, compiled once into __pycache__ (models/jit.py) so that
 # the first `performer run` does not compile them (about 4 s) inside its warm-up.
-$(JIT_STAMP): $(STAMP) models/jit.py models/features/spectral.py models/features/context.py models/networks/dance_jit.py
+$(JIT_STAMP): $(STAMP) models/jit.py models/features/spectral.py models/features/context.py models/networks/dance_jit.py \
+		realtime/pose_jit.py
 	$(BIN)/python -m models.jit
 	touch $(JIT_STAMP)
 

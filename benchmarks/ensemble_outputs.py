@@ -15,7 +15,8 @@ Printed per run: the engine's whole hop p50/p99 (ms) and, per frame, block relea
 last of its performer's sinks returned (p50/p99/max, ms): how late the frames reach the
 sockets. ``--breakdown`` adds a third run, sinks on the worker, with every performer's model
 push and each OSC and WebSocket send timed per call (p50/p99/mean, ms): a performer's part
-of the hop, piece by piece. On 2 cores the output thread needs the interpreter lock the worker holds: its
+of the hop, piece by piece (and, for a dance_vq model, its code step, a prefix piece and the
+idle gate; the engine's guard and smoothing). On 2 cores the output thread needs the interpreter lock the worker holds: its
 work lands inside the worker's hop (the worker releases the lock for every socket send and
 BLAS call), and frames reach the sockets later. docs/latency.md quotes a run.
 """
@@ -123,12 +124,31 @@ def run(mode: str, performers: int, seconds: float, audio: np.ndarray, sr: int, 
         sinks = [OscSink("127.0.0.1", rx.getsockname()[1]), server.route(f"/ws/p{i}", f"p{i}")]
         if mode == "breakdown":
             _Timed(p.model, "push", "model push", spent)
+            for method, key in (("_next_code", "model: code step"), ("_gate", "model: idle gate")):
+                if hasattr(p.model, method):  # a dance_vq stream
+                    _Timed(p.model, method, key, spent)
             _Timed(sinks[0], "send", "OSC (VMC) encode + send", spent)
             _Timed(sinks[1], "send", "WebSocket encode + hand-off", spent)
         perfs.append(Performer(f"p{i}", p.model, p.extractor_factory, [_Fanout(sinks, done, out)],
                                feature_key=p.feature_key))
     src = FileSource(audio, sr, block_size=512, realtime=True, name="clip")
     eng = Engine(src, config=EngineConfig(duration_s=seconds, stats_size=int(seconds * 30) + 10), performers=perfs)
+    if mode == "breakdown":
+        for lane in eng._lanes:
+            if hasattr(lane.smoother, "smooth_into"):
+                _Timed(lane.smoother, "smooth_into", "engine: guard + smoothing", spent)
+        import models.networks.dance_numpy as dance_numpy  # the prefix pieces: made anew every code step
+
+        if not hasattr(dance_numpy.Prefix.step, "timed"):
+            step = dance_numpy.Prefix.step
+
+            def timed_step(self) -> None:
+                t = time.perf_counter()
+                step(self)
+                spent.setdefault("model: prefix piece", []).append(time.perf_counter() - t)
+
+            timed_step.timed = True
+            dance_numpy.Prefix.step = timed_step
     eng.start()
     done.clear()
     spent.clear()

@@ -47,6 +47,7 @@ from models.rig.motion import POSE_DIM
 from models.timebase import FPS, HOP, SAMPLE_RATE
 from realtime.audio_input import AudioSource, RingBuffer
 from realtime.frame import PoseFrame, Sink
+from realtime.pose_jit import guard_smooth
 
 log = logging.getLogger(__name__)
 
@@ -190,7 +191,8 @@ class PoseSmoother:
     about ``alpha / (1 - alpha)`` frames). Quaternions are blended by hemisphere-
     aligned nlerp (the result lies on the shortest arc between the two rotations;
     cheaper than slerp and indistinguishable at per-frame steps). Whether or not it
-    smooths, it renormalises every quaternion (a zero one becomes identity).
+    smooths, it renormalises every quaternion (a zero one becomes identity). One compiled
+    call a frame (:func:`realtime.pose_jit.guard_smooth`, NumPy's float32 arithmetic).
     """
 
     def __init__(self, alpha: float = 0.0) -> None:
@@ -199,34 +201,22 @@ class PoseSmoother:
         self.alpha = float(alpha)
         self._state = np.zeros(POSE_DIM, dtype=np.float32)
         self._has_state = False
-        self._dot = np.zeros(NUM_BONES, dtype=np.float32)
-        self._norm = np.zeros(NUM_BONES, dtype=np.float32)
 
     def reset(self) -> None:
         self._has_state = False
 
-    def _normalize(self, q: np.ndarray) -> None:
-        np.einsum("ij,ij->i", q, q, out=self._norm)
-        bad = self._norm < 1e-12
-        if bad.any():
-            q[bad] = (0.0, 0.0, 0.0, 1.0)
-            self._norm[bad] = 1.0
-        np.sqrt(self._norm, out=self._norm)
-        q /= self._norm[:, None]
+    def smooth_into(self, row: np.ndarray, pose: np.ndarray) -> bool:
+        """``pose`` (POSE_DIM,) float32 = ``row`` (POSE_DIM,) float32 smoothed; False, leaving both
+        and the state untouched, when ``row`` is not finite (the engine's guard)."""
+        if not guard_smooth(row, pose, self._state, self._has_state, self.alpha):
+            return False
+        self._has_state = True
+        return True
 
     def __call__(self, pose: np.ndarray) -> np.ndarray:
-        """Smooth ``pose`` ((POSE_DIM,) float32) in place and return it."""
-        q = pose[3:].reshape(NUM_BONES, 4)
-        self._normalize(q)
-        if self.alpha > 0.0 and self._has_state:
-            prev = self._state[3:].reshape(NUM_BONES, 4)
-            np.einsum("ij,ij->i", q, prev, out=self._dot)
-            q[self._dot < 0] *= -1.0
-            pose *= 1.0 - self.alpha
-            pose += self.alpha * self._state
-            self._normalize(q)
-        self._state[:] = pose
-        self._has_state = True
+        """Smooth ``pose`` ((POSE_DIM,) float32, finite) in place and return it."""
+        if not self.smooth_into(pose, pose):
+            raise ValueError("PoseSmoother needs a finite pose (the engine sends the last good pose instead)")
         return pose
 
 
@@ -559,6 +549,7 @@ class Engine:
         self._reset_requested = threading.Event()
         self._lane_reset_requested = threading.Event()
         self._thread: threading.Thread | None = None
+        self._hop_sinks: list[Sink] = []
         self._zero_counters()
 
     # -- the performers (the first one's for the single-performer attributes) -----------
@@ -665,6 +656,8 @@ class Engine:
             self._chunk = np.zeros((self.config.max_read, self.source.channels), dtype=np.float32)
         for g in self._groups:
             g.extractor = g.factory(self.source.sample_rate)
+        # sinks that hold their thread hand-offs while the hop's performers run (Sink's begin_hop / end_hop)
+        self._hop_sinks = [s for lane in self._lanes for s in lane.sinks if hasattr(s, "begin_hop")]
         self.error = None
         self._stop.clear()
         self._done.clear()
@@ -955,8 +948,10 @@ class Engine:
                 if len(feats):
                     for lane in g.lanes:
                         poses = lane.model.push(feats)
+                        pose = np.empty(POSE_DIM, np.float32)
                         for row in np.asarray(poses, dtype=np.float32):
-                            lane.smoother(row.copy())
+                            if row.shape == pose.shape:  # a non-finite row is skipped, as the guard skips it
+                                lane.smoother.smooth_into(row, pose)
             done += k
         self._do_reset()
         self.warmup_seconds = time.perf_counter() - t0
@@ -1161,6 +1156,16 @@ class Engine:
             released = {s: self.ring.release_time(s) for s in plans[0][2]}
         else:  # the ring's lookup only walks forward: ask in sample order across the groups
             released = {s: self.ring.release_time(s) for s in sorted({s for *_, ss in plans for s in ss})}
+        for sink in self._hop_sinks:
+            sink.begin_hop()
+        try:
+            self._run_groups(plans, released)
+        finally:
+            for sink in self._hop_sinks:
+                sink.end_hop()
+
+    def _run_groups(self, plans: list[tuple[_FeatureGroup, np.ndarray, list[int]]], released: dict[int, float]) -> None:
+        """Each group's lanes on its frames ``plans`` (group, features (k, D), completing samples)."""
         for g, feats, samples in plans:
             rel = [released[s] for s in samples]
             for lane in g.lanes:
@@ -1180,14 +1185,14 @@ class Engine:
         """Guard, smooth, stamp and send (or hold back) one lane's poses from one push."""
         offset_s = lane.offset_ms / 1000.0
         for k, row in enumerate(poses):
-            if row.shape != (POSE_DIM,) or not np.isfinite(row).all():
+            pose = np.empty(POSE_DIM, np.float32)
+            if row.shape != (POSE_DIM,) or not lane.smoother.smooth_into(row, pose):  # guard and smoothing: one call
                 lane.nan_frames += 1
                 if lane.nan_frames == 1:
                     log.warning("%smodel produced a non-finite pose; sending the last good pose instead",
                                 self._who(lane))
                 pose = lane.last_good.copy()
             else:
-                pose = lane.smoother(row.copy())
                 lane.last_good[:] = pose
             if lane.fader.active:  # after last_good: smoothing and the NaN guard keep the dance
                 pose = lane.fader(pose)

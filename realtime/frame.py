@@ -41,6 +41,11 @@ class Sink(Protocol):
     ``send`` is called on the engine's worker thread once per frame and must never
     block on the network, the disk or a slow peer: it queues or drops (and counts
     the drop). ``stats`` returns counters for the status line.
+
+    Optional: ``begin_hop()`` / ``end_hop()``, called by the engine around each hop's
+    performers (:meth:`realtime.engine.Engine._run_lanes`): a sink that hands frames to a
+    thread of its own may hold the hand-off until ``end_hop``, so that thread does not
+    take the interpreter lock from the performers still to run.
     """
 
     name: str

@@ -148,6 +148,13 @@ class BundleLayout:
 class VmcEncoder:
     """Encodes one pose per call as VMC Performer bundles (see the module docstring).
 
+    Every byte of a frame's datagrams but its 88 numbers (the Hips' position, the bones'
+    rotations, the time) is the same from frame to frame, so the datagrams are built once
+    as a template and a frame writes its numbers into their big-endian float slots with one
+    NumPy fancy assignment (about 15 NumPy calls and the joins per frame before, 0.13 ms a
+    frame on the live path; an ensemble pays it per performer). The bytes are those the
+    message-by-message packing gives (tests/test_vmc.py checks them against python-osc).
+
     Args:
         offsets: (NUM_BONES, 3) rest offset of each bone from its parent, metres, project
             frame, bones in :data:`models.rig.humanoid.BONES` order (the root's row is unused:
@@ -165,11 +172,38 @@ class VmcEncoder:
         heads = [root_pos] + [bone_addr + osc_string(name) for name in BONES]
         heads += [osc_message("/VMC/Ext/OK", *VMC_OK_ARGS), osc_string("/VMC/Ext/T") + osc_string(",f")]
         self.layout = BundleLayout(heads, [28] * (1 + NUM_BONES) + [0, 4], max_datagram)
-        # Row 0: the model root (origin, identity); rows 1..: bones. Big-endian float32,
-        # so .tobytes() is the OSC payload as is.
-        self._values = np.zeros((1 + NUM_BONES, 7), dtype=">f4")
-        self._values[:, 6] = 1.0
-        self._values[1:, :3] = to_unity_position(offsets)
+        # Row 0: the model root (origin, identity); rows 1..: bones (position, rotation), Unity handedness.
+        values = np.zeros((1 + NUM_BONES, 7), dtype=">f4")
+        values[:, 6] = 1.0
+        values[1:, :3] = to_unity_position(offsets)
+        raw = values.tobytes()
+        tails = [raw[i : i + 28] for i in range(0, len(raw), 28)] + [b"", bytes(4)]
+        grams = self.layout.pack(tails)
+        self._buf = bytearray(b"".join(grams))
+        ends = np.cumsum([len(g) for g in grams])
+        self._spans = [(int(e) - len(g), int(e)) for g, e in zip(grams, ends)]
+        # Where each message's tail starts in the template: the layout's order, message by message.
+        starts, at = [], 0
+        for group, size in zip(self.layout.groups, self.layout.datagram_sizes):
+            pos = at + len(BUNDLE_HEADER)
+            for i in group:
+                pos += len(self.layout._heads[i])
+                starts.append(pos)
+                pos += self.layout.tail_sizes[i]
+            at += size
+        # The frame's numbers: Hips position (-x, y, z), then per bone its rotation (x, -y, -z, w).
+        hips = 1 + self._root
+        slots = [starts[hips] + 4 * c for c in range(3)]
+        src, sign = [0, 1, 2], [-1.0, 1.0, 1.0]
+        for b in range(NUM_BONES):
+            slots += [starts[1 + b] + 12 + 4 * k for k in range(4)]
+            src += [3 + 4 * b + k for k in range(4)]
+            sign += [1.0, -1.0, -1.0, 1.0]
+        self._slots = np.array(slots) // 4  # float32 slots of the template viewed as ">f4"
+        self._src = np.array(src)
+        self._sign = np.array(sign, np.float32)
+        self._time_slot = starts[-1] // 4
+        self._view = np.frombuffer(self._buf, dtype=">f4")
 
     def encode(self, pose: np.ndarray, time_s: float) -> list[bytes]:
         """Datagrams for one pose.
@@ -179,19 +213,7 @@ class VmcEncoder:
                 local xyzw quaternions, project frame).
             time_s: sender time in seconds for /VMC/Ext/T.
         """
-        pose = np.asarray(pose)
-        v = self._values
-        hips = v[1 + self._root]
-        hips[0] = -pose[0]
-        hips[1] = pose[1]
-        hips[2] = pose[2]
-        q = pose[3:].reshape(NUM_BONES, 4)
-        v[1:, 3] = q[:, 0]
-        v[1:, 4] = -q[:, 1]
-        v[1:, 5] = -q[:, 2]
-        v[1:, 6] = q[:, 3]
-        raw = v.tobytes()
-        tails = [raw[i : i + 28] for i in range(0, len(raw), 28)]
-        tails.append(b"")
-        tails.append(struct.pack(">f", time_s))
-        return self.layout.pack(tails)
+        self._view[self._slots] = np.asarray(pose)[self._src] * self._sign
+        self._view[self._time_slot] = time_s
+        buf = self._buf
+        return [bytes(buf[a:b]) for a, b in self._spans]

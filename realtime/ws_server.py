@@ -185,6 +185,13 @@ class WebSocketRoute:
         """Encode one frame and hand it to the server thread for this route's clients; returns at once."""
         self.server._send(frame, self.path, self)
 
+    def begin_hop(self) -> None:
+        """The server's :meth:`WebSocketSink.begin_hop` (the engine calls it for each route)."""
+        self.server.begin_hop()
+
+    def end_hop(self) -> None:
+        self.server.end_hop()
+
     def stats(self) -> dict[str, float]:
         """clients (on this path), frames (sent by the engine), drops (of its clients), skipped."""
         return self.server._route_stats(self)
@@ -285,6 +292,7 @@ class WebSocketSink:
         self._route_drops: dict[str | None, int] = {}
         self._outbox: deque[tuple[bytes, str | None]] = deque()  # engine thread -> loop (deque ops are atomic)
         self._wake_pending = False
+        self._holding = False  # between begin_hop and end_hop: frames queue without waking the loop
 
         self._loop = asyncio.new_event_loop()
         self._ready = threading.Event()
@@ -338,8 +346,25 @@ class WebSocketSink:
         if route is not None:
             route.frames += 1
         self._outbox.append((data, key))
-        if self._wake_pending:  # the loop has not taken the last hand-off yet: it takes this one too
+        if self._wake_pending or self._holding:  # the loop will take this frame with the pending or held wake-up
             return
+        self._wake()
+
+    def begin_hop(self) -> None:
+        """Hold the hand-off to the server thread until :meth:`end_hop` (the engine's worker, around
+        each hop's performers): frames queue, the server thread is not woken. Woken mid-hop, it
+        took the interpreter lock for its broadcasts whenever a performer released it (every
+        socket send, BLAS and compiled call), and the performers after it waited; at the end of
+        the hop one wake-up sends every performer's frame."""
+        self._holding = True
+
+    def end_hop(self) -> None:
+        """Wake the server thread for the frames queued since :meth:`begin_hop` (once)."""
+        self._holding = False
+        if self._outbox and not self._wake_pending:
+            self._wake()
+
+    def _wake(self) -> None:
         self._wake_pending = True
         try:
             self._loop.call_soon_threadsafe(self._flush)

@@ -162,6 +162,52 @@ def test_numpy_predictor_gives_the_torch_predictors_logits(cfg):
                 np.testing.assert_allclose(got, ref, atol=1e-5 * max(1.0, float(np.abs(ref).max())), rtol=0)
 
 
+def test_compiled_frame_kernels_give_the_numpy_arithmetic_bit_for_bit():
+    """The kernels of a performer's ordinary frame (models/networks/dance_jit.py) against the NumPy
+    code they replaced: the same float32 values, not merely close ones, so codes and poses do not
+    move (the layer norm's and GELU's sums paired as NumPy pairs them; einsum's four products)."""
+    from models.networks.blend import blend_track
+    from models.networks.dance_jit import gelu_bias, layer_norm_rows, push_history, renorm_pose, sanitize_rows
+    from models.networks.dance_numpy import _gelu, _layer_norm
+    from models.networks.streaming import FEATURE_LIMIT, sanitize_features
+
+    rng = np.random.default_rng(5)
+    for d in (16, 128, 200, 1000):  # up to a block of 128, and the pairwise split beyond
+        x = (rng.normal(size=(15, d)) * 3 + 1).astype(np.float32)
+        w, b = rng.normal(size=d).astype(np.float32), rng.normal(size=d).astype(np.float32)
+        np.testing.assert_array_equal(layer_norm_rows(x, w, b, 1e-5), _layer_norm(x, w, b, 1e-5))
+        u = (rng.normal(size=(15, d)) * 2).astype(np.float32)
+        ref = _gelu(u + b)
+        gelu_bias(u, b)
+        np.testing.assert_array_equal(u, ref)
+    feats = rng.normal(scale=50.0, size=(40, 12)).astype(np.float32)
+    feats[3, 2], feats[7, 0], feats[7, 5], feats[9, 1], feats[11, 4] = np.nan, np.inf, -np.inf, 3e5, -2e4
+    clean = np.empty_like(feats)
+    ref, n_bad = sanitize_features(feats)
+    assert sanitize_rows(feats, clean, FEATURE_LIMIT) == n_bad == 2
+    np.testing.assert_array_equal(clean, ref)
+    hist, mean, std = np.zeros((8, 12), np.float32), clean.mean(0), clean.std(0) + 1
+    push_history(hist, clean[0], mean, std)
+    push_history(hist, clean[1], mean, std)
+    np.testing.assert_array_equal(hist[-2:], (clean[:2] - mean) / std)
+    assert not hist[:-2].any()
+    prev = None
+    for scale in rng.uniform(0.3, 3.0, 50).astype(np.float32):
+        pose = rng.normal(size=POSE_DIM).astype(np.float32) * scale
+        q = pose[3:].reshape(-1, 4).copy()  # the NumPy renormalisation it replaced
+        q /= np.sqrt(np.einsum("jc,jc->j", q, q))[:, None]
+        if prev is not None:
+            q[np.einsum("jc,jc->j", q, prev) < 0.0] *= -1.0
+        out = np.empty_like(pose)
+        assert renorm_pose(pose, np.zeros((0, 4), np.float32) if prev is None else prev, out)
+        np.testing.assert_array_equal(out[3:], q.ravel())
+        np.testing.assert_array_equal(out[:3], pose[:3])
+        np.testing.assert_allclose(out, blend_track(pose[None, None], np.ones((1, 1)), prev)[0], atol=1e-6)
+        prev = q
+    pose[7:11] = 0.0  # a zero quaternion: the caller's general path
+    assert not renorm_pose(pose, prev, out)
+
+
 def test_sampling_draws_what_rng_choice_draws():
     """DanceVQ.sample replays Generator.choice(p=...) without its checks: same codes, same generator state."""
     m = tiny_model()

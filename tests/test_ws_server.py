@@ -328,3 +328,22 @@ def test_missing_web_client_is_a_clear_404(sink_factory, tmp_path):
     sink = sink_factory(static_dir=tmp_path / "not-built")
     status, _, body = _get(sink.port, "/")
     assert status == 404 and b"web client not found" in body
+
+
+def test_frames_held_for_a_hop_go_out_in_order_when_it_ends(sink_factory):
+    """The engine wraps each hop's performers in begin_hop / end_hop: the server thread is not
+    woken (and sends nothing) until the hop ends, then every held frame goes out, in order."""
+    sink = sink_factory()
+    with connect(sink.ws_url) as ws:
+        _hello(ws)
+        frames = [_frame(i) for i in range(4)]
+        sink.begin_hop()
+        for f in frames:
+            sink.send(f)
+        with pytest.raises(TimeoutError):
+            ws.recv(timeout=0.3)  # held: never sent before end_hop, however long it takes
+        sink.end_hop()
+        got = [decode_frame(ws.recv(timeout=5)) for _ in frames]
+        assert [w.index for w in got] == [0, 1, 2, 3]
+        np.testing.assert_array_equal(got[2].pose, frames[2].pose)
+        assert _send_until(sink, ws, [_frame(9)])  # outside a hop: sent at once, as before

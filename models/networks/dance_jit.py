@@ -265,6 +265,190 @@ def draw_code(logits, temperature, u):  # pragma: no cover - compiled
     return lo
 
 
+# -- the frames between code steps -------------------------------------------------------------
+# A lane's ordinary frame (no code step) was about 30 small NumPy calls (sanitising, the feature
+# history, the idle gate, the renormalisation) and a prefix piece 10-20 more around its matrix
+# products, each 5-10 µs on the live path's cold caches. These kernels do the same arithmetic in
+# the same order (float32 where NumPy computes in float32, sums paired as NumPy pairs them), so
+# the poses and codes are those of the NumPy code they replace, bit for bit
+# (tests/test_dance_vq.py); the matrix products stay NumPy's (BLAS).
+
+
+@njit(cache=True, nogil=True)
+def sanitize_rows(x, out, limit):  # pragma: no cover - compiled
+    """``out`` (k, D) float32 = ``x`` (k, D) with non-finite values -> 0, clipped to +-limit
+    (``sanitize_features``'s values); returns how many rows held a non-finite value."""
+    lim = np.float32(limit)
+    bad_rows = 0
+    for r in range(x.shape[0]):
+        bad = False
+        for c in range(x.shape[1]):
+            v = np.float32(x[r, c])
+            if not np.isfinite(v):
+                bad = True
+                v = np.float32(0.0)
+            out[r, c] = min(max(v, -lim), lim)
+        if bad:
+            bad_rows += 1
+    return bad_rows
+
+
+@njit(cache=True, nogil=True)
+def push_history(hist, row, mean, std):  # pragma: no cover - compiled
+    """Shift the feature history ``hist`` (seg, D) up one frame and append ``(row - mean) / std`` (D,)."""
+    n, d = hist.shape
+    for i in range(n - 1):
+        for c in range(d):
+            hist[i, c] = hist[i + 1, c]
+    for c in range(d):
+        hist[n - 1, c] = (row[c] - mean[c]) / std[c]
+
+
+@njit(cache=True, nogil=True)
+def gate_ema(row, cols, mean, std, ema, a):  # pragma: no cover - compiled
+    """The music detector's running mean, in place: ``ema = a ema + (1 - a) z`` with
+    ``z = (row[cols] - mean) / std`` (float64, (G,))."""
+    b = 1.0 - a
+    for i in range(cols.shape[0]):
+        z = (np.float64(row[cols[i]]) - mean[i]) / std[i]
+        ema[i] = a * ema[i] + b * z
+
+
+@njit(cache=True, nogil=True)
+def _sq4(q, j):  # pragma: no cover - compiled
+    """|q_j|^2 of quaternion row j (float32), paired as NumPy's einsum adds four products."""
+    return (q[j, 0] * q[j, 0] + q[j, 1] * q[j, 1]) + (q[j, 2] * q[j, 2] + q[j, 3] * q[j, 3])
+
+
+@njit(cache=True, nogil=True)
+def renorm_pose(pose, prev, out):  # pragma: no cover - compiled
+    """``out`` (P,) = ``pose`` (P,) with unit quaternions, each on the hemisphere of ``prev`` (J, 4)
+    (J = 0: no previous frame). Returns False, writing nothing, when the root or a norm is not
+    finite or a norm is at most 1e-8 (the caller takes the general path then)."""
+    q = pose[3:].reshape(-1, 4)
+    nj = q.shape[0]
+    norm = np.empty(nj, np.float32)
+    for j in range(nj):
+        norm[j] = np.float32(math.sqrt(_sq4(q, j)))
+        if not (np.isfinite(norm[j]) and norm[j] > np.float32(1e-8)):
+            return False
+    for c in range(3):
+        if not np.isfinite(pose[c]):
+            return False
+        out[c] = pose[c]
+    o = out[3:].reshape(-1, 4)
+    for j in range(nj):
+        for k in range(4):
+            o[j, k] = q[j, k] / norm[j]
+    if prev.shape[0] == nj:
+        for j in range(nj):
+            dot = (o[j, 0] * prev[j, 0] + o[j, 1] * prev[j, 1]) + (o[j, 2] * prev[j, 2] + o[j, 3] * prev[j, 3])
+            if dot < 0:
+                for k in range(4):
+                    o[j, k] = -o[j, k]
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _block_sum(x, lo, n):  # pragma: no cover - compiled
+    """Sum of x[lo:lo + n], n <= 128, as NumPy sums such a block: eight running sums combined
+    pairwise, then the rest in order (fewer than 8: in order)."""
+    if n < 8:
+        s = np.float32(0.0)
+        for i in range(lo, lo + n):
+            s += x[i]
+        return s
+    r0, r1, r2, r3 = x[lo], x[lo + 1], x[lo + 2], x[lo + 3]
+    r4, r5, r6, r7 = x[lo + 4], x[lo + 5], x[lo + 6], x[lo + 7]
+    i = 8
+    stop = n - n % 8
+    while i < stop:
+        j = lo + i
+        r0 += x[j]
+        r1 += x[j + 1]
+        r2 += x[j + 2]
+        r3 += x[j + 3]
+        r4 += x[j + 4]
+        r5 += x[j + 5]
+        r6 += x[j + 6]
+        r7 += x[j + 7]
+        i += 8
+    s = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        s += x[lo + i]
+        i += 1
+    return s
+
+
+@njit(cache=True, nogil=True)
+def _pairwise_sum(x):  # pragma: no cover - compiled
+    """Sum of x (n,) float32 as NumPy's ``add.reduce`` sums a contiguous row (pairwise): blocks
+    of up to 128 by :func:`_block_sum`; a longer range splits in two halves (the first a
+    multiple of 8) and adds their sums. Written with an explicit stack (numba's cache does
+    not keep recursive functions)."""
+    n = x.shape[0]
+    if n <= 128:
+        return _block_sum(x, 0, n)
+    # post-order walk of the split tree: (lo, n, state) with state 0 = not split yet, 1 = children summed
+    lo_s = np.empty(64, np.int64)
+    n_s = np.empty(64, np.int64)
+    st_s = np.empty(64, np.int64)
+    val = np.empty(64, np.float32)
+    nv = 0
+    top = 0
+    lo_s[0], n_s[0], st_s[0] = 0, n, 0
+    while top >= 0:
+        lo, m, st = lo_s[top], n_s[top], st_s[top]
+        if m <= 128:
+            val[nv] = _block_sum(x, lo, m)
+            nv += 1
+            top -= 1
+        elif st == 1:
+            val[nv - 2] = val[nv - 2] + val[nv - 1]
+            nv -= 1
+            top -= 1
+        else:
+            half = m // 2
+            half -= half % 8
+            st_s[top] = 1
+            lo_s[top + 1], n_s[top + 1], st_s[top + 1] = lo + half, m - half, 0
+            lo_s[top + 2], n_s[top + 2], st_s[top + 2] = lo, half, 0
+            top += 2
+    return val[0]
+
+
+@njit(cache=True, nogil=True)
+def layer_norm_rows(x, w, b, eps):  # pragma: no cover - compiled
+    """LayerNorm of rows x (m, d) float32 over the last axis: dance_numpy's ``_layer_norm``."""
+    m, d = x.shape
+    out = np.empty_like(x)
+    xc = np.empty(d, np.float32)
+    sq = np.empty(d, np.float32)
+    e = np.float32(eps)
+    df = np.float32(d)
+    for r in range(m):
+        mean = _pairwise_sum(x[r]) / df
+        for c in range(d):
+            xc[c] = x[r, c] - mean
+            sq[c] = xc[c] * xc[c]
+        s = np.float32(math.sqrt(_pairwise_sum(sq) / df + e))
+        for c in range(d):
+            out[r, c] = xc[c] / s * w[c] + b[c]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def gelu_bias(u, b):  # pragma: no cover - compiled
+    """In place: ``u = gelu(u + b)`` for rows u (m, n) float32 and bias b (n,); the exact (erf)
+    GELU as dance_numpy's ``_gelu`` computes it (erf in float64, rounded to float32)."""
+    c = np.float32(_SQRT_HALF)
+    for r in range(u.shape[0]):
+        for i in range(u.shape[1]):
+            x = u[r, i] + b[i]
+            e = np.float32(math.erf(np.float64(x * c)))
+            u[r, i] = np.float32(0.5) * x * (np.float32(1.0) + e)
+
+
 @njit(cache=True, nogil=True)
 def warp_pose(played, x):  # pragma: no cover - compiled
     """The pose (P,) at fractional frame ``x`` of ``played`` (F, P) float32: frame ``i = floor(x)``

@@ -16,12 +16,14 @@ arrays, less of it, and most of it before it is needed:
   feed-forward, the final norm and the 512-way head run for that token alone;
 * causal attention: the other 15 tokens' rows do not depend on the newest token, and
   they are known as soon as the previous code is chosen. :class:`Prefix` computes their
-  keys and values in five pieces on the five frames after a code step, and the code
-  step runs the newest token's row alone (:meth:`NumpyPredictor.logits_after`).
+  keys and values in seven pieces on the frames between code steps, and the code step
+  runs the newest token's row alone (:meth:`NumpyPredictor.logits_after`).
 
 The code step's own work (the token's embedding, the newest row through each layer and
 the head) runs as compiled kernels (:mod:`models.networks.dance_jit`): as NumPy calls it
-was about 100 dispatches of 5-10 µs each on the live path's cold caches.
+was about 100 dispatches of 5-10 µs each on the live path's cold caches. The pieces
+ahead keep NumPy's (BLAS) matrix products; their layer norms and GELUs are compiled
+kernels that give NumPy's values bit for bit.
 
 The same numbers come out whichever frame computes them, so the live stream and the
 offline pass (which pushes the song through the same stream) stay equal. The torch
@@ -42,7 +44,7 @@ from collections.abc import Iterator
 import numpy as np
 from scipy.special import erf
 
-from models.networks.dance_jit import embed_token, head, row_layer
+from models.networks.dance_jit import embed_token, gelu_bias, head, layer_norm_rows, row_layer
 
 _SQRT_HALF = np.float32(np.sqrt(0.5))
 _BLAS = None  # threadpoolctl's controller of the BLAS libraries, made on first use (about 2 ms)
@@ -113,7 +115,7 @@ class _Layer:
 
     def qkv(self, h: np.ndarray) -> np.ndarray:
         """Rows (n, d) -> their queries, keys and values side by side (n, 3d)."""
-        return _layer_norm(h, *self.n1) @ self.w_qkv + self.b_qkv
+        return layer_norm_rows(h, *self.n1) @ self.w_qkv + self.b_qkv
 
     def attend(self, h: np.ndarray, q: np.ndarray, k: np.ndarray, v: np.ndarray,
                mask: np.ndarray | None) -> np.ndarray:
@@ -138,7 +140,19 @@ class _Layer:
 
     def feed_forward(self, h: np.ndarray) -> np.ndarray:
         """The residual feed-forward block: (m, d) -> (m, d)."""
-        return h + _gelu(_layer_norm(h, *self.n2) @ self.w_1 + self.b_1) @ self.w_2 + self.b_2
+        return self.ff_out(h, self.ff_hidden(h))
+
+    def ff_hidden(self, h: np.ndarray) -> np.ndarray:
+        """The feed-forward block's first half: rows (m, d) -> GELU hidden rows (m, 4d).
+        (Layer norm and GELU compiled, :mod:`models.networks.dance_jit`: the values of
+        :func:`_layer_norm` and :func:`_gelu`, bit for bit.)"""
+        u = layer_norm_rows(h, *self.n2) @ self.w_1
+        gelu_bias(u, self.b_1)
+        return u
+
+    def ff_out(self, h: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The feed-forward block's second half: rows ``h`` (m, d) + hidden ``u`` (m, 4d) @ w_2 -> (m, d)."""
+        return h + u @ self.w_2 + self.b_2
 
     def row(self, h: np.ndarray, kh: np.ndarray, vh: np.ndarray, m: int) -> np.ndarray:
         """The newest token's row (d,) through this layer: its key and value go into slot ``m`` of
@@ -164,11 +178,14 @@ class Prefix:
     depend on those n - 1 tokens only. Once a code is chosen, the next step's window is
     known but for its last token (the coming 8 frames of audio), so the stream computes
     the keys and values of the next window's other tokens on the frames between code
-    steps, one :meth:`step` a frame (a layer's attention block, then its feed-forward
-    block; for the last layer only its keys and values: 5 steps for 3 layers), and the
-    code step runs the one new row (:meth:`NumpyPredictor.logits_after`). The numbers
-    are those of the whole window at once (:meth:`NumpyPredictor.logits`), whichever
-    frames compute them.
+    steps (a :meth:`step` or two a frame), and the code step runs the one new row
+    (:meth:`NumpyPredictor.logits_after`). The pieces: per layer its keys, values and
+    attention block, then the feed-forward block's two halves (the hidden layer with its
+    GELU, then the output product), and for the last layer only its keys and values: 7
+    pieces for 3 layers, spread over the frames between code steps
+    (:class:`~models.networks.dance_stream.DanceStream` says which).
+    The numbers are those of the whole window at once (:meth:`NumpyPredictor.logits`),
+    whichever frames compute them.
     """
 
     def __init__(self, pred: "NumpyPredictor", tokens, style: int) -> None:
@@ -178,21 +195,35 @@ class Prefix:
         self.h = tokens  # becomes tokens + style + position at the first step (a list is stacked then)
         # per layer: keys (H, hd, m + 1) and values (H, m + 1, hd) by head; the last slot is the new token's
         self.kv: list[tuple[np.ndarray, np.ndarray]] = []
-        self._ff_due = False  # the last layer's attention is done, its feed-forward not yet
+        last = len(pred.layers) - 1
+        # (kind, layer): "attn" = keys, values (and, but for the last layer, the attention block)
+        self._todo = [(kind, i) for i in range(last + 1)
+                      for kind in (("attn", "ff1", "ff2") if i < last and self.m else ("attn",))]
+        self._next = 0
+        self._u: np.ndarray | None = None  # the feed-forward's hidden rows (m, 4d) between its halves
 
     @property
     def done(self) -> bool:
-        return len(self.kv) == len(self.pred.layers) and not self._ff_due
+        return self._next == len(self._todo)
+
+    @property
+    def left(self) -> int:
+        """Pieces not computed yet."""
+        return len(self._todo) - self._next
 
     def step(self) -> None:
-        """The next piece: a layer's keys, values and attention block, or its feed-forward block."""
-        if self._ff_due:
-            self.h = self.pred.layers[len(self.kv) - 1].feed_forward(self.h)
-            self._ff_due = False
+        """The next piece (see the class docstring)."""
+        kind, i = self._todo[self._next]
+        self._next += 1
+        layer = self.pred.layers[i]
+        if kind == "ff1":
+            self._u = layer.ff_hidden(self.h)
             return
-        layer = self.pred.layers[len(self.kv)]
+        if kind == "ff2":
+            self.h, self._u = layer.ff_out(self.h, self._u), None
+            return
         d, nh, m = layer.d, layer.heads, self.m
-        if not self.kv:
+        if i == 0:
             tokens = np.stack(self.h) if m else np.zeros((0, d), np.float32)
             self.h = tokens + self.pred.style[self.style] + self.pred.pos[:m]
         qkv = layer.qkv(self.h)
@@ -201,10 +232,9 @@ class Prefix:
         kh[:, :, :m] = qkv[:, d: 2 * d].reshape(m, nh, d // nh).transpose(1, 2, 0)
         vh[:, :m] = qkv[:, 2 * d:].reshape(m, nh, d // nh).transpose(1, 0, 2)
         self.kv.append((kh, vh))
-        if len(self.kv) < len(self.pred.layers) and m:  # the last layer's rows are not needed, only its keys
+        if i < len(self.pred.layers) - 1 and m:  # the last layer's rows are not needed, only its keys
             self.h = layer.attend_heads(self.h, qkv[:, :d], kh[:, :, :m], vh[:, :m], self.pred.mask[:m, :m],
                                         feed_forward=False)
-            self._ff_due = True
 
     def finish(self) -> "Prefix":
         while not self.done:

@@ -35,10 +35,10 @@ import numpy as np
 
 from models.errors import ConfigError
 from models.networks.blend import blend_track
-from models.networks.dance_jit import match_exemplar, warp_pose
+from models.networks.dance_jit import gate_ema, match_exemplar, push_history, renorm_pose, sanitize_rows, warp_pose
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ, style_token
-from models.networks.streaming import sanitize_features
+from models.networks.streaming import FEATURE_LIMIT
 from models.rig.humanoid import BONE_INDEX
 from models.timebase import FPS
 
@@ -149,20 +149,18 @@ def hermite_decay(frames: int) -> np.ndarray:
 def _renorm_frame(pose: np.ndarray, prev_quat: np.ndarray | None) -> np.ndarray:
     """``blend_track(pose[None, None], [[1]], prev_quat)[0]`` for one pose (P,): its quaternions
     renormalised and sign-aligned to ``prev_quat`` (J, 4), without the blend of one candidate
-    with itself (the engine pushes one frame at a time: 50-80 µs a frame there, 15 here).
-    The same values (a zero may change sign); non-finite or near-zero quaternions take the
+    with itself (the engine pushes one frame at a time: 50-80 µs a frame there). One compiled
+    call (:func:`models.networks.dance_jit.renorm_pose`, NumPy's arithmetic bit for bit; a zero
+    may change sign against ``blend_track``); non-finite or near-zero quaternions take the
     general path."""
-    q = pose[3:].reshape(-1, 4).copy()
-    norm = np.sqrt(np.einsum("jc,jc->j", q, q))
-    if not (np.isfinite(norm).all() and norm.min() > 1e-8 and np.isfinite(pose[:3]).all()):
-        return blend_track(pose[None, None], np.ones((1, 1)), prev_quat)[0]
-    q /= norm[:, None]
-    if prev_quat is not None:
-        q[np.einsum("jc,jc->j", q, prev_quat) < 0.0] *= -1.0
-    out = np.empty_like(pose)
-    out[:3] = pose[:3]
-    out[3:] = q.ravel()
-    return out
+    out = np.empty(len(pose), np.float32)
+    if renorm_pose(np.ascontiguousarray(pose, np.float32), _NO_PREV if prev_quat is None else prev_quat, out):
+        return out
+    return blend_track(pose[None, None], np.ones((1, 1)), prev_quat)[0]
+
+
+#: ``renorm_pose``'s "no previous frame" (no quaternion to align the signs to).
+_NO_PREV = np.zeros((0, 4), np.float32)
 
 
 def _unit(p: np.ndarray) -> np.ndarray:
@@ -257,6 +255,7 @@ class DanceStream:
         self._energy_min, self._gate_b = (float(v) for v in model.gate)
         self._ecol = c.energy_col if 0 <= c.energy_col < c.feature_dim else None
         self._gcols = [*GATE_MFCC, c.clarity_col] if 0 <= c.clarity_col < c.feature_dim else []
+        self._gate_idx = np.array(self._gcols, np.int64)  # (G,) the detector's feature columns
         self._gate_w = model.gate_w.numpy().astype(np.float64)[: len(self._gcols)]
         self._gate_mean = self._feat_mean[self._gcols].astype(np.float64)
         self._gate_std = self._feat_std[self._gcols].astype(np.float64)
@@ -270,6 +269,13 @@ class DanceStream:
         cc = c.clarity_col
         self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None
         self._decay = hermite_decay(DECAY_FRAMES * self.seg // 8)  # (2, D): match_exemplar's
+        # Frames of the cycle the next code step's prefix is computed on: all but the code step
+        # and the frame half a cycle from it, where the code step of a performer staggered by half
+        # a cycle falls (an ensemble of 2 or 4: realtime.engine's stagger). _free[j]: how many
+        # such frames are left from frame j on (0: none on j itself).
+        skip = {0, self.seg // 2} if self.seg > 2 else {0}
+        self._free = [0 if j in skip else sum(1 for i in range(j, self.seg) if i not in skip)
+                      for j in range(self.seg)]
         base = model.destandardize_poses(model.pose_mean * 0)  # the mean pose, unit quaternions
         self._idle_base = base.numpy().astype(np.float32)
         self._sway = IdleSway(self._idle_base)
@@ -323,9 +329,8 @@ class DanceStream:
         if self._ecol is not None and row[self._ecol] <= self._energy_min:
             present = False  # silence: the detector's running mean waits for sound
         elif self._gcols:  # noise without music: the logistic detector on the running mean
-            z = (row[self._gcols] - self._gate_mean) / self._gate_std
             a = self._gate_a if self._music else self._gate_a_return
-            self._ema = a * self._ema + (1 - a) * z
+            gate_ema(row, self._gate_idx, self._gate_mean, self._gate_std, self._ema, a)  # in place, compiled
             # hysteresis: while dancing, noise must be clearly noise (logit below -GATE_MARGIN)
             if float(self._ema @ self._gate_w) + self._gate_b <= (-GATE_MARGIN if self._music else 0.0):
                 present = False
@@ -429,25 +434,26 @@ class DanceStream:
 
     def push(self, features: np.ndarray) -> np.ndarray:
         """Consume k >= 0 feature frames (k, D); return their k poses (k, POSE_DIM) float32."""
-        x = np.asarray(features)
+        x = np.asarray(features, np.float32)
         if x.ndim != 2 or x.shape[1] != self.feature_dim:
             raise ConfigError(f"features must have shape (frames, {self.feature_dim}) for this model, got {x.shape}")
-        x, n_bad = sanitize_features(x)
-        self.nonfinite_frames += n_bad
+        clean = np.empty(x.shape, np.float32)
+        self.nonfinite_frames += sanitize_rows(x, clean, FEATURE_LIMIT)  # sanitize_features' values, one call
+        x = clean
         k = len(x)
         out = np.empty((k, self.pose_dim), np.float32)
         for i in range(k):
             t = self.frame
-            self._hist[:-1] = self._hist[1:]
-            self._hist[-1] = (x[i] - self._feat_mean) / self._feat_std
+            push_history(self._hist, x[i], self._feat_mean, self._feat_std)  # (x - mean) / std, the oldest out
             self._raw = x[i]
             if t % self.seg == 0:
                 self._next_code()
-            else:
+            elif self._free[t % self.seg]:
                 for pre in (self._prefix, self._prefix_auto):
                     if pre is not None and not pre.done:
-                        with single_thread_blas():
-                            pre.step()  # a piece a frame (models/networks/dance_numpy.py)
+                        with single_thread_blas():  # its pieces over this frame and the free ones after it
+                            for _ in range(-(-pre.left // self._free[t % self.seg])):
+                                pre.step()  # (models/networks/dance_numpy.py)
             pose = self._warped(t % self.seg)
             self._gate(x[i])
             w = self._w_idle
