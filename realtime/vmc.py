@@ -132,6 +132,19 @@ class BundleLayout:
             len(BUNDLE_HEADER) + sum(4 + sizes[i] for i in g) for g in self.groups
         )
 
+    def tail_offsets(self) -> list[int]:
+        """Byte offset of each message's tail, in slot order, in the datagrams of :meth:`pack`
+        laid end to end."""
+        offsets, at = [0] * len(self._heads), 0
+        for group, size in zip(self.groups, self.datagram_sizes):
+            pos = at + len(BUNDLE_HEADER)
+            for i in group:
+                pos += len(self._heads[i])
+                offsets[i] = pos
+                pos += self.tail_sizes[i]
+            at += size
+        return offsets
+
     def pack(self, tails: Sequence[bytes]) -> list[bytes]:
         """Datagrams (OSC bundles) of one frame from its per-message tails, in slot order."""
         heads = self._heads
@@ -182,15 +195,7 @@ class VmcEncoder:
         self._buf = bytearray(b"".join(grams))
         ends = np.cumsum([len(g) for g in grams])
         self._spans = [(int(e) - len(g), int(e)) for g, e in zip(grams, ends)]
-        # Where each message's tail starts in the template: the layout's order, message by message.
-        starts, at = [], 0
-        for group, size in zip(self.layout.groups, self.layout.datagram_sizes):
-            pos = at + len(BUNDLE_HEADER)
-            for i in group:
-                pos += len(self.layout._heads[i])
-                starts.append(pos)
-                pos += self.layout.tail_sizes[i]
-            at += size
+        starts = self.layout.tail_offsets()  # where each message's numbers start in the template
         # The frame's numbers: Hips position (-x, y, z), then per bone its rotation (x, -y, -z, w).
         hips = 1 + self._root
         slots = [starts[hips] + 4 * c for c in range(3)]

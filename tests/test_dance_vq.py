@@ -281,6 +281,15 @@ def _poses(t: int, rng: np.random.Generator) -> np.ndarray:
     return np.concatenate([root, q], 1)
 
 
+def memory_model(poses: np.ndarray) -> DanceVQ:
+    """A tiny dance_vq with 3 exemplars a code, its pose statistics set from ``poses`` (T, P)."""
+    torch.manual_seed(0)
+    m = DanceVQ(dataclasses_replace(TINY, members=3))
+    m.pose_mean.copy_(torch.from_numpy(poses.mean(0)))
+    m.pose_std.copy_(torch.from_numpy(np.maximum(poses.std(0), 0.02)))
+    return m
+
+
 class _Clip:
     def __init__(self, poses, features, style):
         self.poses, self.features, self.style = poses, features, style
@@ -395,13 +404,9 @@ def test_choreographic_memory_plays_real_movements_at_their_scale_and_hands_over
     from models.training.dance_vq import fit_members
 
     rng = np.random.default_rng(0)
-    cfg = DanceVQConfig(feature_dim=10, codebook=16, code_dim=8, enc_width=16, dec_width=16, d_model=16, layers=1,
-                        heads=2, window_codes=4, energy_col=0, clarity_col=-1, members=3)
-    torch.manual_seed(0)
-    m = DanceVQ(cfg)
     poses = _poses(900, rng)
-    m.pose_mean.copy_(torch.from_numpy(poses.mean(0)))
-    m.pose_std.copy_(torch.from_numpy(np.maximum(poses.std(0), 0.02)))
+    m = memory_model(poses)
+    cfg = m.config
     with torch.no_grad():
         m.gate[0] = -50.0
     info = fit_members(m, [_Clip(poses, np.zeros((900, 10), np.float32), "C")])
@@ -581,15 +586,10 @@ def test_style_memory_records_each_exemplars_style_and_which_codes_each_style_us
     from models.training.dance_vq import fit_members, fit_style_prior, prior_from_counts
 
     rng = np.random.default_rng(0)
-    cfg = DanceVQConfig(feature_dim=10, codebook=16, code_dim=8, enc_width=16, dec_width=16, d_model=16, layers=1,
-                        heads=2, window_codes=4, energy_col=0, clarity_col=-1, members=3)
-    torch.manual_seed(0)
-    m = DanceVQ(cfg)
     cha, wal = _poses(400, rng), _poses(400, rng)
     cha[:, 1], wal[:, 1] = 1.1, 0.7  # each style's dancers at their own hip height
-    both = np.concatenate([cha, wal])
-    m.pose_mean.copy_(torch.from_numpy(both.mean(0)))
-    m.pose_std.copy_(torch.from_numpy(np.maximum(both.std(0), 0.02)))
+    m = memory_model(np.concatenate([cha, wal]))
+    cfg = m.config
     clips = [_Clip(cha, np.zeros((400, 10), np.float32), "C"), _Clip(wal, np.zeros((400, 10), np.float32), "W")]
     fit_members(m, clips)
     have = m.member_count.numpy()
@@ -653,11 +653,8 @@ def test_style_memory_is_added_to_an_older_checkpoint_only_from_its_own_training
     from models.training.style_memory import add_style_memory
 
     rng = np.random.default_rng(1)
-    torch.manual_seed(0)
-    m = DanceVQ(dataclasses_replace(TINY, members=3))
     poses = _poses(300, rng)
-    m.pose_mean.copy_(torch.from_numpy(poses.mean(0)))
-    m.pose_std.copy_(torch.from_numpy(np.maximum(poses.std(0), 0.02)))
+    m = memory_model(poses)
     clips = [_Clip(poses, np.zeros((300, TINY.feature_dim), np.float32), "R")]
     fit_members(m, clips)
     members = m.member_poses.clone()
