@@ -240,17 +240,29 @@ def test_idle_pose_is_the_scipy_composition_it_replaced():
     np.testing.assert_array_equal(np.concatenate([sway(np.array([k])) for k in t[:50]]), idle_pose(base, t[:50]))
 
 
-def test_exemplar_beat_dips_are_computed_once_per_model_until_the_exemplars_change():
+def test_streams_of_one_model_share_its_predictor_exemplars_and_dips_until_they_change():
+    """An ensemble's performers of one checkpoint hold one copy of what they only read; a
+    weight written in place (a training step) gives the next stream fresh copies."""
+    from models.networks.dance_numpy import NumpyPredictor
+
     m = tiny_model()
     with torch.no_grad():
         m.member_poses.copy_(m.pose_mean.to(m.member_poses.dtype))
         m.member_count.fill_(1)
     a, b = DanceStream(m), DanceStream(m)
-    assert a._dips is b._dips
+    assert a._dips is b._dips and a._members is b._members and a._predictor is b._predictor
     with torch.no_grad():
         m.member_poses[0, 0, :, 4] += 0.5  # written in place: the version counter moves
     c = DanceStream(m)
     assert c._dips is not a._dips and c._dips.shape == a._dips.shape
+    assert c._members is not a._members and c._members[0, 0, 0, 4] != a._members[0, 0, 0, 4]
+    assert c._predictor is a._predictor  # the predictor did not change
+    with torch.no_grad():
+        m.predictor.head.weight.add_(1.0)
+    d = DanceStream(m)
+    assert d._predictor is not a._predictor
+    np.testing.assert_array_equal(d._predictor.w_head, NumpyPredictor(m.predictor).w_head)
+    np.testing.assert_allclose(d._predictor.w_head - a._predictor.w_head, 1.0, atol=1e-6)
 
 
 def test_decoder_is_causal_over_codes():

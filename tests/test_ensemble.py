@@ -234,6 +234,51 @@ def test_show_control_per_performer_over_osc_and_websocket():
     assert server._closed
 
 
+def test_reload_of_an_ensemble_applies_each_performers_live_settings(tmp_path, caplog):
+    """SIGHUP's reload (run.reload_settings) on a two-performer engine: a performer's own
+    smoothing reaches that performer only, a top-level offset every performer without its
+    own, a broken file changes nothing, and a performer added waits for the next start."""
+    import logging
+
+    from realtime.commands.run import reload_settings
+
+    conf = tmp_path / "show.toml"
+    head = 'audio = "x.wav"\noffset_ms = 0\n'
+    alice, bob = '[[performer]]\nname = "alice"\n', '[[performer]]\nname = "bob"\noffset_ms = 25\n'
+    conf.write_text(head + alice + bob)
+    args = cli.build_parser().parse_args(["run", "--config", str(conf)])
+    cfg = resolve_run_config(args)
+    perfs = _ensemble([("alice", 0, None), ("bob", 1, None)], {})
+    for perf, spec in zip(perfs, cfg.performer_specs()):
+        perf.offset_ms, perf.smoothing = spec.offset_ms, spec.smoothing
+    eng = Engine(FileSource(np.zeros(SAMPLE_RATE, np.float32), SAMPLE_RATE), config=EngineConfig(), performers=perfs)
+
+    def settings() -> dict[str, tuple[float, float]]:
+        per = eng.stats()["performers"]
+        return {n: (per[n]["offset_ms"], per[n]["smoothing"]) for n in ("alice", "bob")}
+
+    assert settings() == {"alice": (0.0, 0.0), "bob": (25.0, 0.0)}
+    caplog.set_level(logging.WARNING)
+    conf.write_text('audio = "x.wav"\noffset_ms = 60\n' + alice + "smoothing = 0.4\n" + bob)
+    cfg = reload_settings(args, eng, cfg)
+    assert settings() == {"alice": (60.0, 0.4), "bob": (25.0, 0.0)}
+    assert any("alice: offset_ms -> 60, smoothing -> 0.4" in r.getMessage() for r in caplog.records)
+    for broken in ["offset_ms = [\n", '[[performer]]\nname = "alice"\nsmoothing = 1.5\n']:
+        caplog.clear()
+        conf.write_text('audio = "x.wav"\n' + broken)
+        cfg = reload_settings(args, eng, cfg)
+        errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+        assert len(errors) == 1 and "keeping the current settings" in errors[0] and str(conf) in errors[0]
+        assert settings() == {"alice": (60.0, 0.4), "bob": (25.0, 0.0)}
+    caplog.clear()
+    conf.write_text('audio = "x.wav"\noffset_ms = 60\n' + alice + "smoothing = 0.4\n" + bob
+                    + '[[performer]]\nname = "carol"\n')
+    cfg = reload_settings(args, eng, cfg)
+    assert any("performer (names) changed; applied at the next start only" in r.getMessage() for r in caplog.records)
+    assert settings() == {"alice": (60.0, 0.4), "bob": (25.0, 0.0)} and eng.performers == ["alice", "bob"]
+    eng.close()
+
+
 # -- performer run: three performers, real receivers ----------------------------------------------
 
 def _plain_poses(datagrams: list[bytes]) -> dict[int, np.ndarray]:

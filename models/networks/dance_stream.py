@@ -223,6 +223,38 @@ def _cached_dips(model: DanceVQ, members: np.ndarray, seg: int) -> np.ndarray:
     return cached[1]
 
 
+def _weights_key(tensors) -> tuple:
+    """Where each tensor's memory is and how often it was written in place (its version
+    counter): a key that changes whenever the weights do."""
+    return tuple((t.data_ptr(), t._version, tuple(t.shape)) for t in tensors)
+
+
+def _cached_predictor(model: DanceVQ) -> NumpyPredictor:
+    """The :class:`NumpyPredictor` of ``model``'s predictor, kept on the model and shared by
+    every stream of it: an ensemble's performers of one checkpoint read one copy of the
+    predictor's weights (it is read-only: each stream keeps its own :class:`Prefix`), so
+    their code steps share the CPU caches instead of evicting each other's copy. Rebuilt
+    when a weight changes (a training step writes them in place: their version counters move)."""
+    key = _weights_key(model.predictor.parameters())
+    cached = getattr(model, "_numpy_predictor", None)
+    if cached is None or cached[0] != key:
+        cached = (key, NumpyPredictor(model.predictor))
+        model._numpy_predictor = cached
+    return cached[1]
+
+
+def _cached_members(model: DanceVQ) -> np.ndarray:
+    """``model``'s exemplars as :func:`sign_continuous` makes them (K, M, 2 seg, P), kept on the
+    model like :func:`_cached_predictor`; streams only read it. (Not flagged read-only: the
+    compiled :func:`match_exemplar` would compile again, in the audio path, for read-only slices.)"""
+    key = _weights_key([model.member_poses])
+    cached = getattr(model, "_members_cache", None)
+    if cached is None or cached[0] != key:
+        cached = (key, sign_continuous(model.member_poses.float().numpy()))
+        model._members_cache = cached
+    return cached[1]
+
+
 def _nlerp(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
     """Pose a -> b by weight w in [0, 1]: root lerped, every quaternion nlerped on b's hemisphere of a."""
     out = (1 - w) * a + w * b
@@ -246,7 +278,7 @@ class DanceStream:
             raise ConfigError(f"DanceStream needs a dance_vq model, got {type(model).__name__}")
         self.model = model.eval()
         c = model.config
-        self._predictor = NumpyPredictor(model.predictor)  # the torch predictor's logits, in NumPy (dance_numpy)
+        self._predictor = _cached_predictor(model)  # the torch predictor's logits, in NumPy (dance_numpy)
         self.seg, self.feature_dim, self.pose_dim = c.seg, c.feature_dim, c.pose_dim
         self.seed = int(seed)
         self.style = style_token(style)
@@ -261,7 +293,7 @@ class DanceStream:
         self._gate_std = self._feat_std[self._gcols].astype(np.float64)
         self._gate_a = float(np.exp(-1.0 / GATE_TAU))
         self._gate_a_return = float(np.exp(-1.0 / GATE_TAU_RETURN))
-        self._members = sign_continuous(model.member_poses.float().numpy())  # (K, M, 2 seg, P)
+        self._members = _cached_members(model)  # (K, M, 2 seg, P), shared: never written
         self._counts = model.member_count.numpy()
         self._style_prior = model.style_prior.numpy().astype(np.float32)  # (K, 4)
         self._member_style = model.member_style.numpy()  # (K, M): 0 unknown, else a style token
