@@ -679,3 +679,70 @@ def test_style_memory_is_added_to_an_older_checkpoint_only_from_its_own_training
     with pytest.raises(DataError, match="other exemplars"):
         add_style_memory(m, other)
     assert torch.equal(m.member_poses, members)  # left as it was
+
+
+def speed_model(speeds_deg: np.ndarray) -> DanceVQ:
+    """A tiny dance_vq whose code k's one exemplar turns every bone about y at speeds_deg[k] a frame."""
+    from scipy.spatial.transform import Rotation
+
+    torch.manual_seed(0)
+    m = DanceVQ(TINY).eval()
+    f = np.arange(2 * m.config.seg)
+    with torch.no_grad():
+        m.gate[0] = -50.0
+        for k, v in enumerate(speeds_deg):
+            q = Rotation.from_euler("y", (v * f)[:, None], degrees=True).as_quat()
+            pose = np.concatenate([np.tile([0.0, 1.0, 0.0], (len(f), 1)), np.tile(q, (1, len(BONES)))], 1)
+            m.member_poses[k, 0] = torch.from_numpy(pose.astype(np.float32))
+        m.member_count[:] = 1
+    return m
+
+
+def test_energy_control_favours_calm_or_lively_movements_and_1_changes_nothing():
+    from models.networks.dance_stream import code_energy
+
+    m = speed_model(np.linspace(0.5, 8.0, TINY.codebook))
+    s = DanceStream(m)
+    z = s._code_energy
+    assert np.all(np.diff(z) > 0) and abs(z.mean()) < 1e-5 and abs(z.std() - 1) < 1e-4  # the speeds' order
+    np.testing.assert_array_equal(z, code_energy(s._members, m.member_count.numpy(), m.config.seg))
+    x = music(800)
+    np.testing.assert_array_equal(m.generate(x, seed=3, energy=1.0), m.generate(x, seed=3))
+    drawn = {}
+    for e in (0.0, 1.0, 2.0):
+        st = DanceStream(m, seed=3)
+        st.set_energy(e)
+        st.push(x)
+        drawn[e] = z[st.codes_drawn].mean()
+    assert drawn[0.0] < drawn[1.0] - 0.5 and drawn[2.0] > drawn[1.0] + 0.5, drawn
+    for bad in (-0.1, 2.5, float("nan"), "high", None):
+        with pytest.raises(ConfigError, match="energy must be"):
+            s.set_energy(bad)
+    assert s.energy == 1.0 and s._energy_bias is None  # a refused value changes nothing
+
+
+def test_the_idle_fade_keeps_each_bone_on_one_arc():
+    """A bone whose dance rotation passes 180 degrees from the idle one mid-fade: choosing the
+    shorter arc anew every frame (_nlerp) flips it to the other side in one frame; the fade
+    keeps the arc it started on."""
+    from scipy.spatial.transform import Rotation
+
+    from models.networks.dance_stream import _nlerp
+
+    s = DanceStream(tiny_model())
+    n = 31
+    angles = np.linspace(150.0, 210.0, n)  # the dance pose turns past 180 degrees from the idle's
+    idle = np.zeros(POSE_DIM, np.float32)
+    idle[3:] = np.tile([0.0, 0.0, 0.0, 1.0], len(BONES))
+    dance = np.repeat(idle[None], n, 0)
+    dance[:, 3:7] = Rotation.from_euler("y", angles[:, None], degrees=True).as_quat()
+    weights = np.linspace(0.6, 0.4, n)
+
+    def largest_step(poses: np.ndarray) -> float:
+        return float(quat_angles_deg(poses[1:], poses[:-1]).max())
+
+    fresh = np.stack([_nlerp(d, idle, w) for d, w in zip(dance, weights)])
+    faded = np.stack([s._fade(d, idle, w) for d, w in zip(dance, weights)])
+    assert largest_step(fresh) > 90.0  # the flip
+    assert largest_step(faded) < 5.0
+    np.testing.assert_allclose(faded[0], fresh[0], atol=1e-6)  # the first frame: the shorter arc

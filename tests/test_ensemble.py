@@ -205,9 +205,13 @@ def test_show_control_per_performer_over_osc_and_websocket():
         assert (per["alice"]["offset_ms"], per["bob"]["offset_ms"]) == (40.0, 0.0)
         assert per["alice"]["smoothing"] == per["bob"]["smoothing"] == 0.25
         assert (per["alice"]["idle"], per["bob"]["idle"], perfs[1].model.forced_idle) == (False, True, True)
+        ctl.handle(osc_message("/performer/alice/energy", 0.5), peer)  # the dancing model's energy control
+        assert (perfs[0].model.energy, perfs[1].model.energy) == (0.5, 1.0)
+        ctl.handle(osc_message("/performer/energy", 2.5), peer)  # out of its range: refused, nothing changes
+        assert (perfs[0].model.energy, perfs[1].model.energy) == (0.5, 1.0)
         ctl.handle(osc_message("/performer/nobody/idle", 1), peer)  # unknown performer: a bad message
         ctl.handle(osc_message("/performer/bob/dance", 1), peer)  # unknown control
-        assert ctl.stats()["applied"] == 5 and ctl.stats()["bad"] == 2
+        assert ctl.stats()["applied"] == 6 and ctl.stats()["bad"] == 3
     finally:
         ctl.close()
 

@@ -88,6 +88,14 @@ STYLE_PRIOR: float = 3.0
 #: With a requested style, play only exemplars from that style's dancers where the drawn
 #: code has any (``DanceVQ.member_style``; a code without: all of its exemplars).
 STYLE_MEMBERS: bool = True
+#: The energy control (:meth:`DanceStream.set_energy`, 0..2, 1 = as the music asks): the code
+#: logits move by ``ENERGY_GAIN * (energy - 1) * z``, z each code's movement speed
+#: (:func:`code_energy`), so energy 0 favours the calmest movements and 2 the liveliest
+#: (benchmarks/energy_control.py: the validation dances' motion energy 0.67x, 1.0x and 1.5x
+#: the dancers' at 0, 1 and 2, monotone on every song; docs/show.md, "Energy").
+ENERGY_GAIN: float = 3.0
+#: The energy control's range.
+ENERGY_RANGE: tuple[float, float] = (0.0, 2.0)
 #: Idle sway: (bone, axis, amplitude in degrees, period in s, phase in rad).
 SWAY: tuple[tuple[str, int, float, float, float], ...] = (
     ("Hips", 1, 4.0, 6.0, 0.0),  # a slow turn about the vertical
@@ -170,14 +178,10 @@ def _unit(p: np.ndarray) -> np.ndarray:
     return p
 
 
-def member_dips(windows: np.ndarray, seg: int) -> np.ndarray:
-    """(K, M, seg) 1.0 where an exemplar's smoothed mean joint speed has a local minimum at
-    frame j of its movement (a kinematic beat, as models.evaluation.beats counts them), else 0.
-
-    windows: (K, M, F >= seg + 2, P) poses; speed by forward kinematics on the default skeleton.
-    """
-    from scipy.ndimage import gaussian_filter1d
-
+def member_speed(windows: np.ndarray) -> np.ndarray:
+    """(K, M, F) mean joint speed of each exemplar frame, m a frame, by forward kinematics on
+    the default skeleton. windows: (K, M, F, P) poses; empty member slots (zeros) read as
+    the rest pose."""
     from models.rig.kinematics import fk
     from models.rig.motion import Motion
     from models.rig.skeleton import load_default_skeleton
@@ -189,8 +193,19 @@ def member_dips(windows: np.ndarray, seg: int) -> np.ndarray:
     q[~ok] = [0.0, 0.0, 0.0, 1.0]
     flat[:, 3:] = q.reshape(len(flat), -1)
     pos = fk(Motion.from_vector(flat.astype(np.float32), fps=FPS), load_default_skeleton()).reshape(k * m, f, -1, 3)
-    speed = np.linalg.norm(np.gradient(pos, axis=1), axis=-1).mean(-1)  # (K M, F)
-    speed = gaussian_filter1d(speed, 2.0, axis=1, mode="nearest")
+    return np.linalg.norm(np.gradient(pos, axis=1), axis=-1).mean(-1).reshape(k, m, f)
+
+
+def member_dips(windows: np.ndarray, seg: int) -> np.ndarray:
+    """(K, M, seg) 1.0 where an exemplar's smoothed mean joint speed has a local minimum at
+    frame j of its movement (a kinematic beat, as models.evaluation.beats counts them), else 0.
+
+    windows: (K, M, F >= seg + 2, P) poses; speed: :func:`member_speed`.
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    k, m, f, p = windows.shape
+    speed = gaussian_filter1d(member_speed(windows).reshape(k * m, f), 2.0, axis=1, mode="nearest")
     dip = np.zeros_like(speed)
     dip[:, 1:-1] = (speed[:, 1:-1] < speed[:, :-2]) & (speed[:, 1:-1] <= speed[:, 2:])
     return dip[:, :seg].reshape(k, m, seg).astype(np.float32)
@@ -255,6 +270,33 @@ def _cached_members(model: DanceVQ) -> np.ndarray:
     return cached[1]
 
 
+def code_energy(members: np.ndarray, counts: np.ndarray, seg: int) -> np.ndarray:
+    """How lively each code's movements are: z-scores (K,) float32, over the codes with
+    exemplars, of the log mean joint speed (:func:`member_speed`) of its exemplars' movements
+    (their first seg frames). ``members`` (K, M, >= seg, P), ``counts`` (K,) exemplars per
+    code. A code without exemplars gets 0 (the mean)."""
+    k, m = members.shape[:2]
+    z = np.zeros(k, np.float32)
+    has = counts > 0
+    if has.sum() < 2:
+        return z
+    speed = member_speed(members[:, :, :seg]).mean(-1)  # (K, M)
+    mask = np.arange(m)[None, :] < counts[:, None]
+    per_code = np.log(np.maximum((speed * mask).sum(1)[has] / counts[has], 1e-9))
+    z[has] = (per_code - per_code.mean()) / max(per_code.std(), 1e-9)
+    return z
+
+
+def _cached_energy(model: DanceVQ, members: np.ndarray, seg: int) -> np.ndarray:
+    """:func:`code_energy` of ``model``'s exemplars, kept on the model like :func:`_cached_members`."""
+    key = (_weights_key([model.member_poses, model.member_count]), seg)
+    cached = getattr(model, "_energy_cache", None)
+    if cached is None or cached[0] != key:
+        cached = (key, code_energy(members, model.member_count.numpy(), seg))
+        model._energy_cache = cached
+    return cached[1]
+
+
 def _nlerp(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
     """Pose a -> b by weight w in [0, 1]: root lerped, every quaternion nlerped on b's hemisphere of a."""
     out = (1 - w) * a + w * b
@@ -270,7 +312,8 @@ class DanceStream:
 
     seed: the sampling generator's seed (``reset`` restarts it). style: None/"auto"
     (the music decides), "chacha", "rumba" or "waltz"; ``set_style`` changes it from the
-    next code (within 267 ms).
+    next code (within 267 ms); ``set_energy`` (0..2, 1 = as the music asks) makes the
+    movements calmer or livelier the same way.
     """
 
     def __init__(self, model: DanceVQ, seed: int = 0, style: str | None = None) -> None:
@@ -298,6 +341,9 @@ class DanceStream:
         self._style_prior = model.style_prior.numpy().astype(np.float32)  # (K, 4)
         self._member_style = model.member_style.numpy()  # (K, M): 0 unknown, else a style token
         self._dips = _cached_dips(model, self._members, self.seg)  # (K, M, seg)
+        self._code_energy = _cached_energy(model, self._members, self.seg)  # (K,) z-scores
+        self.energy = 1.0
+        self._energy_bias: np.ndarray | None = None  # ENERGY_GAIN * (energy - 1) * z; None at 1
         cc = c.clarity_col
         self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None
         self._decay = hermite_decay(DECAY_FRAMES * self.seg // 8)  # (2, D): match_exemplar's
@@ -335,12 +381,28 @@ class DanceStream:
         self._ema = np.zeros(len(self._gcols))  # the music detector's running mean
         self._run = 0  # frames the gate's input has disagreed with its state
         self._w_idle = 1.0  # 1 = idle, 0 = dancing; a stream starts at rest and fades in on music
+        self._fade_prev: tuple[np.ndarray, np.ndarray] | None = None  # last faded frame's signed quaternions
         self._prev_quat: np.ndarray | None = None
         self.codes_drawn: list[int] = []
 
     def set_style(self, style: str | None) -> None:
         """Dance this style from the next code on: None/"auto", "chacha", "rumba", "waltz" (ConfigError otherwise)."""
         self.style = style_token(style)
+
+    def set_energy(self, energy: float) -> None:
+        """How lively the movements are, from the next code on: 0 (the calmest the music
+        allows) .. 1 (as the music asks, the default) .. 2 (the liveliest); ConfigError
+        outside :data:`ENERGY_RANGE` or not a number. See :data:`ENERGY_GAIN`."""
+        lo, hi = ENERGY_RANGE
+        try:
+            e = float(energy)
+        except (TypeError, ValueError):
+            raise ConfigError(f"energy must be a number in [{lo:g}, {hi:g}] (1: as the music asks), "
+                              f"got {energy!r}") from None
+        if not lo <= e <= hi:  # NaN fails too
+            raise ConfigError(f"energy must be in [{lo:g}, {hi:g}] (1: as the music asks), got {energy!r}")
+        self._energy_bias = None if e == 1.0 else (ENERGY_GAIN * (e - 1.0) * self._code_energy).astype(np.float32)
+        self.energy = e
 
     def set_idle(self, idle: bool) -> None:
         """True: settle into the idle and hold it whatever the music; False: dance to the music again."""
@@ -388,6 +450,9 @@ class DanceStream:
                 logits = base + STYLE_GUIDANCE * (logits - base)
             if self.style and STYLE_PRIOR != 0.0:  # codes the requested style's dancers use
                 logits = logits + STYLE_PRIOR * self._style_prior[:, self.style]
+            bias = self._energy_bias  # read once: the control thread may swap it
+            if bias is not None:  # livelier or calmer codes (set_energy)
+                logits = logits + bias
             self._tokens.append(token)
             # the next step's window but its newest token is known now: its layers run on the frames between
             nxt = list(self._tokens)[-(pred.window - 1):]
@@ -464,6 +529,29 @@ class DanceStream:
         self._lag = min(max(lag, 0.0), 2.0 * WARP_LAG)
         return warp_pose(self._played, self.seg + j - self._lag)
 
+    def _fade(self, pose: np.ndarray, idle: np.ndarray, e: float) -> np.ndarray:
+        """The dance ``pose`` (P,) -> the ``idle`` pose by weight ``e`` in (0, 1]: :func:`_nlerp`,
+        but with each bone's arc chosen once, when the fade starts (the shorter one), and each
+        quaternion's sign then kept continuous frame to frame. A bone whose dance and idle
+        rotations pass 180 degrees apart mid-fade then keeps blending the way it went; the
+        shorter arc chosen anew each frame flipped to the other side there, a one-frame whip
+        (the head, 99 degrees, early in a validation dance)."""
+        if e >= 1.0:  # fully idle: no fade to follow
+            self._fade_prev = None
+            return _nlerp(pose, idle, e)
+        qa, qb = pose[3:].reshape(-1, 4), idle[3:].reshape(-1, 4)
+        if self._fade_prev is None:  # the fade starts: the shorter arc
+            qb = qb * np.where((qa * qb).sum(1, keepdims=True) < 0, -1.0, 1.0)
+        else:  # during it: each track continuous
+            pa, pb = self._fade_prev
+            qa = qa * np.where((qa * pa).sum(1, keepdims=True) < 0, -1.0, 1.0)
+            qb = qb * np.where((qb * pb).sum(1, keepdims=True) < 0, -1.0, 1.0)
+        self._fade_prev = (np.array(qa), qb)  # copies: qa may view the pose
+        out = (1 - e) * pose + e * idle
+        q = (1 - e) * qa + e * qb
+        out[3:] = (q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-9)).reshape(-1)
+        return out
+
     def push(self, features: np.ndarray) -> np.ndarray:
         """Consume k >= 0 feature frames (k, D); return their k poses (k, POSE_DIM) float32."""
         x = np.asarray(features, np.float32)
@@ -489,9 +577,11 @@ class DanceStream:
             pose = self._warped(t % self.seg)
             self._gate(x[i])
             w = self._w_idle
-            if w > 0.0:
+            if w <= 0.0:
+                self._fade_prev = None
+            else:
                 e = w * w * (3 - 2 * w)  # smoothstep: no kink where the fade starts or ends
-                pose = _nlerp(pose, self._sway(np.array([t]))[0], e)
+                pose = self._fade(pose, self._sway(np.array([t]))[0], e)
             out[i] = pose
             self.frame += 1
         if k == 0:

@@ -368,8 +368,13 @@ class DanceVQ(nn.Module):
         cdf /= cdf[-1]
         return int(cdf.searchsorted(rng.random(), side="right"))
 
-    def generate(self, features: np.ndarray, seed: int = 0, style: str | None = None) -> np.ndarray:
-        """Poses (T, P) float32 for features (T, D): the live stream's frames, all at once."""
+    def generate(self, features: np.ndarray, seed: int = 0, style: str | None = None,
+                 energy: float = 1.0) -> np.ndarray:
+        """Poses (T, P) float32 for features (T, D): the live stream's frames, all at once
+        (``energy``: :meth:`~models.networks.dance_stream.DanceStream.set_energy`)."""
         from models.networks.dance_stream import DanceStream
 
-        return DanceStream(self, seed=seed, style=style).push(features)
+        stream = DanceStream(self, seed=seed, style=style)
+        if energy != 1.0:
+            stream.set_energy(energy)
+        return stream.push(features)
