@@ -41,7 +41,7 @@ class Pipeline:
 
 
 def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, hop: int = 64, seed: int = 0,
-                   style: str | None = None, loaded: dict | None = None) -> Pipeline:
+                   style: str | None = None, energy: float = 1.0, loaded: dict | None = None) -> Pipeline:
     """Load ``checkpoint`` (default: the packaged one) into an extractor factory and a pose model.
 
     ``loaded``: a dict kept by the caller across calls (an ensemble's performers): a
@@ -54,7 +54,9 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
     ``offline_only`` (``violin``, ``dtm``: they read future frames) is refused with one
     line saying so and why (its ``offline_reason``), before any streaming state is built.
     A ``dance_vq`` model streams as a :class:`~models.networks.dance_stream.DanceStream`
-    with ``seed`` and ``style`` (None: the music decides); a style for another model is refused.
+    with ``seed``, ``style`` (None: the music decides) and ``energy`` (0..2, 1: as the music
+    asks; :meth:`~models.networks.dance_stream.DanceStream.set_energy`); a style or an energy
+    other than 1 for another model is refused.
     """
     from models.features.streaming import StreamingFeatureExtractor
     from models.networks.streaming import StreamingGenerator
@@ -77,10 +79,15 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
             from models.networks.dance_stream import DanceStream
 
             generator = DanceStream(loaded.model, seed=seed, style=style)
+            if energy != 1.0:
+                generator.set_energy(energy)
         else:
             if style not in (None, "auto"):
                 raise CheckpointError(f"model {loaded.name!r} takes no style (--style needs a dance_vq model)",
                                       source=path)
+            if energy != 1.0:
+                raise CheckpointError(f"model {loaded.name!r} has no energy control (--energy needs a dance_vq "
+                                      "model)", source=path)
             generator = StreamingGenerator(loaded.model, window=window, hop=hop)
     except CheckpointError:
         raise

@@ -142,6 +142,38 @@ def test_run_refuses_a_missing_checkpoint_and_a_style_the_model_lacks(capsys, cl
                      "--performer", f"bob,checkpoint={tiny_checkpoint},style=waltz"])
     line = one_line_error(capsys.readouterr().err)
     assert code == 2 and "performer 'bob'" in line and "takes no style" in line
+    code = cli.main(["run", "--audio", str(clip), "--fast", "--no-ws", "--no-osc",
+                     "--performer", f"bob,checkpoint={tiny_checkpoint},energy=1.5"])
+    line = one_line_error(capsys.readouterr().err)
+    assert code == 2 and "performer 'bob'" in line and "has no energy control" in line
+    code = cli.main(["run", "--audio", str(clip), "--fast", "--no-ws", "--no-osc", "--energy", "2.5"])
+    assert code == 2 and "energy must be 0..2" in one_line_error(capsys.readouterr().err)
+
+
+def test_energy_reaches_each_performers_model_from_flags_and_tables(tmp_path):
+    """--energy and a performer's energy key set the dancing model's energy control at start
+    (the same as /performer/energy live); config.ENERGY_RANGE is the model's."""
+    from models.networks.dance_stream import ENERGY_RANGE
+    from realtime.config import ENERGY_RANGE as CONFIG_RANGE
+
+    assert CONFIG_RANGE == ENERGY_RANGE
+    conf = tmp_path / "show.toml"
+    conf.write_text('audio = "x.wav"\nenergy = 0.5\n[[performer]]\nname = "calm"\n'
+                    '[[performer]]\nname = "lively"\nenergy = 1.75\n')
+    cfg = resolve_run_config(argparse.Namespace(config=str(conf)))
+    calm, lively = cfg.performer_specs()
+    assert (calm.energy, lively.energy) == (0.5, 1.75)
+    loaded: dict = {}
+    models = [build_pipeline(None, energy=spec.energy, loaded=loaded).model for spec in (calm, lively)]
+    assert [m.energy for m in models] == [0.5, 1.75] and build_pipeline(None, loaded=loaded).model.energy == 1.0
+    assert parse_performer("zed,energy=0.25").energy == 0.25
+    for text, needle in [("zed,energy=3", "performer 'zed': energy must be 0..2"),
+                         ("zed,energy=loud", "energy must be a number")]:
+        with pytest.raises(ConfigError, match=needle):
+            RunConfig(performer=[parse_performer(text)]).validate()
+    new = RunConfig(**{**load_run_config(conf), "energy": 1.0})
+    live, other = performer_live_changes(cfg, new)
+    assert live == {} and other == ["energy", "performer calm: energy"]  # a restart: as style
 
 
 # -- the engine: input stage and lanes ------------------------------------------------------------

@@ -33,7 +33,7 @@ show control (--control-osc, off by default; docs/show.md): OSC messages to
   /performer/smoothing  NUMBER     pose smoothing in [0, 1)
   /performer/idle       0|1        1: settle to the idle pose and hold it; 0: dance again
   /performer/style      STRING     style name (only models that offer styles)
-  /performer/energy     NUMBER     (only models that offer it)
+  /performer/energy     NUMBER     0..2, 1: as the music asks (only models that offer it)
 A bad message is logged once per address, counted in the status line
 ("control N ok M bad") and changes nothing; the stream never stops for it.
 In an ensemble these act on every performer, and /performer/NAME/reset (offset,
@@ -41,11 +41,11 @@ smoothing, idle, style, energy) on the one called NAME.
 
 ensemble (several performers on one audio input; docs/show.md): repeat --performer,
 or give [[performer]] tables in --config. Each performer has its own checkpoint, style,
-seed, smoothing, offset, OSC targets and WebSocket path; the audio input and, where the
+energy, seed, smoothing, offset, OSC targets and WebSocket path; the audio input and, where the
 checkpoints' feature configs agree, the feature extractor are shared. Unset keys take
 the top-level options; performer i (from 0) sends OSC to the --osc ports + i and streams
 on ws://HOST:PORT/ws/NAME (/ws is the first performer). Keys: name, checkpoint, style,
-seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase.
+energy, seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase.
 
 examples:
   performer run --audio song.wav --record take1.npz
@@ -54,6 +54,7 @@ examples:
   performer run --input-device "USB Audio" --control-osc 0.0.0.0:9100 --control-allow 192.168.10.0/24
   oscsend 127.0.0.1 9100 /performer/offset f 40       # liblo-tools; QLab, TouchOSC: docs/show.md
   performer run --audio song.wav --performer alice,style=waltz --performer bob,style=rumba,seed=7
+  performer run --audio song.wav --performer calm,energy=0.5 --performer lively,energy=1.6
 """
 
 
@@ -111,6 +112,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     m.add_argument("--style", choices=("auto", "chacha", "rumba", "waltz"),
                    help="dance this style to any music (default auto: the style the music suggests); "
                         "dance_vq models only")
+    m.add_argument("--energy", type=float, metavar="E",
+                   help="how lively the dance is, 0 (calmest) .. 2 (liveliest); default 1: as the music asks. "
+                        "dance_vq models only; live: /performer/energy (docs/show.md, \"Energy\")")
     m.add_argument("--seed", type=int, metavar="N",
                    help="seed of the dance's random choices (default 0: the same music gives the same dance)")
     m.add_argument("--threads", type=int, metavar="N", help="torch threads (default 1: fastest for per-frame work)")
@@ -123,7 +127,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     e = p.add_argument_group("ensemble (docs/show.md)")
     e.add_argument("--performer", action="append", metavar="NAME[,KEY=VALUE...]",
                    help="one performer of an ensemble on the same audio input; repeat for each. Keys: checkpoint, "
-                        "style, seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase; unset keys take "
+                        "style, energy, seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase; unset keys take "
                         "the options above (OSC: their ports + the performer's position from 0; WebSocket path "
                         "/ws/NAME). Replaces the [[performer]] tables of --config")
     p.add_argument("--quiet", action="store_true", help="no status line")
@@ -196,7 +200,7 @@ def _open_ensemble(cfg, specs, source, fallback):
     pipelines = []
     for spec in specs:
         try:
-            pipelines.append(build_pipeline(spec.checkpoint, seed=spec.seed, loaded=loaded,
+            pipelines.append(build_pipeline(spec.checkpoint, seed=spec.seed, loaded=loaded, energy=spec.energy,
                                             style=None if spec.style == "auto" else spec.style))
         except PerformerError as exc:
             raise type(exc)(f"performer {spec.name!r}: {exc}") from None
@@ -239,7 +243,8 @@ def _open_ensemble(cfg, specs, source, fallback):
              + (f"; WebSocket {server.url} (/ws: {specs[0].name})" if server is not None else "")]
     for spec, pipe, perf in zip(specs, pipelines, performers):
         outs = [f"{s.name} (viewer {s.url})" if hasattr(s, "url") else s.name for s in perf.sinks]
-        lines.append(f"  {spec.name} [{pipe.checkpoint.name}, style {spec.style}, seed {spec.seed}, "
+        energy = f", energy {spec.energy:g}" if spec.energy != 1.0 else ""
+        lines.append(f"  {spec.name} [{pipe.checkpoint.name}, style {spec.style}{energy}, seed {spec.seed}, "
                      f"phase {phases[spec.name]}] -> {', '.join(outs) or 'no outputs'}")
     return engine, [s for perf in performers for s in perf.sinks], server, lines
 
@@ -274,7 +279,8 @@ def run(args: argparse.Namespace) -> int:
     if specs:
         engine, sinks, server, lines = _open_ensemble(cfg, specs, source, fallback)
     else:
-        pipeline = build_pipeline(cfg.checkpoint, seed=cfg.seed, style=None if cfg.style == "auto" else cfg.style)
+        pipeline = build_pipeline(cfg.checkpoint, seed=cfg.seed, style=None if cfg.style == "auto" else cfg.style,
+                                  energy=cfg.energy)
         sinks = _open_sinks(cfg, source.sample_rate)
         engine = Engine(
             source, pipeline.extractor_factory, pipeline.model, sinks,
