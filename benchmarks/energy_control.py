@@ -8,6 +8,8 @@ is compared with the real dancer's on the same song (forward kinematics of both)
 
 * motion energy: ``models.evaluation.metrics.energy_ratio`` (velocity spread, generated
   over real; 1 moves as much as the dancer);
+* hand speed: the mean speed of both hands, generated over real (what an audience
+  watches most);
 * dance-scale amplitude and jitter: ``band_ratios`` (0.25-3 Hz and 6+ Hz power, generated
   over real), as ``performer evaluate`` reports them;
 * mean code energy: the z-score (``dance_stream.code_energy``) of the movements the
@@ -44,6 +46,15 @@ import numpy as np  # noqa: E402
 LEVELS: tuple[float, ...] = (0.0, 0.5, 1.0, 1.5, 2.0)
 
 
+def hand_speed(pos: np.ndarray) -> float:
+    """Mean speed of both hands, m/s, of FK positions (T, J, 3) at 30 fps."""
+    from models.rig.humanoid import BONE_INDEX
+    from models.timebase import FPS
+
+    hands = [BONE_INDEX["LeftHand"], BONE_INDEX["RightHand"]]
+    return float(np.linalg.norm(np.diff(pos[:, hands], axis=0), axis=-1).mean() * FPS)
+
+
 def largest_bone_step(poses: np.ndarray) -> float:
     """The largest rotation of any bone between consecutive frames, degrees; poses (T, P)."""
     q = poses[:, 3:].reshape(len(poses), -1, 4).astype(np.float64)
@@ -53,7 +64,7 @@ def largest_bone_step(poses: np.ndarray) -> float:
 
 def measure_song(model, features: np.ndarray, real_pos: np.ndarray, levels: Sequence[float],
                  seed: int = 0, traces: dict | None = None) -> dict[str, dict[str, float]]:
-    """``{str(level): {"energy_ratio", "band_amp", "jitter", "code_energy", "max_step_deg"}}``
+    """``{str(level): {"energy_ratio", "hand_speed", "band_amp", "jitter", "code_energy", "max_step_deg"}}``
     for one song.
 
     ``features`` (T, D) the song's model features, ``real_pos`` (T, J, 3) the dancer's FK
@@ -75,7 +86,8 @@ def measure_song(model, features: np.ndarray, real_pos: np.ndarray, levels: Sequ
             traces[f"{level:g}"] = pos
         bands = band_ratios(pos, real_pos)
         codes = np.asarray(stream.codes_drawn, np.int64)
-        out[f"{level:g}"] = {"energy_ratio": energy_ratio(pos, real_pos), "band_amp": bands["band_amp"],
+        out[f"{level:g}"] = {"energy_ratio": energy_ratio(pos, real_pos),
+                             "hand_speed": hand_speed(pos) / hand_speed(real_pos), "band_amp": bands["band_amp"],
                              "jitter": bands["jitter"],
                              "code_energy": float(stream._code_energy[codes].mean()) if len(codes) else 0.0,
                              "max_step_deg": largest_bone_step(poses)}
@@ -84,7 +96,8 @@ def measure_song(model, features: np.ndarray, real_pos: np.ndarray, levels: Sequ
 
 def table(results: dict[str, dict], levels: Sequence[float]) -> str:
     """Markdown: per level, each figure's mean over songs with [smallest, largest song]."""
-    keys = (("energy_ratio", "motion energy / dancer's"), ("band_amp", "dance-scale amplitude / dancer's"),
+    keys = (("energy_ratio", "motion energy / dancer's"), ("hand_speed", "hand speed / dancer's"),
+            ("band_amp", "dance-scale amplitude / dancer's"),
             ("jitter", "jitter / dancer's"), ("code_energy", "mean code energy (z)"),
             ("max_step_deg", "largest bone step, deg a frame"))
     lines = ["| energy | " + " | ".join(k[1] for k in keys) + " |", "| ---: |" + " ---: |" * len(keys)]

@@ -70,7 +70,7 @@ class Tracks:
     first_song_frame: int  # song frame of clip frame 0 (Clip.first_frame)
     dance: str
     style: str
-    checkpoint: str
+    checkpoint: str  # its file name, and the energy when not 1
     model: str
     beats: np.ndarray  # song frames (30 fps) of music beats
     split: str  # "validation" or "training": the dance's side of models.data.split
@@ -94,6 +94,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--size", default="480x360", metavar="WxH", help="one viewer's picture size (default: 480x360)")
     p.add_argument("--out", default="out/viewer_video.gif", help="output GIF (default: out/viewer_video.gif)")
     p.add_argument("--cache", default=".cache/corpus", help="corpus cache directory (default: .cache/corpus)")
+    p.add_argument("--energy", type=float, default=1.0,
+                   help="the generating model's energy control, 0..2 (default 1: as the music asks; dance_vq "
+                        "models only; docs/show.md, \"Energy\")")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     a = p.parse_args(argv)
     if not 0 < a.fps <= FPS:
@@ -135,15 +138,16 @@ def load_tracks(a: argparse.Namespace) -> Tracks:
                              f"--start-s must be in {lo:.1f}..{hi:.1f} for --seconds {a.seconds:g}")
     song = load_audio(load_dance(Path(a.data) / a.dance).audio_path, SAMPLE_RATE)[0]
     # Models that hear the waveform (gcn) get the clip's audio: clip frame t ends at song sample (f0 + t + 1) * HOP.
-    generated = run_model(loaded.model, clip.features, audio=song[clip.first_frame * HOP :])
+    generated = run_model(loaded.model, clip.features, audio=song[clip.first_frame * HOP :], energy=a.energy)
     # Beats of a stretch a few seconds wider than the recording (the tracker needs context).
     f_lo = max(0, clip.first_frame + start - 5 * FPS)
     f_hi = clip.first_frame + start + frames + 5 * FPS
     beats = f_lo + music_beats(song[f_lo * HOP : f_hi * HOP])
     names = sorted(d.name for d in Path(a.data).iterdir() if d.is_dir() and d.name.startswith("DANCE_"))
     split = "validation" if a.dance in split_names(names)[1] else "training"
+    label = loaded.path.name + (f", energy {a.energy:g}" if a.energy != 1.0 else "")
     return Tracks(clip.poses, generated, start, frames, clip.first_frame, a.dance, STYLES[a.dance.split("_")[1]],
-                  loaded.path.name, loaded.name, beats, split)
+                  label, loaded.name, beats, split)
 
 
 class Viewer:

@@ -121,7 +121,7 @@ def _pad_end(x: np.ndarray, n: int) -> np.ndarray:
 
 
 def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, seed: int | None = None,
-              audio: np.ndarray | None = None, style: str | None = None) -> np.ndarray:
+              audio: np.ndarray | None = None, style: str | None = None, energy: float = 1.0) -> np.ndarray:
     """Poses ``(T, POSE_DIM)`` float32 for features ``(T, D)`` at 30 fps, one per frame.
 
     ``window``/``hop`` (frames) apply to causal U-Nets only (see the module docstring
@@ -136,7 +136,9 @@ def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, see
     music style classifier); they raise ConfigError without it.
 
     ``style``: for models that take one (``dance_vq``): None/"auto" (the music decides),
-    "chacha", "rumba" or "waltz"; ConfigError for any other model given a style.
+    "chacha", "rumba" or "waltz"; ConfigError for any other model given a style. ``energy``:
+    the same models' energy control, 0..2 (1: as the music asks; ConfigError out of range, or
+    other than 1 for any other model).
     """
     import torch
 
@@ -148,18 +150,22 @@ def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, see
     x = np.asarray(features)
     if x.ndim != 2 or x.shape[0] < 1:
         raise ConfigError(f"features must have shape (frames >= 1, D), got {x.shape}")
+    takes_style = getattr(model, "takes_style", False)
+    if style not in (None, "auto") and not takes_style:
+        raise ConfigError(f"model {type(model).__name__} takes no style; --style works with dance_vq models")
+    if energy != 1.0 and not takes_style:
+        raise ConfigError(f"model {type(model).__name__} has no energy control; --energy works with dance_vq models")
     if isinstance(model, CausalGenerator):
         return offline_windowed(model, x, window=window, hop=hop)
     x, _ = sanitize_features(x)
     if getattr(model, "needs_audio", False):  # gcn: style from the raw waveform, whole song at once
         return model.generate_poses(x, audio, seed=seed)
-    takes_style = getattr(model, "takes_style", False)
-    if style not in (None, "auto") and not takes_style:
-        raise ConfigError(f"model {type(model).__name__} takes no style; --style works with dance_vq models")
     if callable(getattr(model, "generate", None)):  # a whole-song procedure of its own (dtm, dance_vq)
         kw = {"seed": int(seed or 0)} if getattr(model, "stochastic", False) else {}
         if takes_style:
             kw["style"] = style
+            if energy != 1.0:
+                kw["energy"] = energy
         return model.generate(x, **kw)
     t = len(x)
     delay = int(getattr(model, "output_delay", 0))
@@ -240,8 +246,10 @@ def generate(
     hop: int = 64,
     seed: int | None = None,
     style: str | None = None,
+    energy: float = 1.0,
 ) -> Generation:
-    """Generate motion for a whole audio file with a loaded model and write it to ``out``.
+    """Generate motion for a whole audio file with a loaded model and write it to ``out``
+    (``seed``, ``style``, ``energy``: as :func:`run_model` takes them).
 
     Raises :class:`AudioError` naming the file if it cannot be read, holds NaN/inf
     samples, or is shorter than one frame (735 samples at 22050 Hz, 33 ms);
@@ -265,7 +273,8 @@ def generate(
     feats = extract_features(audio, loaded.features)
     timings["features"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    poses = run_model(loaded.model, feats, window=window, hop=hop, audio=audio, seed=seed, style=style)
+    poses = run_model(loaded.model, feats, window=window, hop=hop, audio=audio, seed=seed, style=style,
+                      energy=energy)
     timings["model"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     export_motion(poses, out, source_audio=str(audio_path), checkpoint=str(loaded.path), model_name=loaded.name)

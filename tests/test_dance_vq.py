@@ -715,6 +715,11 @@ def test_energy_control_favours_calm_or_lively_movements_and_1_changes_nothing()
         st.push(x)
         drawn[e] = z[st.codes_drawn].mean()
     assert drawn[0.0] < drawn[1.0] - 0.5 and drawn[2.0] > drawn[1.0] + 0.5, drawn
+    from models.generate import run_model  # performer generate's path takes it too; other models refuse it
+
+    np.testing.assert_array_equal(run_model(m, x, seed=3, energy=0.0), m.generate(x, seed=3, energy=0.0))
+    with pytest.raises(ConfigError, match="has no energy control"):
+        run_model(build_model("causal", {"feature_dim": 10}), x, energy=1.5)
     for bad in (-0.1, 2.5, float("nan"), "high", None):
         with pytest.raises(ConfigError, match="energy must be"):
             s.set_energy(bad)

@@ -98,6 +98,23 @@ def test_bundled_clip_to_bvh_and_npz(tmp_path, capsys, tiny):
     np.testing.assert_allclose(fk(bvh.to_motion(), load_default_skeleton()), fk(motion, load_default_skeleton()), atol=1e-3)
 
 
+def test_energy_reaches_the_dancing_model_and_other_models_refuse_it(tmp_path, capsys, tiny):
+    """performer generate --energy: the dance_vq default's motion changes with it, a causal
+    U-Net refuses it in one line, an out-of-range value is a one-line error."""
+    clip = bundled_clip_path()
+    runs = {}
+    for e in ("0", "1", "2"):
+        code, _, err = run_main(capsys, "generate", clip, "--out", tmp_path / f"e{e}.npz", "--energy", e)
+        assert code == 0, err
+        runs[e] = poses_of(tmp_path / f"e{e}.npz")
+    assert not np.array_equal(runs["0"], runs["2"]) and len(runs["0"]) == len(runs["1"])
+    code, _, err = run_main(capsys, "generate", clip, "--out", tmp_path / "x.npz", "--energy", "1.5",
+                            "--checkpoint", tiny)
+    assert code == 2 and "has no energy control" in err and "Traceback" not in err
+    code, _, err = run_main(capsys, "generate", clip, "--out", tmp_path / "x.npz", "--energy", "-1")
+    assert code == 2 and "energy must be in [0, 2]" in err
+
+
 def test_generate_equals_what_the_engine_streams(tmp_path, tiny):
     """The causal model is generated exactly as `performer run` streams it."""
     from models.features.streaming import StreamingFeatureExtractor

@@ -33,6 +33,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--hop", type=int, default=64, help="causal model: hop between windows in frames, a multiple of 16 (default 64)")
     p.add_argument("--style", choices=("auto", "chacha", "rumba", "waltz"), default="auto",
                    help="dance_vq models: dance this style (default auto: the style the music suggests)")
+    p.add_argument("--energy", type=float, default=1.0, metavar="E",
+                   help="dance_vq models: how lively, 0 (calmest) .. 2 (liveliest); default 1: as the music asks "
+                        "(docs/show.md, \"Energy\")")
     p.add_argument("--seed", type=int, default=0, metavar="N",
                    help="seed of a stochastic model's random choices (default 0)")
     p.add_argument("--threads", type=int, default=1, metavar="N",
@@ -53,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     loaded = load_model(args.checkpoint)
     with torch_threads(args.threads):
         g = generate(args.audio, args.out, loaded, window=args.window, hop=args.hop, seed=args.seed,
-                     style=None if args.style == "auto" else args.style)
+                     style=None if args.style == "auto" else args.style, energy=args.energy)
     t = g.timings
     print(f"{args.out}: {g.num_frames} frames ({g.num_frames / 30:.2f} s at 30 fps) from {g.audio_s:.2f} s of audio, "
           f"model {loaded.name} ({loaded.path})")
