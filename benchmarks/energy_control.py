@@ -78,8 +78,7 @@ def measure_song(model, features: np.ndarray, real_pos: np.ndarray, levels: Sequ
     x, _ = sanitize_features(np.asarray(features))
     out: dict[str, dict[str, float]] = {}
     for level in levels:
-        stream = DanceStream(model, seed=seed)
-        stream.set_energy(level)
+        stream = DanceStream(model, seed=seed, energy=level)
         poses = stream.push(x)
         pos = positions(poses)
         if traces is not None:

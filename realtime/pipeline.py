@@ -78,9 +78,7 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
         if getattr(loaded.model, "takes_style", False):
             from models.networks.dance_stream import DanceStream
 
-            generator = DanceStream(loaded.model, seed=seed, style=style)
-            if energy != 1.0:
-                generator.set_energy(energy)
+            generator = DanceStream(loaded.model, seed=seed, style=style, energy=energy)
         else:
             if style not in (None, "auto"):
                 raise CheckpointError(f"model {loaded.name!r} takes no style (--style needs a dance_vq model)",

@@ -313,11 +313,11 @@ class DanceStream:
 
     seed: the sampling generator's seed (``reset`` restarts it). style: None/"auto"
     (the music decides), "chacha", "rumba" or "waltz"; ``set_style`` changes it from the
-    next code (within 267 ms); ``set_energy`` (0..2, 1 = as the music asks) makes the
-    movements calmer or livelier the same way.
+    next code (within 267 ms). energy: 0..2, 1 = as the music asks; ``set_energy`` changes
+    it the same way.
     """
 
-    def __init__(self, model: DanceVQ, seed: int = 0, style: str | None = None) -> None:
+    def __init__(self, model: DanceVQ, seed: int = 0, style: str | None = None, energy: float = 1.0) -> None:
         if not isinstance(model, DanceVQ):
             raise ConfigError(f"DanceStream needs a dance_vq model, got {type(model).__name__}")
         self.model = model.eval()
@@ -345,6 +345,7 @@ class DanceStream:
         self._code_energy = _cached_energy(model, self._members, self.seg)  # (K,) z-scores
         self.energy = 1.0
         self._energy_bias: np.ndarray | None = None  # ENERGY_GAIN * (energy - 1) * z; None at 1
+        self.set_energy(energy)
         cc = c.clarity_col
         self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None
         self._decay = hermite_decay(DECAY_FRAMES * self.seg // 8)  # (2, D): match_exemplar's

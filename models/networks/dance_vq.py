@@ -374,7 +374,4 @@ class DanceVQ(nn.Module):
         (``energy``: :meth:`~models.networks.dance_stream.DanceStream.set_energy`)."""
         from models.networks.dance_stream import DanceStream
 
-        stream = DanceStream(self, seed=seed, style=style)
-        if energy != 1.0:
-            stream.set_energy(energy)
-        return stream.push(features)
+        return DanceStream(self, seed=seed, style=style, energy=energy).push(features)

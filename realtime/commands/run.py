@@ -127,8 +127,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     e = p.add_argument_group("ensemble (docs/show.md)")
     e.add_argument("--performer", action="append", metavar="NAME[,KEY=VALUE...]",
                    help="one performer of an ensemble on the same audio input; repeat for each. Keys: checkpoint, "
-                        "style, energy, seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase; unset keys take "
-                        "the options above (OSC: their ports + the performer's position from 0; WebSocket path "
+                        "style, energy, seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase; unset "
+                        "keys take the options above (OSC: their ports + the performer's position from 0; WebSocket path "
                         "/ws/NAME). Replaces the [[performer]] tables of --config")
     p.add_argument("--quiet", action="store_true", help="no status line")
     p.set_defaults(func=run)
