@@ -39,6 +39,7 @@ from models.networks.dance_jit import gate_ema, match_exemplar, push_history, re
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ, style_token
 from models.networks.streaming import FEATURE_LIMIT
+from models.networks.tempo import TempoFollower
 from models.rig.humanoid import BONE_INDEX
 from models.timebase import FPS
 
@@ -78,6 +79,21 @@ WARP_LAG: float = 1.5
 #: Pull of the warp's lag back to :data:`WARP_LAG` per frame, so a drifting phase estimate
 #: cannot run it into either bound.
 WARP_PULL: float = 0.05
+#: Tempo following: each movement plays at ``r = T / T_src``, T the music's tempo
+#: (:class:`models.networks.tempo.TempoFollower`, in the range the performer dances at) and
+#: T_src that of the song its exemplar was danced to (``DanceVQ.member_period``), blended
+#: towards 1 as the pulse fades (the follower's confidence), within :data:`RATE_RANGE` and
+#: never faster than the fastest exemplars of the memory move (:data:`SPEED_CAP`). False plays
+#: every movement at its own pace.
+FOLLOW_TEMPO: bool = True
+#: Playback rates a movement may take (a movement plays ``r * seg`` of its exemplar's frames
+#: over its ``seg`` frames; its window holds ``2 seg``).
+RATE_RANGE: tuple[float, float] = (0.55, 1.75)
+#: Follower confidence (:attr:`~models.networks.tempo.TempoFollower.confidence`) below which the
+#: rate is blended towards 1 (no clear pulse: the movements' own pace).
+RATE_CONFIDENCE: float = 0.3
+#: Quantile of the exemplars' mean joint speeds that no movement's played speed exceeds.
+SPEED_CAP: float = 0.98
 #: Classifier-free guidance of a requested style (Ho & Salimans 2021): the logits move from
 #: the music-only ones ("auto") past the style-conditioned ones by this factor. The predictor
 #: was trained with the style token dropped to "auto" 40 % of the time, which is what it needs.
@@ -271,29 +287,33 @@ def _cached_members(model: DanceVQ) -> np.ndarray:
     return cached[1]
 
 
-def code_energy(members: np.ndarray, counts: np.ndarray, seg: int) -> np.ndarray:
+def code_energy(members: np.ndarray, counts: np.ndarray, seg: int, speed: np.ndarray | None = None) -> np.ndarray:
     """How lively each code's movements are: z-scores (K,) float32, over the codes with
     exemplars, of the log mean joint speed (:func:`member_speed`) of its exemplars' movements
     (their first seg frames). ``members`` (K, M, >= seg, P), ``counts`` (K,) exemplars per
-    code. A code without exemplars gets 0 (the mean)."""
+    code; ``speed`` (K, M): those mean speeds, if already computed. A code without exemplars
+    gets 0 (the mean)."""
     k, m = members.shape[:2]
     z = np.zeros(k, np.float32)
     has = counts > 0
     if has.sum() < 2:
         return z
-    speed = member_speed(members[:, :, :seg]).mean(-1)  # (K, M)
+    if speed is None:
+        speed = member_speed(members[:, :, :seg]).mean(-1)  # (K, M)
     mask = np.arange(m)[None, :] < counts[:, None]
     per_code = np.log(np.maximum((speed * mask).sum(1)[has] / counts[has], 1e-9))
     z[has] = (per_code - per_code.mean()) / max(per_code.std(), 1e-9)
     return z
 
 
-def _cached_energy(model: DanceVQ, members: np.ndarray, seg: int) -> np.ndarray:
-    """:func:`code_energy` of ``model``'s exemplars, kept on the model like :func:`_cached_members`."""
+def _cached_energy(model: DanceVQ, members: np.ndarray, seg: int) -> tuple[np.ndarray, np.ndarray]:
+    """(:func:`code_energy` (K,), each exemplar's mean joint speed over its movement (K, M),
+    m/frame) of ``model``'s exemplars, kept on the model like :func:`_cached_members`."""
     key = (_weights_key([model.member_poses, model.member_count]), seg)
     cached = getattr(model, "_energy_cache", None)
     if cached is None or cached[0] != key:
-        cached = (key, code_energy(members, model.member_count.numpy(), seg))
+        speed = member_speed(members[:, :, :seg]).mean(-1)
+        cached = (key, (code_energy(members, model.member_count.numpy(), seg, speed), speed))
         model._energy_cache = cached
     return cached[1]
 
@@ -342,7 +362,12 @@ class DanceStream:
         self._style_prior = model.style_prior.numpy().astype(np.float32)  # (K, 4)
         self._member_style = model.member_style.numpy()  # (K, M): 0 unknown, else a style token
         self._dips = _cached_dips(model, self._members, self.seg)  # (K, M, seg)
-        self._code_energy = _cached_energy(model, self._members, self.seg)  # (K,) z-scores
+        self._code_energy, speed = _cached_energy(model, self._members, self.seg)  # (K,) z-scores, (K, M) m/frame
+        real = np.arange(speed.shape[1])[None, :] < self._counts[:, None]
+        # the fastest a movement may play (m/frame), and each exemplar's source tempo (frames per beat)
+        self._speed_cap = float(np.quantile(speed[real], SPEED_CAP)) if real.any() else np.inf
+        self._member_speed = speed
+        self._member_period = model.member_period.numpy().astype(np.float64)  # (K, M); 0 unknown
         self.energy = 1.0
         self._energy_bias: np.ndarray | None = None  # ENERGY_GAIN * (energy - 1) * z; None at 1
         self.set_energy(energy)
@@ -375,10 +400,14 @@ class DanceStream:
         self._prefix_auto: Prefix | None = None  # the same with the "auto" style, while a style is guided
         self._codes: deque[int] = deque(maxlen=c.decoder_context)
         self._last = c.codebook  # "no code yet"
-        self._segment = np.zeros((self.seg, self.pose_dim), np.float32)
-        self._played = np.zeros((2 * self.seg, self.pose_dim), np.float32)  # previous movement, then this one
-        self._lag = WARP_LAG  # frames the beat warp plays behind the movement
-        self._cont: np.ndarray | None = None  # the playing exemplar's continuation (seg, P), offset included
+        # what plays: seg frames before the current movement, then its exemplar's window (the
+        # movement and its continuation, bent to continue the motion), read at frame
+        # seg + rate * j - lag of the movement's frame j
+        self._played = np.zeros((3 * self.seg, self.pose_dim), np.float32)
+        self._rate = 1.0  # exemplar frames per frame of the current movement (tempo following)
+        self._tempo = TempoFollower()
+        self._lag = WARP_LAG  # exemplar frames the beat warp plays behind the movement
+        self._has_cont = False  # the playing movement has a real continuation to match the next one to
         self._music = False
         self._ema = np.zeros(len(self._gcols))  # the music detector's running mean
         self._run = 0  # frames the gate's input has disagreed with its state
@@ -463,10 +492,12 @@ class DanceStream:
         draws = [m.sample(logits, self.rng) for _ in range(DRAWS)]
         if int(self._counts[draws[0]]) == 0:  # no exemplars (members = 0): the decoder writes the movement
             self._codes.append(draws[0])  # the decoder reads the new code
-            self._segment = m.decode_last(np.fromiter(self._codes, np.int64))
+            segment = m.decode_last(np.fromiter(self._codes, np.int64))
             self._codes.pop()
+            window = np.concatenate([segment, np.repeat(segment[-1:], self.seg, axis=0)])
+            self._play(window, 1.0)  # no continuation to play into: its own pace
             self._commit(draws[0])
-            self._cont = None
+            self._has_cont = False
             return
         codes = list(dict.fromkeys(draws))
         pairs = [(c, j) for c in codes for j in range(int(self._counts[c]))]
@@ -479,35 +510,53 @@ class DanceStream:
         else:
             cands = np.stack([self._members[c, j] for c, j in pairs])
             dips = np.stack([self._dips[c, j] for c, j in pairs])
-        if self._cont is None:  # the first movement starts from its own pose
+        if not self._has_cont:  # the first movement starts from its own pose
             i = 0
-            best = cands[0]
-            self._segment = best[: self.seg].copy()
-            cont = _unit(best[self.seg:].copy())
+            best = _unit(cands[0].copy())
         else:  # motion matching among the drawn codes' exemplars, placed on the beat (one compiled call)
-            beat = self._next_beat()
+            c0 = pairs[0]
+            beat = self._next_beat(self._rate_for(*c0))
             frame, clarity = beat if beat is not None else (-1, 0.0)
-            i, best = match_exemplar(cands, dips, self._cont[:2], self._decay, frame, BEAT_WEIGHT * clarity,
-                                     self.seg, VEL_CAP)
-            self._segment = best[: self.seg].copy()
-            cont = best[self.seg:].copy()  # match_exemplar's quaternions are unit already
+            at = self.seg + self._rate * self.seg  # where the playing movement has got to
+            cont = np.stack([warp_pose(self._played, at), warp_pose(self._played, at + 1.0)])
+            i, best = match_exemplar(cands, dips, cont, self._decay, frame, BEAT_WEIGHT * clarity,
+                                     self.seg, VEL_CAP)  # match_exemplar's quaternions are unit already
+        self._play(best, self._rate_for(*pairs[i]))
         self._commit(pairs[i][0])
-        self._cont = cont
+        self._has_cont = True
+
+    def _rate_for(self, code: int, member: int) -> float:
+        """The playback rate of exemplar ``member`` of ``code`` now (:data:`FOLLOW_TEMPO`)."""
+        src = self._member_period[code, member]
+        period = self._tempo.period
+        if not FOLLOW_TEMPO or src <= 0.0 or period <= 0.0:
+            return 1.0
+        lo, hi = RATE_RANGE
+        r = min(max(src / period, lo), hi) ** min(1.0, self._tempo.confidence / RATE_CONFIDENCE)  # towards 1 as the pulse fades
+        v = self._member_speed[code, member]
+        return min(r, max(1.0, self._speed_cap / v)) if v > 0 else r
+
+    def _play(self, window: np.ndarray, rate: float) -> None:
+        """Start playing ``window`` (2 seg, P), the next movement and its continuation, at ``rate``:
+        the seg frames before it are those the current movement would have played next."""
+        if not self.codes_drawn:  # before the first movement there is only its first pose
+            self._played[: self.seg] = window[0]
+        else:
+            at = self._rate * self.seg  # the current movement's end, seg frames back
+            self._played[: self.seg] = [warp_pose(self._played, at + i) for i in range(self.seg)]
+        self._played[self.seg:] = window
+        self._rate = rate
 
     def _commit(self, code: int) -> None:
-        """Record ``code`` as played (``self._segment`` holds its movement now)."""
-        if not self.codes_drawn:  # before the first movement there is only its first pose to lag behind on
-            self._played[: self.seg] = self._segment[0]
-        else:
-            self._played[: self.seg] = self._played[self.seg:]
-        self._played[self.seg:] = self._segment
+        """Record ``code`` as played (``self._play`` has started its movement)."""
         self._codes.append(code)
         self._last = code
         self.codes_drawn.append(code)
 
-    def _next_beat(self) -> tuple[int, float] | None:
-        """(frame of the coming movement, 0..seg-1, on which the beat tracker expects a beat; its
-        pulse clarity), or None when no beat falls in it or the features have no beat columns."""
+    def _next_beat(self, rate: float = 1.0) -> tuple[int, float] | None:
+        """(frame of the coming movement's exemplar, 0..seg-1, that plays when the beat tracker
+        expects a beat, the movement played at ``rate``; its pulse clarity), or None when no beat
+        falls in it or the features have no beat columns."""
         if self._beat_cols is None:
             return None
         ccos, csin, clarity, logp = (float(self._raw[j]) for j in self._beat_cols)
@@ -515,21 +564,23 @@ class DanceStream:
             return None
         period = 15.0 * 2.0 ** logp
         theta = np.arctan2(csin, ccos) % (2 * np.pi)  # 0 on a beat, rising 2 pi / period a frame
-        ahead = int(round(period * (1 - theta / (2 * np.pi)))) % max(int(round(period)), 1)
+        ahead = int(round(rate * (period * (1 - theta / (2 * np.pi)) % max(period, 1.0))))
         return (ahead, clarity) if ahead < self.seg else None
 
     def _warped(self, j: int) -> np.ndarray:
-        """The pose (P,) of frame ``j`` of the current movement under the beat warp: frame
-        ``seg + j - lag`` of ``self._played``, between two frames nlerped (``warp_pose``; the lag moves by
-        ``1 - rate`` a frame; see :data:`BEAT_WARP`)."""
+        """The pose (P,) of frame ``j`` of the current movement at its tempo rate and under the
+        beat warp: frame ``seg + rate * j - lag`` of ``self._played``, between two frames nlerped
+        (``warp_pose``; the lag moves by ``rate * BEAT_WARP * w * cos(theta)`` a frame; see
+        :data:`BEAT_WARP`)."""
+        x = self.seg + self._rate * j
         if self._beat_cols is None or BEAT_WARP <= 0.0:  # no beat tracker, or no warp: the movement as it is
-            return self._segment[j]
+            return warp_pose(self._played, x)
         ccos, clarity = float(self._raw[self._beat_cols[0]]), float(self._raw[self._beat_cols[2]])
         depth = BEAT_WARP * min(1.0, max(clarity, 0.0) / WARP_CLARITY)
         cos = ccos / clarity if clarity > 1e-9 else 0.0
-        lag = self._lag + depth * cos - WARP_PULL * (self._lag - WARP_LAG)
+        lag = self._lag + self._rate * depth * cos - WARP_PULL * (self._lag - WARP_LAG)
         self._lag = min(max(lag, 0.0), 2.0 * WARP_LAG)
-        return warp_pose(self._played, self.seg + j - self._lag)
+        return warp_pose(self._played, x - self._lag)
 
     def _fade(self, pose: np.ndarray, idle: np.ndarray, e: float) -> np.ndarray:
         """The dance ``pose`` (P,) -> the ``idle`` pose by weight ``e`` in (0, 1]: :func:`_nlerp`,
@@ -568,6 +619,8 @@ class DanceStream:
             t = self.frame
             push_history(self._hist, x[i], self._feat_mean, self._feat_std)  # (x - mean) / std, the oldest out
             self._raw = x[i]
+            if self._beat_cols is not None:
+                self._tempo.update(float(x[i, self._beat_cols[3]]), float(x[i, self._beat_cols[2]]))
             if t % self.seg == 0:
                 self._next_code()
             elif self._free[t % self.seg]:

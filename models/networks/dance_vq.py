@@ -294,11 +294,16 @@ class DanceVQ(nn.Module):
         # adds the prior to the logits (models.networks.dance_stream).
         self.register_buffer("member_style", torch.zeros(c.codebook, c.members, dtype=torch.int64))
         self.register_buffer("style_prior", torch.zeros(c.codebook, 4))
+        # the pace of each member's music (models.training.dance_vq.fit_members): the beat period,
+        # frames per beat at 30 fps, of the song (at the clip's training tempo) it was danced to,
+        # as the live beat tracker hears it (0: unknown, played at its own pace). DanceStream plays
+        # a member at the ratio of the music's tempo to this one (models.networks.dance_stream).
+        self.register_buffer("member_period", torch.zeros(c.codebook, c.members))
 
     def _load_from_state_dict(self, state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys,
                               error_msgs) -> None:
-        """Checkpoints saved before the style memory existed load without one (zeros: unknown)."""
-        for name in ("member_style", "style_prior"):
+        """Checkpoints saved before the style or tempo memory existed load without them (zeros: unknown)."""
+        for name in ("member_style", "style_prior", "member_period"):
             state_dict.setdefault(prefix + name, torch.zeros_like(getattr(self, name)))
         super()._load_from_state_dict(state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys,
                                       error_msgs)

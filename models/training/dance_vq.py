@@ -243,6 +243,26 @@ def validate_codebook(model: DanceVQ, clips: list, offsets: torch.Tensor) -> dic
             "val_perplexity": perplexity(torch.cat(codes_all), model.config.codebook)}
 
 
+def clip_periods(model: DanceVQ, clips: list) -> dict[int, float]:
+    """The beat period (frames at 30 fps, in the performer's tempo range) of each clip's music,
+    by ``id(clip)``: :func:`models.networks.tempo.song_period` of the song at its own tempo
+    (its tempo-1 clip's beat columns, where there is one), divided by the clip's tempo factor,
+    so every stretched copy of a song gets the same octave. 0 where the model has no beat
+    columns or the pulse is never clear."""
+    from models.networks.tempo import fold_period, song_period
+
+    cc = model.config.clarity_col
+    if not (0 <= cc and cc + 1 < model.config.feature_dim):
+        return {id(c): 0.0 for c in clips}
+    own = {c.name: c for c in clips if c.tempo == 1.0}
+    out = {}
+    for c in clips:
+        src = own.get(c.name, c)
+        base = song_period(src.features[:, cc + 1], src.features[:, cc]) * (src.tempo if src is c else 1.0)
+        out[id(c)] = fold_period(base / c.tempo) if base > 0 else 0.0
+    return out
+
+
 @torch.no_grad()
 def fit_members(model: DanceVQ, clips: list, phases: tuple[int, ...] = (0, 4), progress: bool = False) -> dict[str, float]:
     """Fill the choreographic memory: for every code, the ``members`` real windows of
@@ -253,7 +273,8 @@ def fit_members(model: DanceVQ, clips: list, phases: tuple[int, ...] = (0, 4), p
     model.eval()
     c = model.config
     s = c.seg
-    z_all, windows, styles = [], [], []
+    z_all, windows, styles, periods = [], [], [], []
+    period = clip_periods(model, clips)
     for clip in clips:
         for p in phases:
             n = (clip.num_frames - p) // s
@@ -265,20 +286,24 @@ def fit_members(model: DanceVQ, clips: list, phases: tuple[int, ...] = (0, 4), p
                 z_all.append(z[k])
                 windows.append(clip.poses[p + k * s: p + (k + 2) * s])
                 styles.append(STYLE_TOKEN.get(clip.style, 0))
+                periods.append(period[id(clip)])
     z = torch.stack(z_all)
     codes = model.quantizer.codes(z.T[None])[0]
     dist = (z - model.quantizer.embed[codes]).pow(2).sum(1)
     poses = np.stack(windows)
     style = torch.tensor(styles, dtype=torch.int64)
+    period_t = torch.tensor(periods, dtype=torch.float32)
     model.member_poses.zero_()
     model.member_count.zero_()
     model.member_style.zero_()
+    model.member_period.zero_()
     for code in codes.unique().tolist():
         idx = torch.nonzero(codes == code)[:, 0]
         keep = idx[dist[idx].argsort()[: c.members]].numpy()
         model.member_poses[code, : len(keep)] = torch.from_numpy(poses[keep]).half()
         model.member_count[code] = len(keep)
         model.member_style[code, : len(keep)] = style[keep]
+        model.member_period[code, : len(keep)] = period_t[keep]
     have = torch.nonzero(model.member_count > 0)[:, 0]
     emb = model.quantizer.embed
     for code in torch.nonzero(model.member_count == 0)[:, 0].tolist():  # a code no window chose: its nearest neighbour's
@@ -286,6 +311,7 @@ def fit_members(model: DanceVQ, clips: list, phases: tuple[int, ...] = (0, 4), p
         model.member_poses[code] = model.member_poses[near]
         model.member_count[code] = model.member_count[near]
         model.member_style[code] = model.member_style[near]
+        model.member_period[code] = model.member_period[near]
     model.train()
     out = {"codes_with_members": len(have), "windows": len(windows)}
     if progress:
