@@ -39,7 +39,7 @@ from models.networks.dance_jit import gate_ema, match_exemplar, push_history, re
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ, style_token
 from models.networks.streaming import FEATURE_LIMIT
-from models.networks.tempo import TempoFollower
+from models.networks.tempo import DENSITY_WINDOW, TempoFollower, onset_density
 from models.rig.humanoid import BONE_INDEX
 from models.timebase import FPS
 
@@ -79,12 +79,17 @@ WARP_LAG: float = 1.5
 #: Pull of the warp's lag back to :data:`WARP_LAG` per frame, so a drifting phase estimate
 #: cannot run it into either bound.
 WARP_PULL: float = 0.05
-#: Tempo following: each movement plays at ``r = T / T_src``, T the music's tempo
+#: Tempo following: each movement plays at ``r = T / T_ref``, T the music's tempo
 #: (:class:`models.networks.tempo.TempoFollower`, in the range the performer dances at) and
-#: T_src that of the song its exemplar was danced to (``DanceVQ.member_period``), blended
-#: towards 1 as the pulse fades (the follower's confidence), within :data:`RATE_RANGE` and
-#: never faster than the fastest exemplars of the memory move (:data:`SPEED_CAP`). False plays
-#: every movement at its own pace.
+#: T_ref the memory's mean tempo (the geometric mean over its exemplars of the tempo of the
+#: song each was danced to, ``DanceVQ.member_period``: 93 bpm for the shipped model),
+#: blended towards 1 as the pulse fades (the follower's confidence), within
+#: :data:`RATE_RANGE` and never faster than the fastest exemplars of the memory move
+#: (:data:`SPEED_CAP`). Each exemplar's own tempo as the reference (``T / T_src``) was
+#: measured too: the predictor picks slow waltz exemplars for fast music as often as not,
+#: which then hit the rate's upper bound, so the same song faster sped up less (1.15x
+#: against 1.20x over the listening set's songs, 1.25x over 0.8x). False plays every
+#: movement at its own pace.
 FOLLOW_TEMPO: bool = True
 #: Playback rates a movement may take (a movement plays ``r * seg`` of its exemplar's frames
 #: over its ``seg`` frames; its window holds ``2 seg``).
@@ -368,11 +373,14 @@ class DanceStream:
         self._speed_cap = float(np.quantile(speed[real], SPEED_CAP)) if real.any() else np.inf
         self._member_speed = speed
         self._member_period = model.member_period.numpy().astype(np.float64)  # (K, M); 0 unknown
+        known = self._member_period[real & (self._member_period > 0)]
+        self._ref_period = float(np.exp(np.log(known).mean())) if len(known) else 0.0  # the memory's mean tempo
         self.energy = 1.0
         self._energy_bias: np.ndarray | None = None  # ENERGY_GAIN * (energy - 1) * z; None at 1
         self.set_energy(energy)
         cc = c.clarity_col
         self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None
+        self._onset_col = c.onset_col if 0 <= c.onset_col < c.feature_dim else None
         self._decay = hermite_decay(DECAY_FRAMES * self.seg // 8)  # (2, D): match_exemplar's
         # Frames of the cycle the next code step's prefix is computed on: all but the code step
         # and the frame half a cycle from it, where the code step of a performer staggered by half
@@ -406,6 +414,8 @@ class DanceStream:
         self._played = np.zeros((3 * self.seg, self.pose_dim), np.float32)
         self._rate = 1.0  # exemplar frames per frame of the current movement (tempo following)
         self._tempo = TempoFollower()
+        self._onsets = np.zeros(DENSITY_WINDOW, np.float64)  # the last DENSITY_WINDOW onset strengths, a ring
+        self._density = 0.0  # their onset density (per s), taken at each code step
         self._lag = WARP_LAG  # exemplar frames the beat warp plays behind the movement
         self._has_cont = False  # the playing movement has a real continuation to match the next one to
         self._music = False
@@ -526,8 +536,9 @@ class DanceStream:
         self._has_cont = True
 
     def _rate_for(self, code: int, member: int) -> float:
-        """The playback rate of exemplar ``member`` of ``code`` now (:data:`FOLLOW_TEMPO`)."""
-        src = self._member_period[code, member]
+        """The playback rate of exemplar ``member`` of ``code`` now (:data:`FOLLOW_TEMPO`; the
+        same for every exemplar but for the speed cap)."""
+        src = self._ref_period
         period = self._tempo.period
         if not FOLLOW_TEMPO or src <= 0.0 or period <= 0.0:
             return 1.0
@@ -620,7 +631,13 @@ class DanceStream:
             push_history(self._hist, x[i], self._feat_mean, self._feat_std)  # (x - mean) / std, the oldest out
             self._raw = x[i]
             if self._beat_cols is not None:
-                self._tempo.update(float(x[i, self._beat_cols[3]]), float(x[i, self._beat_cols[2]]))
+                if self._onset_col is not None:
+                    self._onsets[t % DENSITY_WINDOW] = x[i, self._onset_col]
+                    if t % self.seg == 0:  # the window up to t, in time order
+                        n = (t + 1) % DENSITY_WINDOW
+                        self._density = onset_density(self._onsets[:n] if t < DENSITY_WINDOW else
+                                                      np.concatenate((self._onsets[n:], self._onsets[:n])))
+                self._tempo.update(float(x[i, self._beat_cols[3]]), float(x[i, self._beat_cols[2]]), self._density)
             if t % self.seg == 0:
                 self._next_code()
             elif self._free[t % self.seg]:

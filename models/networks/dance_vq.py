@@ -82,6 +82,8 @@ class DanceVQConfig:
     choreographic memory that plays a chosen code; 0 = play the decoder's output).
     energy_col / clarity_col: feature columns of the log frame
     energy and of the beat tracker's pulse clarity, read by the idle gate (-1 = unused).
+    onset_col: the onset-strength column, whose onset density picks the octave of the tempo
+    the performer follows (models.networks.tempo; -1 = none: the tracker's own octave).
     """
 
     feature_dim: int = 62
@@ -102,6 +104,7 @@ class DanceVQConfig:
     members: int = 4
     energy_col: int = 13
     clarity_col: int = 60
+    onset_col: int = -1
 
     def __post_init__(self) -> None:
         ints = ("feature_dim", "seg", "codebook", "code_dim", "enc_width", "dec_width", "d_model", "layers", "heads",

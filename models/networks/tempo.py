@@ -33,6 +33,28 @@ TEMPO_TAU: float = 15.0
 MIN_CLARITY: float = 0.05
 #: Pulse clarity at which a frame counts fully in the mean (a clean click track gives about 0.5).
 FULL_CLARITY: float = 0.3
+#: The octave of the beat: the one with about this many onsets per beat (:func:`onset_density`),
+#: a count that stretching the music does not change, so the same song faster or slower is
+#: danced at the same metrical level (the tracker's own choice moves with its tempo prior).
+ONSETS_PER_BEAT: float = 1.5
+#: Onset-strength frames :func:`onset_density` reads (8 s).
+DENSITY_WINDOW: int = 240
+#: Largest step of the follower's log period towards a frame an octave or more away, per
+#: frame at full weight, in octaves over TEMPO_TAU: a sustained change of metrical level is
+#: followed in about 2 s, a one-frame octave slip of the tracker is not.
+OCTAVE_STEP: float = 0.25
+
+
+def onset_density(onset: np.ndarray) -> float:
+    """Onsets per second (30 fps) in an onset-strength window (n,): local maxima over +-2 frames
+    above the window's mean plus half its standard deviation; 0 for fewer than 2 s."""
+    w = np.asarray(onset, np.float64)
+    if len(w) < 2 * FPS:
+        return 0.0
+    thr = w.mean() + 0.5 * w.std()
+    c = w[2:-2]
+    peaks = (c >= thr) & (c >= w[1:-3]) & (c >= w[:-4]) & (c >= w[3:-1]) & (c >= w[4:])
+    return float(peaks.sum()) * FPS / len(w)
 
 
 def fold_period(period: float) -> float:
@@ -49,7 +71,8 @@ def fold_period(period: float) -> float:
 class TempoFollower:
     """An octave-steady running beat period from the beat tracker's columns (module docstring).
 
-    ``update(logp, clarity)`` per frame (``logp = log2(P / 15)``); ``period`` (frames per beat,
+    ``update(logp, clarity, density)`` per frame (``logp = log2(P / 15)``, ``density`` the
+    :func:`onset_density` of the last seconds, 0: unknown); ``period`` (frames per beat,
     folded into :data:`TEMPO_RANGE`, or 0 before any clear pulse); ``confidence`` in [0, 1]
     (the running mean of the clarity over :data:`FULL_CLARITY`).
     """
@@ -64,17 +87,20 @@ class TempoFollower:
         self.log_p = math.nan  # unwrapped log2(P / 15); NaN until the first clear pulse
         self.conf = 0.0
 
-    def update(self, logp: float, clarity: float) -> None:
+    def update(self, logp: float, clarity: float, density: float = 0.0) -> None:
         w = min(1.0, max(clarity, 0.0) / FULL_CLARITY)
         self.conf += self._a * (w - self.conf)
         if clarity < MIN_CLARITY or not math.isfinite(logp):
             return
+        if density > 0.0:  # the octave with ONSETS_PER_BEAT onsets a beat
+            logp += math.floor(math.log2(ONSETS_PER_BEAT * FPS / (density * 15.0)) - logp + 0.5)
         if self.log_p != self.log_p:  # NaN: the first clear pulse
             self.log_p = logp
             return
         d = logp - self.log_p
-        d -= math.floor(d + 0.5)  # the nearest octave of the new estimate to the running one
-        self.log_p += self._a * w * d
+        if density <= 0.0:  # no octave cue: the nearest octave of the new estimate to the running one
+            d -= math.floor(d + 0.5)
+        self.log_p += self._a * w * min(max(d, -OCTAVE_STEP), OCTAVE_STEP)
 
     @property
     def period(self) -> float:
@@ -87,22 +113,27 @@ class TempoFollower:
         return min(1.0, self.conf)
 
 
-def track_periods(logp: np.ndarray, clarity: np.ndarray) -> np.ndarray:
+def track_periods(logp: np.ndarray, clarity: np.ndarray, onset: np.ndarray | None = None,
+                  every: int = 8) -> np.ndarray:
     """Frame by frame :attr:`TempoFollower.period` (T,) float64 over a whole stream's beat columns
-    (T,) (0 before the first clear pulse): the offline form of the same arithmetic."""
+    (T,) and onset strength (T,) (0 before the first clear pulse), the onset density taken
+    every ``every`` frames as the live stream does: the offline form of the same arithmetic."""
     f = TempoFollower()
     out = np.zeros(len(logp))
+    dens = 0.0
     for t, (lp, c) in enumerate(zip(np.asarray(logp, np.float64), np.asarray(clarity, np.float64))):
-        f.update(float(lp), float(c))
+        if onset is not None and t % every == 0:
+            dens = onset_density(onset[max(0, t + 1 - DENSITY_WINDOW): t + 1])
+        f.update(float(lp), float(c), dens)
         out[t] = f.period
     return out
 
 
-def song_period(logp: np.ndarray, clarity: np.ndarray) -> float:
-    """One beat period (frames) for a whole song's beat columns: the median of
-    :func:`track_periods` over its frames after the first 6 s (the tracker's window), 0 if the
-    pulse is never clear."""
-    p = track_periods(logp, clarity)
+def song_period(logp: np.ndarray, clarity: np.ndarray, onset: np.ndarray | None = None) -> float:
+    """One beat period (frames) for a whole song's beat columns and onset strength: the median
+    of :func:`track_periods` over its frames after the first 6 s (the tracker's window), 0 if
+    the pulse is never clear."""
+    p = track_periods(logp, clarity, onset)
     p = p[min(len(p) // 2, 6 * FPS):]
     p = p[p > 0]
     return float(np.median(p)) if len(p) else 0.0

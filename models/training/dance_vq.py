@@ -258,7 +258,9 @@ def clip_periods(model: DanceVQ, clips: list) -> dict[int, float]:
     out = {}
     for c in clips:
         src = own.get(c.name, c)
-        base = song_period(src.features[:, cc + 1], src.features[:, cc]) * (src.tempo if src is c else 1.0)
+        oc = model.config.onset_col
+        onset = src.features[:, oc] if 0 <= oc < model.config.feature_dim else None
+        base = song_period(src.features[:, cc + 1], src.features[:, cc], onset) * (src.tempo if src is c else 1.0)
         out[id(c)] = fold_period(base / c.tempo) if base > 0 else 0.0
     return out
 
@@ -471,6 +473,8 @@ def train_dance_vq(cfg, data_root: str | Path, out_dir: str | Path, cache_dir: s
     model_cfg = {**cfg.model_config, "feature_dim": fcfg.dim, "pose_dim": POSE_DIM}
     if fcfg.beat_phase and "clarity_col" not in cfg.model_config:
         model_cfg["clarity_col"] = fcfg.dim - 2  # [base | context | c cos, c sin, c, log2 P/15]
+    if fcfg.beat_phase and "onset_col" not in cfg.model_config:
+        model_cfg["onset_col"] = fcfg.base_dim - 1  # the onset kinds' last base column
     model: DanceVQ = build_model("dance_vq", model_cfg)  # type: ignore[assignment]
     rng = np.random.default_rng(cfg.seed)
     set_statistics(model, motion_clips, fcfg, rng, progress)

@@ -1,4 +1,4 @@
-"""Give an existing dance_vq checkpoint its style memory (issue 18, target 8).
+"""Give an existing dance_vq checkpoint its style and tempo memory (issue 18 target 8, issue 25).
 
 A requested style (``--style``, the live control) used to be only a token the predictor
 reads: it reweighs the codes the audio already favours, and the exemplars then played
@@ -23,6 +23,7 @@ memory that does not refit to the same exemplars (another config or dataset).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 
 import numpy as np
@@ -71,6 +72,8 @@ def main(argv: list[str] | None = None) -> int:
         lm = load_model(a.checkpoint)
         if not isinstance(lm.model, DanceVQ):
             raise PerformerError(f"{lm.path} is a {lm.name!r} model; the style memory is dance_vq's")
+        if lm.features.beat_phase and lm.model.config.onset_col < 0:  # saved before the tempo memory
+            lm.model.config = dataclasses.replace(lm.model.config, onset_col=lm.features.base_dim - 1)
         cfg = TrainConfig.from_toml(a.config)
         _, motion = training_clips(cfg, lm.features, a.data, a.cache, progress=True)
         counts = add_style_memory(lm.model, motion)
