@@ -1,4 +1,4 @@
-"""benchmarks/energy_control.py: the energy control measured against the real dancer (docs/show.md, "Energy")."""
+"""benchmarks/studies/energy_control.py: the energy control measured against the real dancer (docs/show.md, "Energy")."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-_path = REPO / "benchmarks" / "energy_control.py"
+_path = REPO / "benchmarks" / "studies" / "energy_control.py"
 _spec = importlib.util.spec_from_file_location("energy_control", _path)
 ec = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(ec)

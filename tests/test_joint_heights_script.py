@@ -1,4 +1,4 @@
-"""benchmarks/joint_heights.py: the joint-height figure of issue 18 and its errors."""
+"""benchmarks/studies/joint_heights.py: the joint-height figure of issue 18 and its errors."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-_path = Path(__file__).resolve().parents[1] / "benchmarks" / "joint_heights.py"
+_path = Path(__file__).resolve().parents[1] / "benchmarks" / "studies" / "joint_heights.py"
 _spec = importlib.util.spec_from_file_location("joint_heights", _path)
 jh = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(jh)

@@ -164,7 +164,7 @@ def median_us_per_frame(gen, x: np.ndarray) -> tuple[float, float]:
 
 @pytest.mark.slow
 def test_streaming_is_far_cheaper_than_naive_recompute():
-    """Generous guard only; benchmarks/stream_cost.py measures the real figures."""
+    """Generous guard only; benchmarks/studies/stream_cost.py measures the real figures."""
     torch.manual_seed(0)
     m = randomize_batchnorm(CausalGenerator(GeneratorConfig())).eval()  # the shipped size
     x = random_features(300, 8)

@@ -1,4 +1,4 @@
-"""benchmarks/paired_floor.py: the mean pose and the beat-shift profile it reports."""
+"""benchmarks/studies/paired_floor.py: the mean pose and the beat-shift profile it reports."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from models.rig.humanoid import NUM_BONES
 
-_path = Path(__file__).resolve().parents[1] / "benchmarks" / "paired_floor.py"
+_path = Path(__file__).resolve().parents[1] / "benchmarks" / "studies" / "paired_floor.py"
 _spec = importlib.util.spec_from_file_location("paired_floor", _path)
 paired_floor = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(paired_floor)

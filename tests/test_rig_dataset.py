@@ -1,7 +1,7 @@
 """The rig on the real DWM mocap (raw frames): left/right, accuracy, continuity.
 
-Figures and their explanation: docs/data.md ("Retargeting accuracy"), produced by
-``benchmarks/retarget_accuracy.py``. The acceptance bounds (mean < 1 cm, max < 3 cm
+Figures and their explanation: docs/rig.md ("Retargeting accuracy"), produced by
+``benchmarks/studies/retarget_accuracy.py``. The acceptance bounds (mean < 1 cm, max < 3 cm
 at the 21 covered joints) are on the per-frame skeleton (chain bones in median rest
 directions with each frame's measured lengths, end sites and toe points at their
 measured offsets), because the mocap itself does not keep its bones rigid.
@@ -25,7 +25,7 @@ from models.rig.skeleton import POINT_INDEX, POINT_PARENT_INDEX, Skeleton, load_
 
 pytestmark = pytest.mark.data
 
-# Each style; DANCE_C_7 holds the dataset's worst per-frame error (1.98 cm, docs/data.md),
+# Each style; DANCE_C_7 holds the dataset's worst per-frame error (1.98 cm, docs/rig.md),
 # DANCE_R_8 the torso collapse behind a 74 degree forearm jump.
 REPRESENTATIVE = ("DANCE_C_7", "DANCE_R_8", "DANCE_W_1", "DANCE_W_30")
 COVERED = [POINT_INDEX[n] for n in POINT_OF_JOINT.values()]
@@ -45,7 +45,7 @@ FINGERPRINTS = {
 
 
 def _benchmark():
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "retarget_accuracy.py"
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "studies" / "retarget_accuracy.py"
     spec = importlib.util.spec_from_file_location("retarget_accuracy", path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # dataclasses look their module up there
@@ -142,7 +142,7 @@ def test_rotation_jumps_over_60_degrees_come_from_the_source(dances, per_frame):
 
 
 def test_the_forearm_jump_in_dance_r_8_comes_from_the_collapsing_torso(dances):
-    """DANCE_R_8 raw frames 749 -> 750: the shoulder line collapses, not the arm (docs/data.md)."""
+    """DANCE_R_8 raw frames 749 -> 750: the shoulder line collapses, not the arm (docs/rig.md)."""
     why = _benchmark().explain_jump(dwm_targets(dances["DANCE_R_8"]), "RightLowerArm", 749)
     assert "RightUpperArm-LeftUpperArm (defining ancestor Chest) collapsed" in why, why
 

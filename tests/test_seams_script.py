@@ -1,4 +1,4 @@
-"""benchmarks/seams.py: the seam ratio table of docs/training.md and its exit status."""
+"""benchmarks/studies/seams.py: the seam ratio table of docs/training.md and its exit status."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from pathlib import Path
 
 from models.generate import default_checkpoint_path
 
-_path = Path(__file__).resolve().parents[1] / "benchmarks" / "seams.py"
+_path = Path(__file__).resolve().parents[1] / "benchmarks" / "studies" / "seams.py"
 _spec = importlib.util.spec_from_file_location("seams", _path)
 seams = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(seams)

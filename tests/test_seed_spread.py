@@ -1,4 +1,4 @@
-"""benchmarks/seed_spread.py: grouping evaluated checkpoints by recipe and their spread."""
+"""benchmarks/studies/seed_spread.py: grouping evaluated checkpoints by recipe and their spread."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-_path = Path(__file__).resolve().parents[1] / "benchmarks" / "seed_spread.py"
+_path = Path(__file__).resolve().parents[1] / "benchmarks" / "studies" / "seed_spread.py"
 _spec = importlib.util.spec_from_file_location("seed_spread", _path)
 seed_spread = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(seed_spread)

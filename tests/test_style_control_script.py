@@ -1,4 +1,4 @@
-"""benchmarks/style_control.py: style control measured with the evaluation's style classifier (issue 18)."""
+"""benchmarks/studies/style_control.py: style control measured with the evaluation's style classifier (issue 18)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-_path = REPO / "benchmarks" / "style_control.py"
+_path = REPO / "benchmarks" / "studies" / "style_control.py"
 _spec = importlib.util.spec_from_file_location("style_control", _path)
 sc = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(sc)

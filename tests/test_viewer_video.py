@@ -1,4 +1,4 @@
-"""benchmarks/viewer_video.py: a 1-s, tiny side-by-side recording of the real web viewer.
+"""benchmarks/studies/viewer_video.py: a 1-s, tiny side-by-side recording of the real web viewer.
 
 Needs Debian's chromium, the playwright package, the built viewer (clients/web/dist)
 and the shared dataset; skips with the reason when one is absent.
@@ -16,7 +16,7 @@ import pytest
 from models.generate import default_checkpoint_path
 
 REPO = Path(__file__).resolve().parents[1]
-_path = REPO / "benchmarks" / "viewer_video.py"
+_path = REPO / "benchmarks" / "studies" / "viewer_video.py"
 _spec = importlib.util.spec_from_file_location("viewer_video", _path)
 vv = importlib.util.module_from_spec(_spec)
 sys.modules[_spec.name] = vv  # its dataclass looks its module up there

@@ -1,6 +1,6 @@
 """Audio-time alignment of DWM mocap frames and resampling to the project's 30 fps.
 
-The reading (established by ``benchmarks/alignment_study.py``; numbers in
+The reading (established by ``benchmarks/studies/alignment_study.py``; numbers in
 docs/data.md, "Audio-to-motion alignment"): the ``N`` stored frames of a dance span
 its music interval ``[S/25, E/25]`` seconds evenly, so frame ``i`` sits at audio time
 
@@ -29,7 +29,7 @@ from models.data.dwm import CONFIG_FPS, Dance, dance_dirs, load_dance
 from models.errors import DataError
 from models.timebase import FPS
 
-#: Dances for which benchmarks/alignment_study.py could not confirm the reading:
+#: Dances for which benchmarks/studies/alignment_study.py could not confirm the reading:
 #: the H1 metre test fails (|err| >= 3 %) and the motion locks to the music's beat
 #: grid at a rate more than 2.5 % away from the H1 rate (or, for W_23, the motion
 #: period estimate is unreliable).  Their timestamps follow the same rule; leave

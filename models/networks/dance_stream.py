@@ -112,7 +112,7 @@ STYLE_MEMBERS: bool = True
 #: The energy control (:meth:`DanceStream.set_energy`, 0..2, 1 = as the music asks): the code
 #: logits move by ``ENERGY_GAIN * (energy - 1) * z``, z each code's movement speed
 #: (:func:`code_energy`), so energy 0 favours the calmest movements and 2 the liveliest
-#: (benchmarks/energy_control.py: the validation dances' motion energy 0.67x, 1.0x and 1.5x
+#: (benchmarks/studies/energy_control.py: the validation dances' motion energy 0.67x, 1.0x and 1.5x
 #: the dancers' at 0, 1 and 2, monotone on every song; docs/show.md, "Energy").
 ENERGY_GAIN: float = 3.0
 #: The energy control's range.

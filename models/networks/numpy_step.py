@@ -10,7 +10,7 @@ Why a second implementation: one streamed frame is about 130 tiny operations on
 arrays of 2 rows and at most 384 columns. Their arithmetic is a few microseconds in
 all; what costs is the per-call dispatch, about 4 µs for a torch ``addmm`` and 1 µs for
 ``np.dot`` into a preallocated output (2 µs against 0.5 µs for a row copy). The torch
-step takes about 0.3 ms per frame, this one about half (``benchmarks/model_cost.py``
+step takes about 0.3 ms per frame, this one about half (``benchmarks/studies/model_cost.py``
 reports both, side by side). Every output and scratch array is allocated once, when
 the step is made; a frame allocates only a few small temporaries (window views).
 

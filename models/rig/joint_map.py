@@ -1,6 +1,6 @@
 """How the 23 joints of the DWM dataset map onto the humanoid rig.
 
-Joint semantics (docs/data.md, "Joint map" has the table and the evidence): 0/1 the
+Joint semantics (docs/rig.md, "Joint map" has the table and the evidence): 0/1 the
 right/left side of the head; 2 the pelvis (a lower-spine point about 14 cm above the
 hip centre); 3-6 right shoulder, elbow, wrist, hand; 7-11 right hip, knee, ankle,
 heel, toe; 12-15 and 16-20 the same on the left; 21 and 22 are markers riding on the

@@ -220,7 +220,7 @@ def load_default_skeleton(path: str | Path | None = None) -> Skeleton:
     """The canonical rest skeleton shipped in ``models/assets/humanoid_rest.json``.
 
     It is the symmetric median fit over the whole DWM dataset, written by
-    ``.venv/bin/python benchmarks/retarget_accuracy.py --data /path/to/dwm
+    ``.venv/bin/python benchmarks/studies/retarget_accuracy.py --data /path/to/dwm
     --write-rest models/assets/humanoid_rest.json``.
     """
     return Skeleton.from_json(DEFAULT_REST_PATH if path is None else path)

@@ -18,7 +18,7 @@ same clips, forward kinematics and metric code as ``performer evaluate``:
 
 ::
 
-    .venv/bin/python benchmarks/paired_floor.py --data ../shared/data/dwm \\
+    .venv/bin/python benchmarks/studies/paired_floor.py --data ../shared/data/dwm \\
         --checkpoint models/assets/default.pt runs/lstm/best.pt
 
 Prints two Markdown tables (quoted in docs/training.md). The mean poses are

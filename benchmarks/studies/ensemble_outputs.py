@@ -1,6 +1,6 @@
 """An ensemble's outputs on the engine's worker thread, or on an output thread of their own?
 
-Run:  .venv/bin/python benchmarks/ensemble_outputs.py [--performers 4] [--seconds 15] [--repeat 2] [--breakdown]
+Run:  .venv/bin/python benchmarks/studies/ensemble_outputs.py [--performers 4] [--seconds 15] [--repeat 2] [--breakdown]
 
 N performers of the packaged checkpoint (seeds 0..N-1, staggered) on the bundled clip,
 replayed in real time at 44.1 kHz in blocks of 512, in one engine; each performer sends

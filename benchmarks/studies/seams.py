@@ -9,7 +9,7 @@ acceleration of the frames within 2 of a window boundary over that of the other 
 movements, where one real exemplar hands over to the next (inertialization), so for it the
 ratio is taken at every movement start with a radius of 1 frame::
 
-    .venv/bin/python benchmarks/seams.py --checkpoint models/assets/default.pt \\
+    .venv/bin/python benchmarks/studies/seams.py --checkpoint models/assets/default.pt \\
         --audio models/assets/clip.ogg /path/to/dwm/DANCE_W_5/audio.mp3
 
 Prints a Markdown table (rows: songs, columns: checkpoints). Exit status 2 on a missing

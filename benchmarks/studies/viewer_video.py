@@ -22,7 +22,7 @@ are drawn around the pictures; the GIF is silent.
 Needs Debian's chromium (``apt-get install chromium``; ``$PERFORMER_CHROMIUM`` names
 another binary) and the playwright Python package (``pip install -e '.[dev]'``)::
 
-    .venv/bin/python benchmarks/viewer_video.py --checkpoint models/assets/default.pt \\
+    .venv/bin/python benchmarks/studies/viewer_video.py --checkpoint models/assets/default.pt \\
         --data ../shared/data/dwm --dance DANCE_W_5 --start-s 40 --seconds 10 --fps 15 \\
         --out docs/img/dance_side_by_side_before.gif
 """
@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 if str(REPO) not in sys.path:  # run as a script from anywhere
     sys.path.insert(0, str(REPO))
 

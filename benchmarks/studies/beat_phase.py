@@ -13,7 +13,7 @@ with (models/evaluation/beats.py). Reported per song and pooled, after the track
 
 Usage::
 
-    .venv/bin/python benchmarks/beat_phase.py --data ../shared/data/dwm [--seconds 120]
+    .venv/bin/python benchmarks/studies/beat_phase.py --data ../shared/data/dwm [--seconds 120]
 """
 
 from __future__ import annotations

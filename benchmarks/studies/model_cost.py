@@ -10,7 +10,7 @@ NumPy step and with the torch reference step, and the torch ops one frame dispat
 is not included (it is shared: docs/features.md); ``--threads`` torch threads (default 1,
 the engine's setting). Pin to two cores as the latency suite does::
 
-    taskset -c 0,1 .venv/bin/python benchmarks/model_cost.py --audio ../shared/data/dwm/DANCE_R_5/audio.mp3 \\
+    taskset -c 0,1 .venv/bin/python benchmarks/studies/model_cost.py --audio ../shared/data/dwm/DANCE_R_5/audio.mp3 \\
         --checkpoint models/assets/default.pt runs/unet_gan/best.pt runs/lstm/best.pt
 
 Prints a Markdown table (docs/models.md quotes it) and, with ``--json``, writes the figures.

@@ -9,7 +9,7 @@ are the music beats ``performer evaluate`` scores against (``librosa.beat.beat_t
 the song), dots the kinematic beats (speed dips); the legend gives each panel's beat hit
 rate on the plotted span and on the whole dance::
 
-    .venv/bin/python benchmarks/beat_warp.py --data ../shared/data/dwm --out docs/img/beat_warp.png
+    .venv/bin/python benchmarks/studies/beat_warp.py --data ../shared/data/dwm --out docs/img/beat_warp.png
 
 Exit status 2 on a missing or unreadable checkpoint, dataset or dance.
 """
@@ -20,7 +20,7 @@ import argparse
 import sys
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 if str(REPO) not in sys.path:  # run as a script from anywhere
     sys.path.insert(0, str(REPO))
 

@@ -9,7 +9,7 @@ checkpoint's own row::
 
     performer evaluate --checkpoint models/assets/default.pt runs/v100_s*/best.pt \\
         runs/lstm/best.pt runs/lstm_s*/best.pt --data ../shared/data/dwm --out runs/eval_seeds --quiet
-    .venv/bin/python benchmarks/seed_spread.py runs/eval_seeds \\
+    .venv/bin/python benchmarks/studies/seed_spread.py runs/eval_seeds \\
         --group "causal fine-tune=runs/beat_ctx60_w5_v100/best.pt,runs/v100_s*/best.pt" \\
         --group "lstm=runs/lstm/best.pt,runs/lstm_s*/best.pt"
 

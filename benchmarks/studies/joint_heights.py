@@ -11,7 +11,7 @@ kinematics on the default skeleton. The legend gives each curve's standard devia
 over the plotted span (cm), so the picture's point, how far the joints swing, reads as
 a number too::
 
-    .venv/bin/python benchmarks/joint_heights.py --checkpoint models/assets/default.pt \\
+    .venv/bin/python benchmarks/studies/joint_heights.py --checkpoint models/assets/default.pt \\
         --data ../shared/data/dwm --out docs/img/joint_heights_before.png
 
 Exit status 2 on a missing or unreadable checkpoint, dataset or dance.
@@ -23,7 +23,7 @@ import argparse
 import sys
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 if str(REPO) not in sys.path:  # run as a script from anywhere
     sys.path.insert(0, str(REPO))
 

@@ -6,7 +6,7 @@ max/median of its average over frames with the same phase t mod P. A value well 
 that of unrelated periods means the jerk comes from something that repeats every P
 frames (the causal U-Net's level L updates every 2**L frames)::
 
-    .venv/bin/python benchmarks/jerk_phase.py ../shared/data/dwm/DANCE_R_5/audio.mp3 --checkpoint models/assets/default.pt
+    .venv/bin/python benchmarks/studies/jerk_phase.py ../shared/data/dwm/DANCE_R_5/audio.mp3 --checkpoint models/assets/default.pt
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ CLI), and plots over time:
 with the seam of the two songs marked. Writes ``--png`` (default
 docs/img/gcn_style_change.png) and prints when the decided style switched.
 
-    .venv/bin/python benchmarks/gcn_style_change.py --checkpoint models/assets/gcn.pt --data ../shared/data/dwm
+    .venv/bin/python benchmarks/studies/gcn_style_change.py --checkpoint models/assets/gcn.pt --data ../shared/data/dwm
     .venv/bin/performer generate out/gcn_style_change.wav --out out/gcn_style_change.npz --checkpoint models/assets/gcn.pt
 """
 
@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
 

@@ -14,7 +14,7 @@ other seeds than the detector was fitted on), and prints per gap:
 and, over the songs themselves, the share of music frames the gate wrongly took for a
 gap (``false_idle``). ``--plot`` draws the idle weight and a hand's height over time.
 
-    .venv/bin/python benchmarks/idle_gate.py --checkpoint models/assets/default.pt \\
+    .venv/bin/python benchmarks/studies/idle_gate.py --checkpoint models/assets/default.pt \\
         --data ../shared/data/dwm --plot docs/img/idle_gate.png
 """
 

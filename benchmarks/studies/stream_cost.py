@@ -1,6 +1,6 @@
 """Per-frame cost of the streaming causal generator vs the naive full-window recompute.
 
-Run:  .venv/bin/python benchmarks/stream_cost.py [--threads 2] [--frames 300] [--naive-frames 100]
+Run:  .venv/bin/python benchmarks/studies/stream_cost.py [--threads 2] [--frames 300] [--naive-frames 100]
 
 Prints parameter counts of every registered model, then, for an untrained causal model
 of the default size (BN statistics randomised; cost does not depend on training), the

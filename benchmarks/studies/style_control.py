@@ -19,7 +19,7 @@ A style is "controlled" on a song when its share beats every other style's by at
 ``--margin`` (default 0.2); the summary line counts the songs. ``--json`` writes every
 song's full class shares::
 
-    .venv/bin/python benchmarks/style_control.py --checkpoint models/assets/default.pt \\
+    .venv/bin/python benchmarks/studies/style_control.py --checkpoint models/assets/default.pt \\
         --data ../shared/data/dwm --json runs/style_control.json
 
 Exit status 2 on a missing or unreadable checkpoint or dataset, or a checkpoint whose
@@ -34,7 +34,7 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 if str(REPO) not in sys.path:  # run as a script from anywhere
     sys.path.insert(0, str(REPO))
 

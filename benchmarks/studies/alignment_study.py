@@ -32,7 +32,7 @@ joint speed of the world positions):
 
 Run (about 1.5 minutes on 2 cores; audio features are cached under OUT/cache)::
 
-    .venv/bin/python benchmarks/alignment_study.py --data ../shared/data/dwm --out /tmp/alignment_study
+    .venv/bin/python benchmarks/studies/alignment_study.py --data ../shared/data/dwm --out /tmp/alignment_study
 
 Writes ``OUT/alignment_study.json`` (everything), ``OUT/alignment_study.md`` (the
 tables in docs/data.md) and ``OUT/alignment_study.png``.
@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from models.data.alignment import held_frames  # noqa: E402
 from models.data.dwm import CONFIG_FPS, Dance, load_dataset  # noqa: E402

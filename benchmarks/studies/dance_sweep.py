@@ -7,7 +7,7 @@ seed, generates the 6 validation dances through the live stream and prints the d
 amplitude and jitter ratios (models.evaluation.metrics.band_ratios), the jerk against the
 real dances' and the pooled beat hit rate and coverage (the evaluate report's definitions)::
 
-    .venv/bin/python benchmarks/dance_sweep.py --checkpoint models/assets/default.pt \\
+    .venv/bin/python benchmarks/studies/dance_sweep.py --checkpoint models/assets/default.pt \\
         --data ../shared/data/dwm 1,1 2,1 4,2 1,1,0.8
 
 ``--members 0`` plays the codebook's decoder instead of the real exemplars (the design

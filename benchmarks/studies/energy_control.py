@@ -21,7 +21,7 @@ Prints one table (mean over songs, and the smallest and largest song) and writes
 motion energy against the control, one line per song, and the first song's right-hand
 height over 20 s at the lowest, default and highest level beside the real dancer's::
 
-    .venv/bin/python benchmarks/energy_control.py --data ../shared/data/dwm \\
+    .venv/bin/python benchmarks/studies/energy_control.py --data ../shared/data/dwm \\
         --plot docs/img/energy_control.png --json runs/energy_control.json
 
 Exit status 2 on a missing or unreadable checkpoint or dataset, or a checkpoint whose
@@ -36,7 +36,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 if str(REPO) not in sys.path:  # run as a script from anywhere
     sys.path.insert(0, str(REPO))
 

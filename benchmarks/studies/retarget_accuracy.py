@@ -22,11 +22,11 @@ resampling), this measures:
 
 Usage::
 
-    .venv/bin/python benchmarks/retarget_accuracy.py --data ../shared/data/dwm
-    .venv/bin/python benchmarks/retarget_accuracy.py --data ../shared/data/dwm \\
+    .venv/bin/python benchmarks/studies/retarget_accuracy.py --data ../shared/data/dwm
+    .venv/bin/python benchmarks/studies/retarget_accuracy.py --data ../shared/data/dwm \\
         --write-rest models/assets/humanoid_rest.json   # regenerate the default skeleton
 
-Prints Markdown tables (the figures in docs/data.md come from here). About 50 s on
+Prints Markdown tables (the figures in docs/rig.md come from here). About 50 s on
 one CPU core. ``--trace DANCE:BONE:START:STOP`` prints instead what moves one bone
 over a few raw frames (see :func:`trace`).
 """
@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from models.data.dwm import Dance, load_dance, load_dataset  # noqa: E402
 from models.rig.humanoid import BONES, PARENT  # noqa: E402
@@ -388,7 +388,7 @@ def main(argv: list[str] | None = None) -> int:
     dances = load_dataset(args.data, styles=args.styles)
     if args.write_rest:
         all_frames = np.concatenate([d.world_positions_m() for d in dances])
-        note = "symmetric median fit over all raw frames of the DWM dataset; written by: .venv/bin/python benchmarks/retarget_accuracy.py --data ../shared/data/dwm --write-rest models/assets/humanoid_rest.json"
+        note = "symmetric median fit over all raw frames of the DWM dataset; written by: .venv/bin/python benchmarks/studies/retarget_accuracy.py --data ../shared/data/dwm --write-rest models/assets/humanoid_rest.json"
         fit_skeleton(all_frames, symmetric=True).to_json(args.write_rest, note=note)
         print(f"wrote {args.write_rest}", file=sys.stderr)
         default = load_default_skeleton(args.write_rest)

@@ -7,7 +7,7 @@ dance's real style, then prints the energy ratio (velocity spread generated / re
 and the jerk (m/s³) of each setting next to the real dances' jerk. Same definitions as
 ``performer evaluate`` (docs/metrics.md)::
 
-    .venv/bin/python benchmarks/gcn_smoothing.py --data ../shared/data/dwm --true-style
+    .venv/bin/python benchmarks/studies/gcn_smoothing.py --data ../shared/data/dwm --true-style
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
 
