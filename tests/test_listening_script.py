@@ -186,3 +186,36 @@ def test_help_and_bad_data(capsys, tmp_path):
     with pytest.raises(SystemExit):
         script.main(["--sets", "tempo"])
     assert "--sets takes" in capsys.readouterr().err
+
+
+def test_performer_evaluate_listening_writes_the_figures(tmp_path, shipped, capsys):
+    import argparse
+
+    import soundfile as sf
+
+    from _dwm_synth import sine_dance, write_dance
+    from models.features.audio_io import bundled_clip_path, load_audio
+    from realtime.commands import evaluate as cmd
+
+    joints, center, _ = sine_dance(100, 0, 100)
+    for name in ("DANCE_C_1", "DANCE_C_2", "DANCE_R_1", "DANCE_R_2", "DANCE_W_1", "DANCE_W_2"):
+        write_dance(tmp_path / "dwm", name, joints, center, 0, 100)  # silent songs: no tempo, not in the set
+    (tmp_path / "music").mkdir()
+    (tmp_path / "speech").mkdir()
+    song, _ = load_audio(bundled_clip_path(), SAMPLE_RATE)
+    sf.write(tmp_path / "music" / "clip.wav", song, SAMPLE_RATE)
+    sf.write(tmp_path / "speech" / "noise.wav", 0.05 * np.random.default_rng(0).normal(size=3 * SAMPLE_RATE),
+             SAMPLE_RATE)
+    args = argparse.Namespace(checkpoint=[str(shipped.path), str(REPO / "models" / "assets" / "dtm.pt")],
+                              data=str(tmp_path / "dwm"), split="val", out=str(tmp_path / "out"),
+                              cache=str(tmp_path / "cache" / "corpus"), classifier_epochs=10, dances=None,
+                              max_frames=None, window=128, hop=64, listening="quick", music=None, speech=None,
+                              quiet=True)
+    paths = cmd.listening(args)
+    text = paths["listening_md"].read_text()
+    assert "performer evaluate --checkpoint" in text and "--listening quick" in text
+    assert "| clip |" in text and "dtm" not in text.split("```")[2]  # the dtm model has no listening figures
+    out = capsys.readouterr().out
+    assert "ramp: no song" in out and "is a 'dtm' model" in out
+    assert any(line.startswith(("PASS  ", "FAIL  ")) for line in out.splitlines())
+    assert list((tmp_path / "cache" / "listening").glob("clip-*-x0.8-*.npy"))

@@ -464,9 +464,9 @@ def stretch_set(lm, cache: AudioCache, songs: list[tuple[Path, float]], opts: Op
     return rows
 
 
-def ramp_song(cache: AudioCache, songs: list[tuple[Path, float]], opts: Options) -> tuple[Path, float]:
+def ramp_song(cache: AudioCache, songs: list[tuple[Path, float]], opts: Options) -> tuple[Path, float] | None:
     """The ramp's recording: ``opts.ramp_song`` (a stem or directory name among the stretch set's
-    candidates) or the first song of the stretch set long enough for the whole ramp."""
+    candidates) or the first song of the stretch set long enough for the whole ramp (None: none is)."""
     need = (RAMP_HOLD_S + 2 * RAMP_S) * RAMP_RATES[1] + 1.0
     if opts.ramp_song:
         for p in candidates(opts):
@@ -476,7 +476,7 @@ def ramp_song(cache: AudioCache, songs: list[tuple[Path, float]], opts: Options)
     for p, bpm in songs:
         if len(cache.audio(p)) / SAMPLE_RATE >= need:
             return p, bpm
-    raise DataError(f"no song of the stretch set is {need:.0f} s long, as the ramp needs", source="ramp")
+    return None
 
 
 def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict:
@@ -596,16 +596,23 @@ def verdict(key: str, value: float | None) -> str:
     return ""
 
 
-def run(checkpoints: Sequence[str | Path | None], opts: Options, log=print) -> dict:
-    """Every set of ``opts.sets`` for each dance_vq checkpoint (None: the packaged default).
+def run(checkpoints: Sequence[str | Path | None], opts: Options, log=print, only_dance_vq: bool = False) -> dict:
+    """Every set of ``opts.sets`` for each dance_vq checkpoint (None: the packaged default);
+    another model kind raises PerformerError, or with ``only_dance_vq`` is left out (logged).
     Returns ``{"options": ..., "models": {name: {"checkpoint", "stretch", "ramp", "presence", "summary"}}}``."""
     from models.errors import PerformerError
     from models.generate import load_model
 
-    loaded = [load_model(c) for c in checkpoints]
-    for lm in loaded:
-        if not getattr(lm.model, "takes_style", False):
+    loaded = []
+    for lm in (load_model(c) for c in checkpoints):
+        if getattr(lm.model, "takes_style", False):
+            loaded.append(lm)
+        elif only_dance_vq:
+            log(f"listening: {lm.path} is a {lm.name!r} model; the listening sets run dance_vq models only")
+        else:
             raise PerformerError(f"{lm.path} is a {lm.name!r} model; the listening sets run dance_vq models")
+    if not loaded:
+        return {"options": {}, "models": {}}
     cache = AudioCache(opts.cache_dir)
     songs = stretch_songs(cache, opts) if ("stretch" in opts.sets or "ramp" in opts.sets) else []
     if "stretch" in opts.sets:
@@ -614,6 +621,8 @@ def run(checkpoints: Sequence[str | Path | None], opts: Options, log=print) -> d
         log(f"stretch set: {len(songs)} songs in {TEMPO_RANGE[0]:g}-{TEMPO_RANGE[1]:g} bpm: "
             + ", ".join(f"{song_name(p)} ({b:.0f})" for p, b in songs))
     rsong = ramp_song(cache, songs, opts) if "ramp" in opts.sets else None
+    if "ramp" in opts.sets and rsong is None:
+        log("ramp: no song of the stretch set is long enough; the ramp is left out")
     speech_song = rsong[0] if rsong else (songs[0][0] if songs else None)
     if speech_song is None and "presence" in opts.sets and opts.music is not None:
         speech_song = music_files(opts.music)[0]
@@ -648,6 +657,8 @@ def markdown(result: dict, command: str | None = None) -> str:
     lines = []
     if command:
         lines += ["```", command, "```", ""]
+    if not names:
+        return "\n".join(lines + ["No dance_vq checkpoint: no listening figures."]) + "\n"
     lines += ["| target | " + " | ".join(names) + " |", "| --- | " + " | ".join("---:" for _ in names) + " |"]
     for key, desc, op, thr in TARGETS:
         cells = []
