@@ -44,8 +44,6 @@ STRETCH_RATES: tuple[float, float, float] = (0.8, 1.0, 1.25)
 TEMPO_RANGE: tuple[float, float] = (80.0, 130.0)
 #: Band (Hz) of :func:`frequency_centroid`: dance-scale motion up to the start of the jitter band.
 CENTROID_BAND: tuple[float, float] = (0.25, 6.0)
-#: Lags (s) searched for the speed curve's period in :func:`kinematic_bpm`.
-KIN_LAGS_S: tuple[float, float] = (0.2, 2.0)
 #: Seconds at the start of every performance left out of the scores (the stream starts idle
 #: and fades in once it hears music).
 SETTLE_S: float = 3.0
@@ -107,37 +105,12 @@ def frequency_centroid(pos: np.ndarray, fps: float = FPS, band: tuple[float, flo
     return float((freq[keep] * power[keep]).sum() / total) if total > 0 else 0.0
 
 
-def kinematic_bpm(pos: np.ndarray, fps: float = FPS, lags_s: tuple[float, float] = KIN_LAGS_S) -> float:
-    """Kinematic beats per minute: 60 / the period (s) of the strongest periodicity of the speed curve.
-
-    The mean joint speed (:func:`models.evaluation.beats.motion_speed`, Gaussian-smoothed with
-    :data:`models.evaluation.beats.SPEED_SIGMA` frames as for the kinematic beats) minus its
-    mean, autocorrelated; the period is the lag of the highest autocorrelation peak between
-    ``lags_s`` (0.2-2 s: 30-300 speed dips a minute), refined by a parabola through the peak
-    and its neighbours. Playing a motion ``r`` times faster multiplies it by ``r`` (no
-    threshold on dip depth, unlike counting :func:`kinematic_beats`). 0 if no peak.
-    """
-    from scipy.ndimage import gaussian_filter1d
-    from scipy.signal import find_peaks
-
-    from models.evaluation.beats import SPEED_SIGMA
-
-    v = gaussian_filter1d(motion_speed(pos, fps), SPEED_SIGMA, mode="nearest")
-    v = v - v.mean()
-    n = len(v)
-    ac = np.fft.irfft(np.abs(np.fft.rfft(v, 2 * n)) ** 2)[:n]
-    lo, hi = int(lags_s[0] * fps), min(int(lags_s[1] * fps), n - 2)
-    if hi <= lo or ac[0] <= 0:
-        return 0.0
-    peaks, _ = find_peaks(ac[: hi + 1])
-    peaks = peaks[peaks >= lo]
-    if not peaks.size:
-        return 0.0
-    k = int(peaks[np.argmax(ac[peaks])])
-    a, b, c = ac[k - 1], ac[k], ac[k + 1]
-    den = a - 2 * b + c
-    lag = k + (0.5 * (a - c) / den if den < 0 else 0.0)
-    return 60.0 * fps / lag
+def kinematic_bpm(pos: np.ndarray, fps: float = FPS) -> float:
+    """Kinematic beats per minute: :func:`models.evaluation.beats.kinematic_beats` (dips of the
+    smoothed mean joint speed at least 0.02 m/s deep and 6 frames apart) counted over the
+    motion, per minute of it. The depth threshold and the smoothing are fixed, so a complex
+    motion played faster does not always count proportionally more dips (docs/metrics.md)."""
+    return 60.0 * len(kinematic_beats(pos, fps)) * fps / len(pos)
 
 
 def dance_amplitude(pos: np.ndarray, fps: float = FPS) -> float:
@@ -709,5 +682,6 @@ def verdict_lines(result: dict) -> list[str]:
         for key, desc, op, thr in TARGETS:
             if key in m["summary"]:
                 v = m["summary"][key]
-                out.append(f"{verdict(key, v)}  {desc} {op} {thr:g}: {_fmt(v)}  [{n}]")
+                shown = "n/a (never idle)" if verdict(key, v) == "n/a" else _fmt(v)
+                out.append(f"{verdict(key, v):4}  {desc} {op} {thr:g}: {shown}  [{n}]")
     return out
