@@ -601,7 +601,11 @@ def run(checkpoints: Sequence[str | Path | None], opts: Options, log=print, only
         speech_song = music_files(opts.music)[0]
     models: dict[str, dict] = {}
     for lm in loaded:
-        name = f"{lm.name} ({lm.path})"
+        try:
+            shown = lm.path.resolve().relative_to(Path.cwd().resolve())
+        except ValueError:
+            shown = lm.path
+        name = f"{lm.name} ({shown})"
         res: dict = {"checkpoint": str(lm.path)}
         if "stretch" in opts.sets:
             res["stretch"] = stretch_set(lm, cache, songs, opts)
