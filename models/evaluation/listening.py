@@ -409,7 +409,8 @@ def score_motion(poses: np.ndarray, beats: np.ndarray) -> dict[str, float]:
     """The stretch set's figures of one performance from :data:`SETTLE_S` on (beats: frames of the whole)."""
     skip = int(SETTLE_S * FPS)
     pos = positions(poses[skip:])
-    hit, half = beat_hits(pos, np.asarray(beats) - skip)
+    b = np.asarray(beats) - skip
+    hit, half = beat_hits(pos, b[b >= 0])
     return {"speed": mean_speed(pos), "centroid_hz": frequency_centroid(pos), "kin_bpm": kinematic_bpm(pos),
             "amp_m": dance_amplitude(pos), "hit": hit, "hit_half": half}
 
@@ -606,6 +607,8 @@ def run(checkpoints: Sequence[str | Path | None], opts: Options, log=print, only
         except ValueError:
             shown = lm.path
         name = f"{lm.name} ({shown})"
+        if name in models:  # the same file twice
+            name += f" #{sum(n.startswith(name) for n in models) + 1}"
         res: dict = {"checkpoint": str(lm.path)}
         if "stretch" in opts.sets:
             res["stretch"] = stretch_set(lm, cache, songs, opts)
