@@ -231,3 +231,14 @@ def test_performer_evaluate_listening_writes_the_figures(tmp_path, shipped, caps
     assert "ramp: no song" in out and "is a 'dtm' model" in out
     assert any(line.startswith(("PASS  ", "FAIL  ")) for line in out.splitlines())
     assert list((tmp_path / "cache" / "listening").glob("clip-*-x0.8-*.npy"))
+
+
+def test_the_ramps_audio_plays_at_the_intended_tempo():
+    from models.features.audio_io import bundled_clip_path, load_audio
+
+    song, _ = load_audio(bundled_clip_path(), SAMPLE_RATE)  # 120 bpm
+    src = np.tile(song, 3)[: int(70 * SAMPLE_RATE)]
+    y = L.vary_rate(src, L.ramp_rate)
+    assert len(y) / SAMPLE_RATE > L.RAMP_HOLD_S + 2 * L.RAMP_S
+    check = L.ramp_audio_check(y[: int((L.RAMP_HOLD_S + 2 * L.RAMP_S) * SAMPLE_RATE)], 120.0)
+    assert check["audio_tempo_corr"] > 0.9 and check["audio_tempo_err"] < 0.05, check

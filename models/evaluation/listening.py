@@ -471,9 +471,29 @@ def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict
     a = int(hold * FPS)
     corr, lag, corr0 = lagged_correlation(tempo[a:], speed[a:], int(MAX_LAG_S * FPS))
     steps = bone_steps_deg(poses[int(SETTLE_S * FPS):])
+    check = ramp_audio_check(y, bpm)
     return {"song": song_name(path), "bpm": bpm, "start_s": start, "corr": corr, "lag_s": lag / FPS,
-            "corr_lag0": corr0, "max_step_deg": float(steps.max()), "time_s": t.tolist(),
+            "corr_lag0": corr0, "max_step_deg": float(steps.max()), **check, "time_s": t.tolist(),
             "tempo_bpm": tempo.tolist(), "speed": speed.tolist()}
+
+
+def ramp_audio_check(y: np.ndarray, bpm: float) -> dict[str, float]:
+    """Does the ramp's audio ``y`` (n,) at 22050 Hz play at ``bpm`` x :func:`ramp_rate`? The local
+    tempo of ``librosa.feature.tempo`` (``aggregate=None``: one estimate per onset frame from
+    its ~9-s tempogram window, prior centred on ``bpm``) between 8 s and 6 s before the end:
+    ``audio_tempo_corr`` (its correlation with the intended tempo) and ``audio_tempo_err``
+    (median relative error)."""
+    import librosa
+
+    hop = 512
+    env = librosa.onset.onset_strength(y=np.asarray(y, np.float32), sr=SAMPLE_RATE, hop_length=hop)
+    local = librosa.feature.tempo(onset_envelope=env, sr=SAMPLE_RATE, hop_length=hop, aggregate=None,
+                                  start_bpm=bpm, prior=None)
+    t = librosa.times_like(env, sr=SAMPLE_RATE, hop_length=hop)
+    want = bpm * ramp_rate(t)
+    keep = (t > 8.0) & (t < t[-1] - 6.0)
+    return {"audio_tempo_corr": float(np.corrcoef(local[keep], want[keep])[0, 1]),
+            "audio_tempo_err": float(np.median(np.abs(local[keep] / want[keep] - 1)))}
 
 
 def settle_back(w: np.ndarray, start: int, end: int, nxt: int) -> dict[str, float | None]:
@@ -670,7 +690,9 @@ def markdown(result: dict, command: str | None = None) -> str:
             r = m["ramp"]
             lines += ["", f"Ramp on {r['song']} ({r['bpm']:.0f} bpm as recorded): correlation {r['corr']:.2f} at "
                       f"lag {r['lag_s']:.2f} s ({r['corr_lag0']:.2f} at lag 0), largest bone rotation "
-                      f"{r['max_step_deg']:.1f} deg a frame."]
+                      f"{r['max_step_deg']:.1f} deg a frame. The ramp's audio: local tempo (librosa's tempogram) against "
+                      f"the intended tempo, correlation {r['audio_tempo_corr']:.2f}, median error "
+                      f"{100 * r['audio_tempo_err']:.1f} %."]
         pres = m.get("presence") or {}
         if pres.get("music"):
             lines += ["", "| recording | s | idle after 3 s |", "| --- | ---: | ---: |"]
