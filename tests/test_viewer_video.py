@@ -66,9 +66,34 @@ def test_one_second_clip_has_every_picture_and_both_performers_move(can_record, 
     assert np.any(frames[0][:, : size[0]] != frames[0][:, size[0] :])
 
 
+def test_tempo_sides_start_at_the_same_moment_of_the_song_and_keep_its_beats(tmp_path):
+    """--tempo: frame ``start`` of both sides is song time --start-s; a beat of the song falls on
+    the same song time on both sides (each side's frames count stretched time)."""
+    import soundfile as sf
+
+    from models.features.audio_io import bundled_clip_path, load_audio
+
+    song, sr = load_audio(bundled_clip_path(), 22050)
+    sf.write(tmp_path / "song.wav", song[: 16 * sr], sr)
+    a = vv.parse_args(["--tempo", "0.8,1.25", "--audio", str(tmp_path / "song.wav"), "--start-s", "6",
+                       "--seconds", "6", "--checkpoint", str(default_checkpoint_path()), "--out", str(tmp_path / "t.gif")])
+    tr = vv.load_tempo_tracks(a)
+    assert tr.rates == (0.8, 1.25) and tr.start == int(round(6 / 1.25 * 30)) - 1
+    assert len(tr.real) >= tr.start + tr.frames and len(tr.generated) >= tr.start + tr.frames
+    song_s = [tr.tempo_start_s + (b[(b >= tr.start) & (b < tr.start + tr.frames)] - tr.start) / 30 * r
+              for b, r in zip(tr.side_beats, tr.rates)]
+    both = song_s[0][song_s[0] < 6 + 6 * 0.8 - 0.5]  # the song the slower side heard
+    assert len(both) >= 6  # 120 bpm: a beat every 0.5 s of song
+    nearest = np.min(np.abs(both[:, None] - song_s[1][None, :]), axis=1)
+    assert np.median(nearest) < 0.07  # the same beats, within two frames
+    assert not np.allclose(tr.real[tr.start], tr.generated[tr.start])  # two performances
+
+
 def test_bad_options_are_refused(capsys):
-    for argv in (["--fps", "60"], ["--seconds", "0"], ["--size", "big"], ["--out", "x.mp4"]):
+    for argv in (["--fps", "60"], ["--seconds", "0"], ["--size", "big"], ["--out", "x.mp4"], ["--tempo", "0.8"],
+                 ["--tempo", "0.8,x"], ["--audio", "a.ogg"]):
         with pytest.raises(SystemExit) as exc:
             vv.parse_args(argv)
         assert exc.value.code == 2
-    assert "--out must be a .gif" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--out must be a .gif" in err and "--tempo takes two rates" in err and "--audio works with --tempo" in err

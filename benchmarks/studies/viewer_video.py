@@ -19,6 +19,16 @@ are hidden (their rates and delays mean nothing when frames are stepped). Labels
 song time and a beat marker (librosa's beat tracker on the song, lit for 0.1 s per beat)
 are drawn around the pictures; the GIF is silent.
 
+With ``--tempo A,B`` both sides are the checkpoint's performer on the same song
+time-stretched to two rates with pitch kept (``librosa.effects.time_stretch`` of the song
+up to the recorded span; ``--audio`` takes another recording than the dance's song): both
+pictures cover the same seconds of wall clock from the moment ``--start-s`` of the
+unstretched song, so the faster side hears more of the song; each side has its own beat
+marker (the beats of the stretched audio it heard) and song position::
+
+    .venv/bin/python benchmarks/viewer_video.py --tempo 0.8,1.25 --dance DANCE_W_5 --start-s 40 \\
+        --seconds 8 --fps 15 --out docs/img/tempo_side_by_side.gif
+
 Needs Debian's chromium (``apt-get install chromium``; ``$PERFORMER_CHROMIUM`` names
 another binary) and the playwright Python package (``pip install -e '.[dev]'``)::
 
@@ -74,6 +84,9 @@ class Tracks:
     model: str
     beats: np.ndarray  # song frames (30 fps) of music beats
     split: str  # "validation" or "training": the dance's side of models.data.split
+    rates: tuple[float, float] | None = None  # --tempo: the two sides' stretch rates (real, generated: both generated)
+    side_beats: tuple[np.ndarray, np.ndarray] | None = None  # --tempo: each side's beat frames on its own grid
+    tempo_start_s: float = 0.0  # --tempo: the unstretched song's time at frame ``start`` of both sides
 
     def song_time(self, t: int) -> float:
         """Audio time (s) clip frame ``t`` describes: the end of its feature frame."""
@@ -97,8 +110,20 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--energy", type=float, default=1.0,
                    help="the generating model's energy control, 0..2 (default 1: as the music asks; dance_vq "
                         "models only; docs/show.md, \"Energy\")")
+    p.add_argument("--tempo", metavar="A,B",
+                   help="two stretch rates (e.g. 0.8,1.25): the performer on the song at each rate, side by side")
+    p.add_argument("--audio", metavar="FILE", help="--tempo: a recording to stretch instead of --dance's song")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     a = p.parse_args(argv)
+    if a.tempo is not None:
+        try:
+            a.tempo = tuple(float(v) for v in a.tempo.split(","))
+        except ValueError:
+            a.tempo = ()
+        if len(a.tempo) != 2 or not all(0.25 <= r <= 4 for r in a.tempo):
+            p.error("--tempo takes two rates in [0.25, 4] separated by a comma, e.g. 0.8,1.25")
+    elif a.audio is not None:
+        p.error("--audio works with --tempo only")
     if not 0 < a.fps <= FPS:
         p.error(f"--fps must be in (0, {FPS}], got {a.fps}")
     if not a.seconds > 0:
@@ -148,6 +173,43 @@ def load_tracks(a: argparse.Namespace) -> Tracks:
     label = loaded.path.name + (f", energy {a.energy:g}" if a.energy != 1.0 else "")
     return Tracks(clip.poses, generated, start, frames, clip.first_frame, a.dance, STYLES[a.dance.split("_")[1]],
                   label, loaded.name, beats, split)
+
+
+def load_tempo_tracks(a: argparse.Namespace) -> Tracks:
+    """--tempo: the checkpoint's poses on the song stretched to each of ``a.tempo``'s rates, cut so
+    that frame ``start`` of both is the moment ``a.start_s`` of the unstretched song."""
+    import librosa
+    import torch
+
+    from models.data.dwm import STYLES, load_dance
+    from models.evaluation.listening import heard_beats
+    from models.features.audio_io import load_audio
+    from models.features.spectral import extract_features
+    from models.generate import load_model, run_model
+    from models.timebase import SAMPLE_RATE
+
+    torch.set_num_threads(min(2, torch.get_num_threads()))
+    loaded = load_model(a.checkpoint)
+    path = Path(a.audio) if a.audio else load_dance(Path(a.data) / a.dance).audio_path
+    song = load_audio(path, SAMPLE_RATE)[0]
+    end_s = a.start_s + a.seconds * max(a.tempo) + 1.0
+    if end_s * SAMPLE_RATE > len(song):
+        raise PerformerError(f"{path}: {len(song) / SAMPLE_RATE:.1f} s long; --start-s {a.start_s:g} and --seconds "
+                             f"{a.seconds:g} at {max(a.tempo):g}x need {end_s:.1f} s")
+    src = song[: int(end_s * SAMPLE_RATE)]
+    sides = []
+    for r in a.tempo:
+        y = src if r == 1.0 else librosa.effects.time_stretch(src, rate=r).astype(np.float32)
+        poses = run_model(loaded.model, extract_features(y, loaded.features), energy=a.energy)
+        sides.append((poses, heard_beats(y), int(round(a.start_s / r * FPS)) - 1))  # pose ending at song time start_s
+    start = min(at for _, _, at in sides)
+    frames = int(round(a.seconds * FPS))
+    (pl, bl, al), (pr, br, ar) = sides
+    name = a.dance if not a.audio else Path(a.audio).stem
+    style = STYLES.get(a.dance.split("_")[1], "?") if not a.audio else "recording"
+    label = loaded.path.name + (f", energy {a.energy:g}" if a.energy != 1.0 else "")
+    return Tracks(pl[al - start:], pr[ar - start:], start, frames, 0, name, style, label, loaded.name, np.array([]),
+                  "tempo", a.tempo, (bl - (al - start), br - (ar - start)), a.start_s)
 
 
 class Viewer:
@@ -291,13 +353,25 @@ def compose(tracks: Tracks, shots: list, size: tuple[int, int]) -> list:
         d = ImageDraw.Draw(img)
         d.line([(w, 0), (w, top + h + bottom)], fill=LINE, width=2)
         pad = int(8 * scale)
+        y = top + h + bottom // 2
+        r = int(5 * scale)
+        if tracks.rates is not None:  # --tempo: a label, song position and beat marker per side
+            for k, (rate, beats) in enumerate(zip(tracks.rates, tracks.side_beats)):
+                x0 = k * w
+                d.text((x0 + pad, top // 2), f"song at {rate:g}x: {tracks.checkpoint}", fill=FG, font=big, anchor="lm")
+                song_s = tracks.tempo_start_s + (t - tracks.start) / FPS * rate  # the unstretched song's time
+                d.text((x0 + pad, y), f"{tracks.dance}   song time {song_s:6.2f} s", fill=DIM, font=small, anchor="lm")
+                on = any(0 <= t - b < max(1, int(round(BEAT_LIT_S * FPS))) for b in beats)
+                cx = x0 + w - pad - r
+                d.ellipse([cx - r, y - r, cx + r, y + r], fill=BEAT if on else UNLIT)
+                d.text((cx - r - pad // 2, y), "beat", fill=DIM, font=small, anchor="rm")
+            out.append(img)
+            continue
         d.text((pad, top // 2), "real dancer (motion capture)", fill=FG, font=big, anchor="lm")
         d.text((w + pad, top // 2), f"generated: {tracks.checkpoint}", fill=FG, font=big, anchor="lm")
-        y = top + h + bottom // 2
         song_frame = tracks.first_song_frame + t
         d.text((pad, y), f"song: {tracks.dance} ({tracks.style}, {tracks.split} dance)   {tracks.song_time(t):6.2f} s",
                fill=DIM, font=small, anchor="lm")
-        r = int(5 * scale)
         cx = 2 * w - pad - r
         d.ellipse([cx - r, y - r, cx + r, y + r], fill=BEAT if song_frame in lit else UNLIT)
         d.text((cx - r - pad // 2, y), "beat", fill=DIM, font=small, anchor="rm")
@@ -340,9 +414,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         say = (lambda *_: None) if a.quiet else (lambda *m: print(*m, file=sys.stderr))
-        say(f"generating {a.dance} with {a.checkpoint or 'the default checkpoint'}...")
-        tracks = load_tracks(a)
-        say(f"recording {tracks.frames / FPS:g} s from song time {tracks.song_time(tracks.start):.2f} s "
+        say(f"generating {a.audio or a.dance} with {a.checkpoint or 'the default checkpoint'}...")
+        tracks = load_tempo_tracks(a) if a.tempo else load_tracks(a)
+        at = a.start_s if a.tempo else tracks.song_time(tracks.start)
+        say(f"recording {tracks.frames / FPS:g} s from song time {at:.2f} s "
             f"({tracks.model}, {tracks.checkpoint}) at {a.fps:g} pictures/s, {a.size[0]}x{a.size[1]} per side...")
         shots = record(tracks, a.size, a.fps, progress=not a.quiet)
         pictures = compose(tracks, shots, a.size)

@@ -21,6 +21,13 @@ the captured motion after forward kinematics on the default skeleton:
 A "real data" row scores the real validation motion itself (FD: real validation vs
 real training motion). Writes OUT/results.json, results.md, results.png and
 per_dance.json, and prints the table. Metric definitions: docs/metrics.md.
+
+--listening adds, for dance_vq checkpoints, the tempo and presence figures of
+models/evaluation/listening.py (docs/metrics.md, "Listening"): the validation songs and
+--music recordings between 80 and 130 bpm stretched to 0.8x/1.0x/1.25x (speed, frequency
+centroid, kinematic bpm, band amplitude, beat hit rate and its half-beat-shifted control),
+a tempo ramp 0.85x-1.2x-0.85x, the idle fraction on every --music recording and speech
+between two songs; writes OUT/listening.json and listening.md with PASS/FAIL per target.
 """
 
 EPILOG = """\
@@ -28,6 +35,7 @@ examples:
   performer evaluate --checkpoint models/assets/default.pt --data /path/to/dwm --out runs/eval
   performer evaluate --checkpoint runs/causal/best.pt runs/unet_gan/best.pt --data /path/to/dwm
   performer evaluate --checkpoint CKPT --data /path/to/dwm --dances 1 --max-frames 600   # quick look
+  performer evaluate --checkpoint models/assets/default.pt --data ../shared/data/dwm --listening
 """
 
 
@@ -54,6 +62,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--multimodality-samples", type=int, default=5, metavar="K",
                    help="stochastic models (dtm): generations per dance behind the multimodality metric "
                         "(default 5; 0 or 1: off); deterministic models show n/a")
+    p.add_argument("--listening", nargs="?", const="full", choices=("full", "quick"),
+                   help="also the tempo, beat, ramp and presence figures of dance_vq checkpoints "
+                        "(docs/metrics.md; 'quick': 3 songs, short excerpts)")
+    p.add_argument("--music", metavar="DIR", help="--listening: music recordings (default: music/ beside --data)")
+    p.add_argument("--speech", metavar="DIR", help="--listening: speech recordings (default: speech/ beside --data)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -74,8 +87,35 @@ def run(args: argparse.Namespace) -> int:
                        multimodality_samples=max(0, args.multimodality_samples))
     with torch_threads(args.threads):
         paths = run_evaluation(args.checkpoint, args.data, args.out, command_line(args), opts)
+        if getattr(args, "listening", None):
+            paths.update(listening(args))
     print("wrote " + ", ".join(str(p) for p in paths.values()))
     return 0
+
+
+def listening(args: argparse.Namespace) -> dict:
+    """The listening sets (models/evaluation/listening.py) for the dance_vq checkpoints of ``args``;
+    writes OUT/listening.json and listening.md, prints PASS/FAIL per target."""
+    import json
+    from pathlib import Path
+
+    from models.evaluation import listening as L
+
+    shared = Path(args.data).parent
+    opts = L.Options(dwm=args.data, music=args.music or shared / "music", speech=args.speech or shared / "speech",
+                     cache_dir=Path(args.cache).parent / "listening", quick=args.listening == "quick",
+                     progress=not args.quiet)
+    result = L.run(args.checkpoint, opts, only_dance_vq=True)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"listening_json": out / "listening.json", "listening_md": out / "listening.md"}
+    paths["listening_json"].write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+    text = L.markdown(result, command_line(args))
+    paths["listening_md"].write_text(text, encoding="utf-8")
+    print(text)
+    for line in L.verdict_lines(result):
+        print(line)
+    return paths
 
 
 def command_line(args: argparse.Namespace) -> str:
@@ -91,4 +131,9 @@ def command_line(args: argparse.Namespace) -> str:
         parts.append("--gan-scores")
     if getattr(args, "multimodality_samples", 5) != 5:
         parts += ["--multimodality-samples", str(args.multimodality_samples)]
+    if getattr(args, "listening", None):
+        parts += ["--listening"] + (["quick"] if args.listening == "quick" else [])
+        for flag, v in (("--music", getattr(args, "music", None)), ("--speech", getattr(args, "speech", None))):
+            if v is not None:
+                parts += [flag, str(v)]
     return " ".join(shlex.quote(str(p)) for p in parts)
