@@ -26,7 +26,7 @@ pictures cover the same seconds of wall clock from the moment ``--start-s`` of t
 unstretched song, so the faster side hears more of the song; each side has its own beat
 marker (the beats of the stretched audio it heard) and song position::
 
-    .venv/bin/python benchmarks/viewer_video.py --tempo 0.8,1.25 --dance DANCE_W_5 --start-s 40 \\
+    .venv/bin/python benchmarks/studies/viewer_video.py --tempo 0.8,1.25 --dance DANCE_W_5 --start-s 40 \\
         --seconds 8 --fps 15 --out docs/img/tempo_side_by_side.gif
 
 Needs Debian's chromium (``apt-get install chromium``; ``$PERFORMER_CHROMIUM`` names
