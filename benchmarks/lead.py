@@ -55,14 +55,17 @@ def seen_hits(kin: np.ndarray, mus: np.ndarray, delay: int) -> tuple[int, int]:
 
 def measure_song(model, features: np.ndarray, mus: np.ndarray, leads: Sequence[float],
                  seeds: Sequence[int] = (0,)) -> dict[str, dict[str, list[int]]]:
-    """``{str(lead_ms): {"seen": [hits, beats], "no_lead": [hits, beats], "undelayed": [hits, beats]}}``
-    for one song, summed over ``seeds``: ``seen`` the lead's motion behind a display delay of
+    """``{str(lead_ms): {"seen": [hits, beats], "no_lead": [hits, beats], "undelayed": [hits, beats]},
+    "chance": hit rate of beats at random frames}`` for one song, counts summed over ``seeds``: ``seen`` the lead's motion behind a display delay of
     the lead, ``no_lead`` lead 0's motion behind the same delay, ``undelayed`` the lead's
     motion with no delay. ``leads[0]`` must be 0."""
     from models.evaluation.beats import kinematic_beats
     from models.evaluation.evaluate import positions
 
-    out = {f"{ms:g}": {"seen": [0, 0], "no_lead": [0, 0], "undelayed": [0, 0]} for ms in leads}
+    from models.evaluation.beats import chance_hit_rate
+
+    out: dict = {f"{ms:g}": {"seen": [0, 0], "no_lead": [0, 0], "undelayed": [0, 0]} for ms in leads}
+    out["chance"] = chance_hit_rate(mus, len(features))
     for seed in seeds:
         kins = {ms: kinematic_beats(positions(model.generate(features, seed=seed, lead=ms))) for ms in leads}
         for ms in leads:
@@ -88,6 +91,22 @@ def table(results: dict[str, dict], leads: Sequence[float]) -> str:
         cell = lambda r: f"{r[0]:.3f} [{r[1]:.2f}, {r[2]:.2f}]"  # noqa: E731
         lines.append(f"| {ms:g} | {lead_frames(ms)} | {cell(seen)} | {seen[0] / max(ref, 1e-9):.2f} | "
                      f"{cell(nolead)} | {cell(undelayed)} |")
+    return "\n".join(lines)
+
+
+def song_table(results: dict[str, dict], leads: Sequence[float]) -> str:
+    """Markdown: per song, lead 0's hit rate, and per other lead the ratio to it of the lead's
+    motion behind its delay and of lead 0's motion behind the same delay."""
+    rest = [ms for ms in leads if ms != 0]
+    head = "| song | lead 0 hit rate | " + " | ".join(f"{ms:g} ms: with the lead / without" for ms in rest) + " |"
+    lines = [head, "| --- | ---: |" + " ---: |" * len(rest)]
+    for song, row in results.items():
+        ref = row["0"]["undelayed"][0] / max(row["0"]["undelayed"][1], 1)
+        cells = []
+        for ms in rest:
+            seen, nolead = (row[f"{ms:g}"][k][0] / max(row[f"{ms:g}"][k][1], 1) for k in ("seen", "no_lead"))
+            cells.append(f"{seen / max(ref, 1e-9):.2f} / {nolead / max(ref, 1e-9):.2f}")
+        lines.append(f"| {song} | {ref:.3f} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -145,6 +164,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"The lead on {len(results)} validation dances ({a.checkpoint}, seeds {' '.join(map(str, a.seeds))}): "
           "beat hit rate (+-2 frames), pooled over songs and seeds [smallest, largest song]\n")
     print(table(results, a.leads))
+    chance = np.mean([row["chance"] for row in results.values()])
+    print(f"\n(Kinematic beats at random frames would hit {chance:.3f} of the time: the mean over the songs of "
+          "models.evaluation.beats.chance_hit_rate.)")
+    print("\nPer song: ratio to the song's lead 0 hit rate (no delay) of what the audience sees behind a "
+          "display delay of the lead, with the lead / without it\n")
+    print(song_table(results, a.leads))
     if a.json:
         Path(a.json).parent.mkdir(parents=True, exist_ok=True)
         Path(a.json).write_text(json.dumps(results, indent=1))
