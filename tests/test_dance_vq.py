@@ -793,6 +793,10 @@ def test_a_lead_streams_like_the_whole_song_reads_no_audio_ahead_and_changes_at_
             i += k
         parts.append(s.push(x[i:]))
         np.testing.assert_allclose(np.concatenate(parts), whole, atol=1e-5)  # stream == offline, every lead
+        steps = DanceStream(m, seed=2, lead_ms=ms)
+        assert [len(steps.codes_drawn) for _ in range(3) if steps.push(x[:8]) is not None] == [1, 2, 3]
+        steps.push(x[:1])
+        assert len(steps.codes_drawn) == 4  # code steps on frames 0, 8, 16, ... whatever the lead (the stagger's)
         y = x.copy()
         y[300:] = beat_music(300, period=11.0, seed=9)  # other music from frame 300 on
         np.testing.assert_array_equal(m.generate(y, seed=2, lead=ms)[:300], whole[:300])  # never heard early
