@@ -56,6 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--audio", default=None, help="audio file (default: the bundled clip)")
     p.add_argument("--checkpoint", default=None, help="checkpoint (default: the packaged one)")
     p.add_argument("--seconds", type=float, default=30.0, help="seconds of audio played in real time (default 30)")
+    p.add_argument("--lead", type=float, default=0.0, help="the performer's lead, ms (default 0; performer run --lead)")
     p.add_argument("--block", type=int, default=512, help="samples per audio block (default 512)")
     p.add_argument("--rate", type=int, default=44100, help="input sample rate the audio is played at (default 44100)")
     args = p.parse_args(argv)
@@ -96,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
         dance_stream.match_exemplar = _timed(t, "dance_vq: code step: motion matching", dance_stream.match_exemplar)
 
     try:
-        pipe = build_pipeline(args.checkpoint)
+        pipe = build_pipeline(args.checkpoint, lead=args.lead)
         audio, sr = load_audio(args.audio or bundled_clip_path(), args.rate, mono=False)
     except PerformerError as exc:
         print(f"hop_profile: {exc}", file=sys.stderr)

@@ -121,7 +121,8 @@ def _pad_end(x: np.ndarray, n: int) -> np.ndarray:
 
 
 def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, seed: int | None = None,
-              audio: np.ndarray | None = None, style: str | None = None, energy: float = 1.0) -> np.ndarray:
+              audio: np.ndarray | None = None, style: str | None = None, energy: float = 1.0,
+              lead: float = 0.0) -> np.ndarray:
     """Poses ``(T, POSE_DIM)`` float32 for features ``(T, D)`` at 30 fps, one per frame.
 
     ``window``/``hop`` (frames) apply to causal U-Nets only (see the module docstring
@@ -138,7 +139,9 @@ def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, see
     ``style``: for models that take one (``dance_vq``): None/"auto" (the music decides),
     "chacha", "rumba" or "waltz"; ConfigError for any other model given a style. ``energy``:
     the same models' energy control, 0..2 (1: as the music asks; ConfigError out of range, or
-    other than 1 for any other model).
+    other than 1 for any other model). ``lead``: the same models' lead, ms, 0..200 (the poses
+    sent that far ahead of the audio for a display chain's delay; ConfigError out of range,
+    or other than 0 for any other model).
     """
     import torch
 
@@ -155,6 +158,8 @@ def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, see
         raise ConfigError(f"model {type(model).__name__} takes no style; --style works with dance_vq models")
     if energy != 1.0 and not takes_style:
         raise ConfigError(f"model {type(model).__name__} has no energy control; --energy works with dance_vq models")
+    if lead != 0.0 and not takes_style:
+        raise ConfigError(f"model {type(model).__name__} has no lead control; --lead works with dance_vq models")
     if isinstance(model, CausalGenerator):
         return offline_windowed(model, x, window=window, hop=hop)
     x, _ = sanitize_features(x)
@@ -166,6 +171,8 @@ def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, see
             kw["style"] = style
             if energy != 1.0:
                 kw["energy"] = energy
+            if lead != 0.0:
+                kw["lead"] = lead
         return model.generate(x, **kw)
     t = len(x)
     delay = int(getattr(model, "output_delay", 0))
@@ -247,9 +254,10 @@ def generate(
     seed: int | None = None,
     style: str | None = None,
     energy: float = 1.0,
+    lead: float = 0.0,
 ) -> Generation:
     """Generate motion for a whole audio file with a loaded model and write it to ``out``
-    (``seed``, ``style``, ``energy``: as :func:`run_model` takes them).
+    (``seed``, ``style``, ``energy``, ``lead``: as :func:`run_model` takes them).
 
     Raises :class:`AudioError` naming the file if it cannot be read, holds NaN/inf
     samples, or is shorter than one frame (735 samples at 22050 Hz, 33 ms);
@@ -274,7 +282,7 @@ def generate(
     timings["features"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     poses = run_model(loaded.model, feats, window=window, hop=hop, audio=audio, seed=seed, style=style,
-                      energy=energy)
+                      energy=energy, lead=lead)
     timings["model"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     export_motion(poses, out, source_audio=str(audio_path), checkpoint=str(loaded.path), model_name=loaded.name)

@@ -52,17 +52,20 @@ STYLE_CHOICES = ("auto", "chacha", "rumba", "waltz")
 #: --energy range (dance_vq models; models.networks.dance_stream.ENERGY_RANGE, held equal by
 #: tests/test_ensemble.py): 1 dances as the music asks, 0 calmest, 2 liveliest
 ENERGY_RANGE = (0.0, 2.0)
+#: --lead range, ms (dance_vq models; models.networks.dance_stream.LEAD_RANGE_MS, held equal by
+#: tests/test_ensemble.py): the poses go out this far ahead of the audio, for a display chain's delay
+LEAD_RANGE_MS = (0.0, 200.0)
 #: Environment variable read for the WebSocket token when neither flag nor file sets one
 #: (unlike a flag, it does not show in the process list).
 TOKEN_ENV = "PERFORMER_WS_TOKEN"
 
 
 #: Keys of one performer of an ensemble ([[performer]] in TOML, --performer on the command line).
-PERFORMER_KEYS: tuple[str, ...] = ("name", "checkpoint", "style", "energy", "seed", "osc", "ws_path", "smoothing",
-                                   "offset_ms", "record", "phase")
+PERFORMER_KEYS: tuple[str, ...] = ("name", "checkpoint", "style", "energy", "lead", "seed", "osc", "ws_path",
+                                   "smoothing", "offset_ms", "record", "phase")
 _PERFORMER_TYPES: dict[str, tuple[type, ...]] = {
-    "name": (str,), "checkpoint": (str,), "style": (str,), "energy": (int, float), "seed": (int,),
-    "osc": (list, str), "ws_path": (str,),
+    "name": (str,), "checkpoint": (str,), "style": (str,), "energy": (int, float), "lead": (int, float),
+    "seed": (int,), "osc": (list, str), "ws_path": (str,),
     "smoothing": (int, float), "offset_ms": (int, float), "record": (str,), "phase": (int,),
 }
 #: Most performers in one process.
@@ -78,6 +81,7 @@ class PerformerConfig:
     checkpoint: Path | None = None
     style: str | None = None
     energy: float | None = None
+    lead: float | None = None
     seed: int | None = None
     osc: list[str] | None = None
     ws_path: str | None = None
@@ -102,6 +106,7 @@ class PerformerSpec:
     record: Path | None
     phase: int | None
     energy: float = 1.0
+    lead: float = 0.0
 
 
 def parse_performer(text: str) -> PerformerConfig:
@@ -122,7 +127,7 @@ def parse_performer(text: str) -> PerformerConfig:
         try:
             if key in ("seed", "phase"):
                 values[key] = int(value)
-            elif key in ("smoothing", "offset_ms", "energy"):
+            elif key in ("smoothing", "offset_ms", "energy", "lead"):
                 values[key] = float(value)
             elif key in ("checkpoint", "record"):
                 values[key] = Path(value)
@@ -171,6 +176,7 @@ class RunConfig:
     checkpoint: Path | None = None
     style: str = "auto"
     energy: float = 1.0
+    lead: float = 0.0
     seed: int = 0
     record: Path | None = None
     threads: int = 1
@@ -209,6 +215,7 @@ class RunConfig:
             ("offset_ms", -10000 <= self.offset_ms <= 10000, "-10000..10000 ms"),
             ("smoothing", 0.0 <= self.smoothing < 1.0, "[0, 1)"),
             ("energy", ENERGY_RANGE[0] <= self.energy <= ENERGY_RANGE[1], "0..2 (1: as the music asks)"),
+            ("lead", LEAD_RANGE_MS[0] <= self.lead <= LEAD_RANGE_MS[1], "0..200 ms"),
             ("warmup", 0.0 <= self.warmup <= 60.0, "0..60 seconds"),
             ("fallback_after", 0.05 <= self.fallback_after <= 3600.0, "0.05..3600 seconds"),
             ("ws_max_clients", 1 <= self.ws_max_clients <= 10000, "1..10000"),
@@ -233,7 +240,7 @@ class RunConfig:
     def performer_specs(self) -> list[PerformerSpec]:
         """The ensemble's performers with every setting resolved (empty without ``performer``).
 
-        Unset keys take the top level's ``checkpoint``, ``style``, ``energy``, ``seed``,
+        Unset keys take the top level's ``checkpoint``, ``style``, ``energy``, ``lead``, ``seed``,
         ``smoothing`` and ``offset_ms``. ``osc``: performer ``i`` (from 0) sends to the top level's targets with
         each port raised by ``i`` (none with ``no_osc``); ``ws_path``: ``/ws/NAME``;
         ``record``: the top level's ``record`` with ``-NAME`` added to its name, if set.
@@ -263,6 +270,9 @@ class RunConfig:
             energy = self.energy if p.energy is None else float(p.energy)
             if not ENERGY_RANGE[0] <= energy <= ENERGY_RANGE[1]:
                 raise ConfigError(f"{what}: energy must be 0..2 (1: as the music asks), got {energy!r}")
+            lead = self.lead if p.lead is None else float(p.lead)
+            if not LEAD_RANGE_MS[0] <= lead <= LEAD_RANGE_MS[1]:
+                raise ConfigError(f"{what}: lead must be 0..200 ms, got {lead!r}")
             smoothing = self.smoothing if p.smoothing is None else float(p.smoothing)
             offset = self.offset_ms if p.offset_ms is None else float(p.offset_ms)
             if not 0.0 <= smoothing < 1.0:
@@ -301,7 +311,7 @@ class RunConfig:
                     seen[kind][value] = name
             out.append(PerformerSpec(name, self.checkpoint if p.checkpoint is None else Path(p.checkpoint),
                                      style, self.seed if p.seed is None else int(p.seed), osc, ws_path,
-                                     smoothing, offset, record, p.phase, energy))
+                                     smoothing, offset, record, p.phase, energy, lead))
         return out
 
     def osc_targets(self) -> list[tuple[str, int]]:
@@ -331,7 +341,7 @@ _TYPES: dict[str, tuple[type, ...]] = {
     "audio": (str,), "input_device": (str, int), "sample_rate": (int,), "block_size": (int,),
     "monitor": (bool,), "loop": (bool,), "fast": (bool,), "duration": (int, float), "osc": (list, str),
     "osc_mode": (str,), "no_osc": (bool,), "ws": (str,), "no_ws": (bool,), "checkpoint": (str,), "style": (str,),
-    "energy": (int, float), "seed": (int,), "record": (str,), "threads": (int,), "offset_ms": (int, float),
+    "energy": (int, float), "lead": (int, float), "seed": (int,), "record": (str,), "threads": (int,), "offset_ms": (int, float),
     "smoothing": (int, float),
     "warmup": (int, float), "fallback_audio": (str,), "fallback_after": (int, float), "ws_token": (str,),
     "ws_viewers_open": (bool,), "ws_max_clients": (int,), "ws_origin": (list, str),
@@ -458,7 +468,7 @@ def performer_live_changes(old: RunConfig, new: RunConfig) -> tuple[dict[str, di
         changed = {k: float(getattr(p, k)) for k in LIVE_SETTINGS if getattr(p, k) != getattr(q, k)}
         if changed:
             live[name] = changed
-        rest = [k for k in ("checkpoint", "style", "energy", "seed", "osc", "ws_path", "record", "phase")
+        rest = [k for k in ("checkpoint", "style", "energy", "lead", "seed", "osc", "ws_path", "record", "phase")
                 if getattr(p, k) != getattr(q, k)]
         other += [f"performer {name}: {k}" for k in rest]
     return live, other

@@ -79,7 +79,8 @@ class PoseModel(Protocol):
     Optional show controls, used by :meth:`Engine.control` when present (looked up with
     ``getattr``, so a model without them still fits): ``set_idle(bool)`` (True: settle
     into the model's idle pose and hold it, False: dance again; the model does the
-    transition, without a jump), ``set_style(name: str)`` and ``set_energy(x: float)``.
+    transition, without a jump), ``set_style(name: str)``, ``set_energy(x: float)`` and
+    ``set_lead(ms: float)`` (send the poses that far ahead, for a display chain's delay).
     Each validates its value and raises :class:`~models.errors.ConfigError` (one line
     naming it) for a bad one without changing anything. They are called on a control
     thread (OSC or WebSocket), not the engine's worker, so they must be cheap, must not
@@ -274,7 +275,7 @@ MAX_SAMPLE: float = 4.0
 LIVE_SETTINGS: tuple[str, ...] = ("offset_ms", "smoothing")
 
 #: Actions of :meth:`Engine.control` (the WebSocket and OSC control inputs use these).
-CONTROL_ACTIONS: tuple[str, ...] = ("reset", "set_offset", "set_smoothing", "idle", "style", "energy")
+CONTROL_ACTIONS: tuple[str, ...] = ("reset", "set_offset", "set_smoothing", "idle", "style", "energy", "lead")
 
 #: Longest style name :meth:`Engine.control` passes to a model, characters.
 MAX_STYLE_CHARS: int = 64
@@ -761,9 +762,9 @@ class Engine:
 
         Actions (:data:`CONTROL_ACTIONS`): ``reset``; ``set_offset`` (ms) and
         ``set_smoothing`` (through :meth:`update`); ``idle`` (0/1, see :meth:`set_idle`);
-        ``style`` (a name) and ``energy`` (a number), passed to the pose model's
-        ``set_style`` / ``set_energy`` when it has them and refused otherwise. ``performer``:
-        None or ``"*"`` acts on every performer (``reset``: the whole engine, as
+        ``style`` (a name), ``energy`` and ``lead`` (numbers; the lead in ms), passed to the
+        pose model's ``set_style`` / ``set_energy`` / ``set_lead`` when it has them and refused
+        otherwise. ``performer``: None or ``"*"`` acts on every performer (``reset``: the whole engine, as
         :meth:`reset`), a name on that one (``reset``: :meth:`reset_performer`). Every value
         is checked, against every performer it goes to, before anything changes; a bad one,
         an unknown action or performer, or a control a model does not offer raises
@@ -788,11 +789,11 @@ class Engine:
             style = check_style_name(value)
             for fn in fns:
                 fn(style)
-        elif action == "energy":
-            fns = [self._model_control(lane, "set_energy", "energy") for lane in lanes]
-            energy = check_finite("energy", value)
+        elif action in ("energy", "lead"):
+            fns = [self._model_control(lane, f"set_{action}", action) for lane in lanes]
+            number = check_finite(action, value)
             for fn in fns:
-                fn(energy)
+                fn(number)
         else:
             raise ConfigError(f"unknown control action {short_repr(action)}; use {', '.join(CONTROL_ACTIONS)}")
 

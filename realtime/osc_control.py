@@ -12,6 +12,7 @@ WebSocket control channel uses too (docs/show.md has the desk setups)::
     /performer/idle       n           1: settle to the idle pose and hold it; 0: dance again
     /performer/style      s           a style name, for models that offer styles
     /performer/energy     n           a number, for models that offer it
+    /performer/lead       n           ms, 0..200, for models that offer it (send poses ahead)
 
 In an ensemble (several performers in one ``performer run``) each of these addresses acts
 on every performer, and ``/performer/NAME/reset``, ``/performer/NAME/offset``, ... on the
@@ -63,6 +64,7 @@ ADDRESSES: dict[str, tuple[str, str]] = {
     "/performer/idle": ("idle", "switch"),
     "/performer/style": ("style", "name"),
     "/performer/energy": ("energy", "number"),
+    "/performer/lead": ("lead", "number"),
 }
 _WANT = {"number": "one number", "switch": "one number (0 or 1)", "name": "one string", "trigger": "at most one number"}
 

@@ -41,7 +41,8 @@ class Pipeline:
 
 
 def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, hop: int = 64, seed: int = 0,
-                   style: str | None = None, energy: float = 1.0, loaded: dict | None = None) -> Pipeline:
+                   style: str | None = None, energy: float = 1.0, lead: float = 0.0,
+                   loaded: dict | None = None) -> Pipeline:
     """Load ``checkpoint`` (default: the packaged one) into an extractor factory and a pose model.
 
     ``loaded``: a dict kept by the caller across calls (an ensemble's performers): a
@@ -55,8 +56,9 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
     line saying so and why (its ``offline_reason``), before any streaming state is built.
     A ``dance_vq`` model streams as a :class:`~models.networks.dance_stream.DanceStream`
     with ``seed``, ``style`` (None: the music decides) and ``energy`` (0..2, 1: as the music
-    asks; :meth:`~models.networks.dance_stream.DanceStream.set_energy`); a style or an energy
-    other than 1 for another model is refused.
+    asks; :meth:`~models.networks.dance_stream.DanceStream.set_energy`) and ``lead`` (ms, 0..200:
+    :meth:`~models.networks.dance_stream.DanceStream.set_lead`); a style, an energy other
+    than 1 or a lead other than 0 for another model is refused.
     """
     from models.features.streaming import StreamingFeatureExtractor
     from models.networks.streaming import StreamingGenerator
@@ -78,7 +80,7 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
         if getattr(loaded.model, "takes_style", False):
             from models.networks.dance_stream import DanceStream
 
-            generator = DanceStream(loaded.model, seed=seed, style=style, energy=energy)
+            generator = DanceStream(loaded.model, seed=seed, style=style, energy=energy, lead_ms=lead)
         else:
             if style not in (None, "auto"):
                 raise CheckpointError(f"model {loaded.name!r} takes no style (--style needs a dance_vq model)",
@@ -86,6 +88,9 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
             if energy != 1.0:
                 raise CheckpointError(f"model {loaded.name!r} has no energy control (--energy needs a dance_vq "
                                       "model)", source=path)
+            if lead != 0.0:
+                raise CheckpointError(f"model {loaded.name!r} has no lead control (--lead needs a dance_vq model)",
+                                      source=path)
             generator = StreamingGenerator(loaded.model, window=window, hop=hop)
     except CheckpointError:
         raise

@@ -751,3 +751,74 @@ def test_the_idle_fade_keeps_each_bone_on_one_arc():
     assert largest_step(fresh) > 90.0  # the flip
     assert largest_step(faded) < 5.0
     np.testing.assert_allclose(faded[0], fresh[0], atol=1e-6)  # the first frame: the shorter arc
+
+
+def speed_by_beat_phase(p: np.ndarray, period: int = 15, lead: int = 0) -> np.ndarray:
+    """Mean bone rotation between frames t-1 and t (degrees) of poses ``p`` (T, P), by the step's
+    midpoint's frames after a beat of a ``period``-frame pulse with beats on frames 0, period, ...,
+    counted ``lead`` frames later (0.5, 1.5, ...), once the dance has faded in (frame 60 on)."""
+    step = quat_angles_deg(p[61:], p[60:-1]).mean(1)
+    phase = (np.arange(61, len(p)) - 0.5 + lead) % period
+    return np.array([step[np.abs(phase - h) < 0.1].mean() for h in np.arange(0.5, period)])
+
+
+def test_a_lead_puts_the_beat_moves_that_many_frames_earlier():
+    """With a lead of L frames the warp slows into the beats the tracker expects L frames on:
+    the pose sent at t is the one taken at t + L, so the speed profile over the beat, counted L
+    frames later, is lead 0's (a stream that ignored the lead would keep its dips on the beat)."""
+    m = DanceVQ(BEAT).eval()
+    turning_exemplars(m)
+    x = beat_music(900)
+    v0 = speed_by_beat_phase(m.generate(x, seed=2))
+    assert v0[[0, -1]].max() < 0.75 * 3.0 < 1.25 * 3.0 < v0[7]  # lead 0: slowest on the beat
+    for ms, frames in ((67.0, 2), (133.0, 4), (200.0, 6)):
+        led = m.generate(x, seed=2, lead=ms)
+        np.testing.assert_allclose(speed_by_beat_phase(led, lead=frames), v0, atol=0.25)
+        v = speed_by_beat_phase(led)
+        assert v[[0, -1]].max() > 1.25 * v0[[0, -1]].max()  # not on the audio's beat any more
+        assert int(np.argmin(v)) in {(15 - frames - 1) % 15, 15 - frames}  # but L frames before it
+
+
+def test_a_lead_streams_like_the_whole_song_reads_no_audio_ahead_and_changes_at_a_code_step():
+    from models.networks.dance_stream import LEAD_RANGE_MS
+
+    m = DanceVQ(BEAT).eval()
+    turning_exemplars(m)
+    x = beat_music(600)
+    for ms in (0.0, 67.0, 133.0, 200.0):
+        whole = m.generate(x, seed=2, lead=ms)
+        s, parts, i = DanceStream(m, seed=2, lead_ms=ms), [], 0
+        for k in np.random.default_rng(int(ms)).integers(0, 13, size=600):
+            parts.append(s.push(x[i: i + k]))
+            i += k
+        parts.append(s.push(x[i:]))
+        np.testing.assert_allclose(np.concatenate(parts), whole, atol=1e-5)  # stream == offline, every lead
+        steps = DanceStream(m, seed=2, lead_ms=ms)
+        assert [len(steps.codes_drawn) for _ in range(3) if steps.push(x[:8]) is not None] == [1, 2, 3]
+        steps.push(x[:1])
+        assert len(steps.codes_drawn) == 4  # code steps on frames 0, 8, 16, ... whatever the lead (the stagger's)
+        y = x.copy()
+        y[300:] = beat_music(300, period=11.0, seed=9)  # other music from frame 300 on
+        np.testing.assert_array_equal(m.generate(y, seed=2, lead=ms)[:300], whole[:300])  # never heard early
+    # a live change takes effect at the next code step (frame 104 after a call at frame 100), without a jump
+    s = DanceStream(m, seed=2)
+    before = s.push(x[:100])
+    s.set_lead(133.0)
+    after = s.push(x[100:])
+    plain = m.generate(x, seed=2)
+    np.testing.assert_allclose(np.concatenate([before, after])[:104], plain[:104], atol=1e-6)
+    assert not np.allclose(after[4:40], plain[104:140], atol=1e-3)
+    steps = quat_angles_deg(after[1:], after[:-1]).max(1)
+    assert steps[:10].max() < 2.0 * quat_angles_deg(plain[61:], plain[60:-1]).max()
+    assert s.lead_ms == 133.0 and LEAD_RANGE_MS == (0.0, 200.0)
+    s.reset()  # the lead is a setting: a reset keeps it, as style and energy
+    np.testing.assert_allclose(s.push(x), m.generate(x, seed=2, lead=133.0), atol=1e-5)
+    from models.generate import run_model  # performer generate's path takes it too; other models refuse it
+
+    np.testing.assert_array_equal(run_model(m, x, seed=2, lead=67.0), m.generate(x, seed=2, lead=67.0))
+    with pytest.raises(ConfigError, match="has no lead control"):
+        run_model(build_model("causal", {"feature_dim": 10}), x[:, :10], lead=67.0)
+    for bad in (-1.0, 250.0, float("nan"), "soon", None):
+        with pytest.raises(ConfigError, match="lead must be"):
+            s.set_lead(bad)
+    assert s.lead_ms == 133.0  # a refused value changes nothing

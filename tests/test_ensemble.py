@@ -176,6 +176,87 @@ def test_energy_reaches_each_performers_model_from_flags_and_tables(tmp_path):
     assert live == {} and other == ["energy", "performer calm: energy"]  # a restart: as style
 
 
+def test_lead_reaches_each_performers_model_from_flags_tables_osc_and_websocket(tmp_path, capsys, clip,
+                                                                                tiny_checkpoint):
+    """--lead and a performer's lead key set the dancing model's lead at start; /performer/lead
+    over a real UDP socket and the WebSocket control's ``lead`` change it live, per performer or
+    for all; out of range or for a model without the control it is refused in one line."""
+    from websockets.sync.client import connect
+
+    from models.networks.dance_stream import LEAD_RANGE_MS
+    from realtime.config import LEAD_RANGE_MS as CONFIG_RANGE
+    from realtime.osc_control import OscControl
+    from realtime.ws_server import WebSocketSink
+
+    assert CONFIG_RANGE == LEAD_RANGE_MS
+    conf = tmp_path / "show.toml"
+    conf.write_text('audio = "x.wav"\nlead = 67\n[[performer]]\nname = "near"\n'
+                    '[[performer]]\nname = "far"\nlead = 133.5\n')
+    cfg = resolve_run_config(argparse.Namespace(config=str(conf)))
+    near, far = cfg.performer_specs()
+    assert (cfg.lead, near.lead, far.lead) == (67, 67.0, 133.5)
+    assert resolve_run_config(argparse.Namespace(lead=100.0)).lead == 100.0
+    assert parse_performer("zed,lead=40").lead == 40.0
+    for text, needle in [("zed,lead=201", "performer 'zed': lead must be 0..200 ms"),
+                         ("zed,lead=soon", "lead must be a number")]:
+        with pytest.raises(ConfigError, match=needle):
+            RunConfig(performer=[parse_performer(text)]).validate()
+    live, other = performer_live_changes(cfg, RunConfig(**{**load_run_config(conf), "lead": 0.0}))
+    assert live == {} and other == ["lead", "performer near: lead"]  # a reload: at the next start, as energy
+    code = cli.main(["run", "--audio", str(clip), "--fast", "--no-ws", "--no-osc", "--lead", "-5"])
+    assert code == 2 and "lead must be 0..200 ms" in one_line_error(capsys.readouterr().err)
+    code = cli.main(["run", "--audio", str(clip), "--fast", "--no-ws", "--no-osc",
+                     "--performer", f"bob,checkpoint={tiny_checkpoint},lead=67"])
+    line = one_line_error(capsys.readouterr().err)
+    assert code == 2 and "performer 'bob'" in line and "has no lead control" in line
+
+    loaded: dict = {}
+    perfs = []
+    for spec in (near, far):
+        p = build_pipeline(None, lead=spec.lead, loaded=loaded)
+        perfs.append(Performer(spec.name, p.model, p.extractor_factory, [ListSink()], feature_key=p.feature_key))
+    assert [p.model.lead_ms for p in perfs] == [67.0, 133.5] and build_pipeline(None, loaded=loaded).model.lead_ms == 0
+    eng = Engine(FileSource(np.zeros(SAMPLE_RATE, np.float32), SAMPLE_RATE), config=EngineConfig(),
+                 performers=perfs)
+
+    def leads() -> tuple[float, float]:
+        return perfs[0].model.lead_ms, perfs[1].model.lead_ms
+
+    with OscControl("127.0.0.1", 0, control=eng.control) as ctl, \
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+        ctl.start()
+        for message, want in [(osc_message("/performer/far/lead", 100), (67.0, 100.0)),
+                              (osc_message("/performer/lead", 0.0), (0.0, 0.0)),
+                              (osc_message("/performer/lead", 250.0), (0.0, 0.0)),  # out of range: refused
+                              (osc_message("/performer/near/lead", 33), (33.0, 0.0))]:
+            out.sendto(message, ("127.0.0.1", ctl.port))
+            deadline = time.monotonic() + 5
+            while leads() != want and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert leads() == want
+        deadline = time.monotonic() + 5
+        while ctl.stats()["applied"] + ctl.stats()["bad"] < 4 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert (ctl.stats()["applied"], ctl.stats()["bad"]) == (3, 1)
+
+    server = WebSocketSink("127.0.0.1", 0, token="s3cret", control=eng.control)
+    routes = [server.route("/ws/near", "near", default=True), server.route("/ws/far", "far")]
+    try:
+        with connect(routes[1].ws_url + "?token=s3cret", open_timeout=5) as ws:
+            assert json.loads(ws.recv(timeout=5))["control"]
+            ws.send(json.dumps({"type": "control", "action": "lead", "value": 133}))
+            assert json.loads(ws.recv(timeout=5))["type"] == "control_ok"
+            assert leads() == (33.0, 133.0)  # the client's own performer
+            ws.send(json.dumps({"type": "control", "action": "lead", "value": 200.5, "performer": "*"}))
+            assert "lead must be in [0, 200] ms" in json.loads(ws.recv(timeout=5))["error"]
+            ws.send(json.dumps({"type": "control", "action": "lead", "value": 67, "performer": "*"}))
+            assert json.loads(ws.recv(timeout=5))["type"] == "control_ok"
+        assert leads() == (67.0, 67.0)
+    finally:
+        for r in routes:
+            r.close()
+
+
 # -- the engine: input stage and lanes ------------------------------------------------------------
 
 def test_one_extractor_per_feature_config_and_each_staggered_stream_equals_its_own_offline_pass(

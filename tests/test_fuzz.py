@@ -112,7 +112,8 @@ messages = st.one_of(
     st.fixed_dictionaries({"type": st.sampled_from(TYPES)}, optional={
         "format": st.sampled_from(["binary", "json", "xml"]) | json_values,
         "id": json_values, "token": st.sampled_from(["s3cret", "wrong"]) | json_values,
-        "action": st.sampled_from(["reset", "set_offset", "set_smoothing", "idle", "style", "energy", "stop"])
+        "action": st.sampled_from(["reset", "set_offset", "set_smoothing", "idle", "style", "energy", "lead",
+                                           "stop"])
         | json_values,
         "value": st.floats() | st.integers(-20000, 20000) | json_values,
     }).map(json.dumps),
@@ -189,7 +190,8 @@ def test_server_on_a_real_socket(server, batch):
 
 
 @FAST
-@given(action=st.sampled_from(["reset", "set_offset", "set_smoothing", "idle", "style", "energy"]) | json_values,
+@given(action=st.sampled_from(["reset", "set_offset", "set_smoothing", "idle", "style", "energy", "lead"])
+       | json_values,
        value=json_values | st.floats() | st.integers())
 def test_control_commands(server, action, value):
     _, eng = server
@@ -221,7 +223,8 @@ def osc_control(server):
 
 @FAST
 @given(address=st.sampled_from(["/performer/reset", "/performer/offset", "/performer/smoothing",
-                                "/performer/idle", "/performer/style", "/performer/energy", "/x", "/"])
+                                "/performer/idle", "/performer/style", "/performer/energy", "/performer/lead", "/x",
+                                "/"])
        | osc_texts.map(lambda t: "/" + t), args=osc_args, cut=st.integers(0, 64), junk=st.binary(max_size=12),
        bundle=st.booleans())
 def test_osc_control_any_datagram(osc_control, address, args, cut, junk, bundle):

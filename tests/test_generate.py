@@ -115,6 +115,24 @@ def test_energy_reaches_the_dancing_model_and_other_models_refuse_it(tmp_path, c
     assert code == 2 and "energy must be in [0, 2]" in err
 
 
+def test_lead_reaches_the_dancing_model_and_other_models_refuse_it(tmp_path, capsys, tiny):
+    """performer generate --lead: the dance_vq default writes its lead stream (DanceVQ.generate's
+    with that lead), a causal U-Net refuses it in one line, an out-of-range lead is a one-line error."""
+    clip = bundled_clip_path()
+    code, _, err = run_main(capsys, "generate", clip, "--out", tmp_path / "l.npz", "--lead", "133")
+    assert code == 0, err
+    lm = load_model(None)
+    feats = extract_features(load_audio(clip, SAMPLE_RATE)[0], lm.features)
+    expected = lm.model.generate(feats, seed=0, lead=133.0)
+    np.testing.assert_allclose(poses_of(tmp_path / "l.npz"), expected, atol=1e-5)
+    assert not np.allclose(expected, lm.model.generate(feats, seed=0), atol=1e-3)
+    code, _, err = run_main(capsys, "generate", clip, "--out", tmp_path / "x.npz", "--lead", "67",
+                            "--checkpoint", tiny)
+    assert code == 2 and "has no lead control" in err and "Traceback" not in err
+    code, _, err = run_main(capsys, "generate", clip, "--out", tmp_path / "x.npz", "--lead", "500")
+    assert code == 2 and "lead must be in [0, 200] ms" in err
+
+
 def test_generate_equals_what_the_engine_streams(tmp_path, tiny):
     """The causal model is generated exactly as `performer run` streams it."""
     from models.features.streaming import StreamingFeatureExtractor

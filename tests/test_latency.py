@@ -239,6 +239,13 @@ def test_bench_cli_bad_inputs_exit_2_with_one_line(tmp_path, capsys):
         main(["bench", "latency", "--cores", "a,b", "--out", str(tmp_path)])
 
 
+def test_bench_latency_lead_reaches_the_performer_process(tmp_path, capsys, checkpoint):
+    """--lead goes to the performer process's pipeline: a causal U-Net there refuses it."""
+    code = main(["bench", "latency", "--seconds", "1", "--naive-seconds", "0", "--no-offline", "--warmup", "0.2",
+                 "--checkpoint", str(checkpoint), "--out", str(tmp_path), "--lead", "67"])
+    assert code == 2 and "model 'causal' has no lead control" in capsys.readouterr().err
+
+
 # -- short real-time runs (guard budgets) --------------------------------------------------------
 
 @pytest.mark.latency

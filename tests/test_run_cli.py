@@ -135,6 +135,25 @@ def test_run_in_process_to_udp_and_config_file(tmp_path, capsys, clip, tiny_chec
     assert frames == list(range(60))  # every frame reached the real UDP socket, in order
 
 
+def test_run_lead_streams_the_dancing_models_lead(tmp_path, capsys, clip):
+    """performer run --lead 133: what is sent is the dancing default's stream with that lead (the
+    model fed the clip's streamed features), not lead 0's."""
+    from models.features.audio_io import load_audio
+    from realtime.pipeline import build_pipeline
+
+    out = tmp_path / "lead.npz"
+    code, err = run_main(capsys, "run", "--audio", clip, "--fast", "--no-ws", "--no-osc", "--warmup", "0",
+                         "--lead", "133", "--record", out, "--quiet")
+    assert code == 0, err
+    with np.load(out) as z:
+        got = z["pose"]
+    pipe = build_pipeline(None, lead=133.0)
+    feats = pipe.extractor_factory(SAMPLE_RATE).push(load_audio(clip, SAMPLE_RATE)[0])
+    assert pipe.model.lead_ms == 133.0 and len(got) == len(feats)
+    np.testing.assert_allclose(got, pipe.model.push(feats), atol=1e-5)
+    assert not np.allclose(got, build_pipeline(None).model.push(feats), atol=1e-3)
+
+
 @pytest.mark.parametrize(
     "args, message",
     [

@@ -241,6 +241,7 @@ BAD_MESSAGES: list[tuple[str, ...]] = [
     ("/performer/dance", "f", "1"),  # unknown address
     ("/performer/style", "s", "calm"),  # the tiny model offers no styles
     ("/performer/energy", "f", "1"),
+    ("/performer/lead", "f", "67"),  # nor a lead
     ("/performer/reset", "s", "now"),
 ]
 

@@ -167,8 +167,8 @@ def run(checkpoint: str, data_root: str | Path, cache_dir: str | Path | None, le
     ``trace``: a list that receives (song, {level: positions}, real positions) of the first song."""
     import torch
 
-    from models.errors import ConfigError, DataError
-    from models.evaluation.evaluate import EvalOptions, load_clips, positions, split_dances
+    from models.errors import ConfigError
+    from models.evaluation.evaluate import EvalOptions, load_clips, positions, validation_names
     from models.generate import load_model
     from models.networks.dance_vq import DanceVQ
 
@@ -176,14 +176,7 @@ def run(checkpoint: str, data_root: str | Path, cache_dir: str | Path | None, le
     if not isinstance(lm.model, DanceVQ):
         raise ConfigError(f"{checkpoint}: model {type(lm.model).__name__} has no energy control (dance_vq models do)")
     opts = EvalOptions(cache_dir=cache_dir, progress=False)
-    _, val_names = split_dances(data_root, opts)
-    if songs:
-        missing = sorted(set(songs) - set(val_names))
-        if missing:
-            raise DataError(f"not validation dances: {', '.join(missing)} (they are: {', '.join(val_names)})",
-                            source=str(data_root))
-        val_names = [n for n in val_names if n in songs]
-    clips = load_clips(data_root, val_names, lm.features, opts)
+    clips = load_clips(data_root, validation_names(data_root, songs, opts), lm.features, opts)
     out: dict[str, dict] = {}
     with torch.no_grad():
         for i, c in enumerate(clips, 1):

@@ -120,6 +120,19 @@ def split_dances(data_root: str | Path, opts: EvalOptions) -> tuple[list[str], l
     return train, (val if opts.split == "val" else train)
 
 
+def validation_names(data_root: str | Path, songs: list[str] | None, opts: EvalOptions) -> list[str]:
+    """The evaluated dances of :func:`split_dances`, only ``songs`` of them when given (in the
+    split's order); DataError naming any of ``songs`` that is not one of them."""
+    _, names = split_dances(data_root, opts)
+    if songs:
+        missing = sorted(set(songs) - set(names))
+        if missing:
+            raise DataError(f"not validation dances: {', '.join(missing)} (they are: {', '.join(names)})",
+                            source=str(data_root))
+        names = [n for n in names if n in songs]
+    return names
+
+
 def load_clips(data_root: str | Path, names: list[str], feature_config, opts: EvalOptions) -> list:
     """Tempo-1 corpus clips of ``names``, cut to ``opts.max_frames``."""
     from models.training.corpus import build_corpus

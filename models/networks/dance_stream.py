@@ -29,6 +29,7 @@ fades back into the dance, which has kept running underneath, so nothing jumps.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 import numpy as np
@@ -117,6 +118,9 @@ STYLE_MEMBERS: bool = True
 ENERGY_GAIN: float = 3.0
 #: The energy control's range.
 ENERGY_RANGE: tuple[float, float] = (0.0, 2.0)
+#: The lead control's range, ms (:meth:`DanceStream.set_lead`): a display chain's delay
+#: (renderer, projector, LED wall, encoder) that the motion is sent ahead of.
+LEAD_RANGE_MS: tuple[float, float] = (0.0, 200.0)
 #: Idle sway: (bone, axis, amplitude in degrees, period in s, phase in rad).
 SWAY: tuple[tuple[str, int, float, float, float], ...] = (
     ("Hips", 1, 4.0, 6.0, 0.0),  # a slow turn about the vertical
@@ -339,10 +343,22 @@ class DanceStream:
     seed: the sampling generator's seed (``reset`` restarts it). style: None/"auto"
     (the music decides), "chacha", "rumba" or "waltz"; ``set_style`` changes it from the
     next code (within 267 ms). energy: 0..2, 1 = as the music asks; ``set_energy`` changes
-    it the same way.
+    it the same way. lead_ms: 0..200, the display chain's delay the poses are sent ahead of
+    (``set_lead``, from the next code step on).
+
+    **Lead.** With a lead of L frames (``round(lead_ms * 30 / 1000)``, 0..6) the pose sent
+    at audio frame t is the one the performer takes at t + L: every beat-tracker phase
+    the stream reads (the predictor's audio tokens, the beat placement of the next
+    movement, the beat warp) is the tracker's own forecast for L frames on, its phase
+    advanced by ``2 pi L / period``; the rest of each frame is the audio heard so far. A
+    movement played from audio frame t (shown at t + L) is so decided with audio up to L
+    frames before it is seen, and its speed dips aim at the beats expected at t + L.
+    The code steps stay on frames ``t % seg == 0`` whatever the lead, so an ensemble's
+    stagger and the prefix schedule (``_free``) are those of lead 0.
     """
 
-    def __init__(self, model: DanceVQ, seed: int = 0, style: str | None = None, energy: float = 1.0) -> None:
+    def __init__(self, model: DanceVQ, seed: int = 0, style: str | None = None, energy: float = 1.0,
+                 lead_ms: float = 0.0) -> None:
         if not isinstance(model, DanceVQ):
             raise ConfigError(f"DanceStream needs a dance_vq model, got {type(model).__name__}")
         self.model = model.eval()
@@ -378,6 +394,9 @@ class DanceStream:
         self.energy = 1.0
         self._energy_bias: np.ndarray | None = None  # ENERGY_GAIN * (energy - 1) * z; None at 1
         self.set_energy(energy)
+        self.lead_ms = 0.0
+        self._lead_next = 0  # lead in frames from the next code step on (set_lead)
+        self.set_lead(lead_ms)
         cc = c.clarity_col
         self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None
         self._onset_col = c.onset_col if 0 <= c.onset_col < c.feature_dim else None
@@ -425,6 +444,7 @@ class DanceStream:
         self._fade_prev: tuple[np.ndarray, np.ndarray] | None = None  # last faded frame's signed quaternions
         self._prev_quat: np.ndarray | None = None
         self.codes_drawn: list[int] = []
+        self._lead = self._lead_next  # the lead in frames now (taken up at code steps)
 
     def set_style(self, style: str | None) -> None:
         """Dance this style from the next code on: None/"auto", "chacha", "rumba", "waltz" (ConfigError otherwise)."""
@@ -444,6 +464,30 @@ class DanceStream:
             raise ConfigError(f"energy must be in [{lo:g}, {hi:g}] (1: as the music asks), got {energy!r}")
         self._energy_bias = None if e == 1.0 else (ENERGY_GAIN * (e - 1.0) * self._code_energy).astype(np.float32)
         self.energy = e
+
+    def set_lead(self, lead_ms: float) -> None:
+        """Send the poses ``lead_ms`` (0..200 ms, rounded to whole 30 fps frames) ahead of the
+        audio, from the next code step on (see the class docstring, "Lead"); ConfigError
+        outside :data:`LEAD_RANGE_MS` or not a number."""
+        lo, hi = LEAD_RANGE_MS
+        try:
+            ms = float(lead_ms)
+        except (TypeError, ValueError):
+            raise ConfigError(f"lead must be a number of ms in [{lo:g}, {hi:g}], got {lead_ms!r}") from None
+        if not lo <= ms <= hi:  # NaN fails too
+            raise ConfigError(f"lead must be in [{lo:g}, {hi:g}] ms, got {lead_ms!r}")
+        self._lead_next = int(round(ms * FPS / 1000.0))
+        self.lead_ms = ms
+
+    def _ahead(self, row: np.ndarray) -> np.ndarray:
+        """``row`` (D,) with the beat tracker's phase advanced by the lead (a copy): its
+        forecast for ``self._lead`` frames on, ``theta + 2 pi L / period``."""
+        ccos, csin, _, logp = self._beat_cols
+        a = 2.0 * math.pi * self._lead / (15.0 * 2.0 ** float(row[logp]))
+        c, s, x, y = math.cos(a), math.sin(a), float(row[ccos]), float(row[csin])
+        out = row.copy()
+        out[ccos], out[csin] = x * c - y * s, x * s + y * c
+        return out
 
     def set_idle(self, idle: bool) -> None:
         """True: settle into the idle and hold it whatever the music; False: dance to the music again."""
@@ -628,9 +672,12 @@ class DanceStream:
         out = np.empty((k, self.pose_dim), np.float32)
         for i in range(k):
             t = self.frame
-            push_history(self._hist, x[i], self._feat_mean, self._feat_std)  # (x - mean) / std, the oldest out
-            self._raw = x[i]
-            if self._beat_cols is not None:
+            if t % self.seg == 0:
+                self._lead = self._lead_next  # a new lead starts with a movement
+            row = self._ahead(x[i]) if self._lead and self._beat_cols is not None else x[i]
+            push_history(self._hist, row, self._feat_mean, self._feat_std)  # (x - mean) / std, the oldest out
+            self._raw = row
+            if self._beat_cols is not None:  # the tempo (the period is the same ahead or not)
                 if self._onset_col is not None:
                     self._onsets[t % DENSITY_WINDOW] = x[i, self._onset_col]
                     if t % self.seg == 0:  # the window up to t, in time order

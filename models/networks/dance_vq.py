@@ -377,9 +377,10 @@ class DanceVQ(nn.Module):
         return int(cdf.searchsorted(rng.random(), side="right"))
 
     def generate(self, features: np.ndarray, seed: int = 0, style: str | None = None,
-                 energy: float = 1.0) -> np.ndarray:
+                 energy: float = 1.0, lead: float = 0.0) -> np.ndarray:
         """Poses (T, P) float32 for features (T, D): the live stream's frames, all at once
-        (``energy``: :meth:`~models.networks.dance_stream.DanceStream.set_energy`)."""
+        (``energy``: :meth:`~models.networks.dance_stream.DanceStream.set_energy`; ``lead``, ms:
+        :meth:`~models.networks.dance_stream.DanceStream.set_lead`)."""
         from models.networks.dance_stream import DanceStream
 
-        return DanceStream(self, seed=seed, style=style, energy=energy).push(features)
+        return DanceStream(self, seed=seed, style=style, energy=energy, lead_ms=lead).push(features)

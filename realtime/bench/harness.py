@@ -62,6 +62,7 @@ class RunSettings:
     threads: int = 1
     warmup_s: float = 3.0
     model: str = "streaming"  # or "naive" (NaiveWindowGenerator)
+    lead_ms: float = 0.0  # the single performer's lead (`performer run --lead`)
 
 
 class _Child:
@@ -142,7 +143,7 @@ def run_performers(specs: list[StreamSpec], settings: RunSettings, workdir: Path
         workers = []
         common = {"checkpoint": str(settings.checkpoint), "block_size": settings.block_size,
                   "seconds": settings.seconds, "threads": settings.threads, "warmup_s": settings.warmup_s,
-                  "model": settings.model}
+                  "model": settings.model, "lead_ms": settings.lead_ms}
         if ensemble:
             wspecs = [{**common, "audio_npy": str(specs[0].audio_npy), "sample_rate": specs[0].sample_rate,
                        "name": specs[0].name, "out": str(workdir / "ensemble.json"),

@@ -41,6 +41,7 @@ class BenchConfig:
     threads: int = 1  # torch threads per performer (the engine's default)
     warmup_s: float = 3.0  # engine warm-up (as `performer run`)
     cores: tuple[int, ...] | None = None  # CPU affinity of every process (None: leave as is)
+    lead_ms: float = 0.0  # the performer's lead (`performer run --lead`; latency only)
     notes: list[str] = field(default_factory=list)
 
 
@@ -451,7 +452,7 @@ def _sweep(cfg: BenchConfig):
 
 
 def _settings(cfg: BenchConfig, checkpoint: Path, seconds: float, model: str = "streaming") -> RunSettings:
-    return RunSettings(checkpoint, seconds, cfg.block_size, cfg.threads, cfg.warmup_s, model)
+    return RunSettings(checkpoint, seconds, cfg.block_size, cfg.threads, cfg.warmup_s, model, cfg.lead_ms)
 
 
 def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seconds: float = 10.0,

@@ -16,7 +16,7 @@
    time; and the process's CPU time and peak RSS. Prints ``{"done": out}``.
 
 SPEC keys: checkpoint, audio_npy, sample_rate, block_size, seconds, threads, warmup_s,
-model ("streaming" or "naive"), osc_port, out, name.
+model ("streaming" or "naive"), osc_port, out, name, lead_ms (the performer's lead, default 0).
 
 An ensemble (``performer bench ensemble``): SPEC has ``performers``, a list of
 ``{"name", "osc_port", "seed", "phase"}`` (phase null: the engine's stagger), instead of
@@ -182,7 +182,7 @@ def run(spec: dict) -> dict:
     cfg = EngineConfig(threads=threads, warmup_s=float(spec.get("warmup_s", 3.0)), duration_s=seconds,
                        stats_size=frames_max)
     if ensemble is None:
-        pipeline = build_pipeline(spec["checkpoint"])
+        pipeline = build_pipeline(spec["checkpoint"], lead=float(spec.get("lead_ms", 0.0)))
         model = _model(pipeline, spec.get("model", "streaming"), spec["checkpoint"])
         lanes = [(spec.get("name", "audio"), [OscSink("127.0.0.1", int(spec["osc_port"]), mode="vmc"), server,
                                                TimingSink(frames_max)])]

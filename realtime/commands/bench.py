@@ -124,6 +124,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                      help="seconds replayed with the naive baseline in the engine (default 10; 0 skips)")
     lat.add_argument("--no-offline", action="store_true", help="skip the offline real-time factor")
     lat.add_argument("--label", help="name of the recording in reports (default: file name)")
+    lat.add_argument("--lead", type=float, default=0.0, metavar="MS",
+                     help="the performer's lead, ms, as `performer run --lead` (default 0; dance_vq models)")
     _common(lat)
     lat.set_defaults(func=latency)
 
@@ -176,7 +178,7 @@ def _config(args):
         raise ConfigError(f"--seconds must be positive, got {args.seconds}")
     return BenchConfig(checkpoint=None if args.checkpoint is None else Path(args.checkpoint),
                        sample_rate=args.sample_rate, block_size=args.block_size, threads=args.threads,
-                       warmup_s=args.warmup, cores=args.cores)
+                       warmup_s=args.warmup, cores=args.cores, lead_ms=getattr(args, "lead", 0.0))
 
 
 def _audio(path: str | None) -> Path:

@@ -36,6 +36,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--energy", type=float, default=1.0, metavar="E",
                    help="dance_vq models: how lively, 0 (calmest) .. 2 (liveliest); default 1: as the music asks "
                         "(docs/show.md, \"Energy\")")
+    p.add_argument("--lead", type=float, default=0.0, metavar="MS",
+                   help="dance_vq models: the pose written for audio time t is the one taken at t + MS, "
+                        "0..200 ms, for a display chain's delay (default 0; docs/show.md, \"Lead\")")
     p.add_argument("--seed", type=int, default=0, metavar="N",
                    help="seed of a stochastic model's random choices (default 0)")
     p.add_argument("--threads", type=int, default=1, metavar="N",
@@ -56,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     loaded = load_model(args.checkpoint)
     with torch_threads(args.threads):
         g = generate(args.audio, args.out, loaded, window=args.window, hop=args.hop, seed=args.seed,
-                     style=None if args.style == "auto" else args.style, energy=args.energy)
+                     style=None if args.style == "auto" else args.style, energy=args.energy, lead=args.lead)
     t = g.timings
     print(f"{args.out}: {g.num_frames} frames ({g.num_frames / 30:.2f} s at 30 fps) from {g.audio_s:.2f} s of audio, "
           f"model {loaded.name} ({loaded.path})")

@@ -34,18 +34,19 @@ show control (--control-osc, off by default; docs/show.md): OSC messages to
   /performer/idle       0|1        1: settle to the idle pose and hold it; 0: dance again
   /performer/style      STRING     style name (only models that offer styles)
   /performer/energy     NUMBER     0..2, 1: as the music asks (only models that offer it)
+  /performer/lead       NUMBER     ms, 0..200: send the poses ahead for the display's delay (same)
 A bad message is logged once per address, counted in the status line
 ("control N ok M bad") and changes nothing; the stream never stops for it.
 In an ensemble these act on every performer, and /performer/NAME/reset (offset,
-smoothing, idle, style, energy) on the one called NAME.
+smoothing, idle, style, energy, lead) on the one called NAME.
 
 ensemble (several performers on one audio input; docs/show.md): repeat --performer,
 or give [[performer]] tables in --config. Each performer has its own checkpoint, style,
-energy, seed, smoothing, offset, OSC targets and WebSocket path; the audio input and, where the
+energy, lead, seed, smoothing, offset, OSC targets and WebSocket path; the audio input and, where the
 checkpoints' feature configs agree, the feature extractor are shared. Unset keys take
 the top-level options; performer i (from 0) sends OSC to the --osc ports + i and streams
 on ws://HOST:PORT/ws/NAME (/ws is the first performer). Keys: name, checkpoint, style,
-energy, seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase.
+energy, lead, seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase.
 
 examples:
   performer run --audio song.wav --record take1.npz
@@ -102,7 +103,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     o.add_argument("--record", metavar="FILE", help="write what was streamed to FILE.npz and FILE.bvh when the run stops")
     c = p.add_argument_group("show control")
     c.add_argument("--control-osc", metavar="[HOST:]PORT",
-                   help="listen for OSC show control (/performer/reset, offset, smoothing, idle, style, energy) "
+                   help="listen for OSC show control (/performer/reset, offset, smoothing, idle, style, energy, lead) "
                         "on this UDP port; host 127.0.0.1 unless given (0.0.0.0: every interface). Off by default")
     c.add_argument("--control-allow", action="append", metavar="CIDR",
                    help="only senders in this network (e.g. 192.168.10.0/24, or one address) may steer; repeat "
@@ -115,6 +116,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     m.add_argument("--energy", type=float, metavar="E",
                    help="how lively the dance is, 0 (calmest) .. 2 (liveliest); default 1: as the music asks. "
                         "dance_vq models only; live: /performer/energy (docs/show.md, \"Energy\")")
+    m.add_argument("--lead", type=float, metavar="MS",
+                   help="send the pose the performer takes MS ms later, 0..200 (default 0), so it is on the beat "
+                        "behind a display chain of that delay; dance_vq models only; live: /performer/lead "
+                        "(docs/show.md, \"Lead\")")
     m.add_argument("--seed", type=int, metavar="N",
                    help="seed of the dance's random choices (default 0: the same music gives the same dance)")
     m.add_argument("--threads", type=int, metavar="N", help="torch threads (default 1: fastest for per-frame work)")
@@ -127,7 +132,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     e = p.add_argument_group("ensemble (docs/show.md)")
     e.add_argument("--performer", action="append", metavar="NAME[,KEY=VALUE...]",
                    help="one performer of an ensemble on the same audio input; repeat for each. Keys: checkpoint, "
-                        "style, energy, seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase; unset "
+                        "style, energy, lead, seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase; unset "
                         "keys take the options above (OSC: their ports + the performer's position from 0; WebSocket path "
                         "/ws/NAME). Replaces the [[performer]] tables of --config")
     p.add_argument("--quiet", action="store_true", help="no status line")
@@ -201,6 +206,7 @@ def _open_ensemble(cfg, specs, source, fallback):
     for spec in specs:
         try:
             pipelines.append(build_pipeline(spec.checkpoint, seed=spec.seed, loaded=loaded, energy=spec.energy,
+                                            lead=spec.lead,
                                             style=None if spec.style == "auto" else spec.style))
         except PerformerError as exc:
             raise type(exc)(f"performer {spec.name!r}: {exc}") from None
@@ -244,6 +250,7 @@ def _open_ensemble(cfg, specs, source, fallback):
     for spec, pipe, perf in zip(specs, pipelines, performers):
         outs = [f"{s.name} (viewer {s.url})" if hasattr(s, "url") else s.name for s in perf.sinks]
         energy = f", energy {spec.energy:g}" if spec.energy != 1.0 else ""
+        energy += f", lead {spec.lead:g} ms" if spec.lead != 0.0 else ""
         lines.append(f"  {spec.name} [{pipe.checkpoint.name}, style {spec.style}{energy}, seed {spec.seed}, "
                      f"phase {phases[spec.name]}] -> {', '.join(outs) or 'no outputs'}")
     return engine, [s for perf in performers for s in perf.sinks], server, lines
@@ -280,7 +287,7 @@ def run(args: argparse.Namespace) -> int:
         engine, sinks, server, lines = _open_ensemble(cfg, specs, source, fallback)
     else:
         pipeline = build_pipeline(cfg.checkpoint, seed=cfg.seed, style=None if cfg.style == "auto" else cfg.style,
-                                  energy=cfg.energy)
+                                  energy=cfg.energy, lead=cfg.lead)
         sinks = _open_sinks(cfg, source.sample_rate)
         engine = Engine(
             source, pipeline.extractor_factory, pipeline.model, sinks,

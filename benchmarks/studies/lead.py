@@ -1,0 +1,181 @@
+"""The lead, measured: does ``--lead`` put the motion back on the beat behind a display delay?
+
+A display chain (renderer, projector, LED wall, stream encoder) shows the pose sent at
+audio time t at t + D. With ``--lead D`` the performer sends the pose it takes at t + D,
+so the audience sees it on time. For each validation dance of the DWM dataset and each
+lead L (ms; L frames at 30 fps, ``round(L * 30 / 1000)``), the dancing checkpoint's live
+stream (``DanceVQ.generate(..., lead=L)``: a fresh stream fed the song's frames, as
+``performer run`` feeds them) is scored as the audience sees it behind a display of delay
+L: its kinematic beats (``models.evaluation.beats.kinematic_beats``) shifted L frames
+later, against the music beats ``performer evaluate`` scores with (``librosa.beat.beat_track``
+on the song), beat hit rate within +-2 frames (``beat_hit_rate``, as benchmarks/studies/beat_warp.py).
+Beside it: lead 0's motion behind the same delay (what the audience sees without the lead),
+and each lead's ratio to lead 0's hit rate with no delay (issue 25, target 5: at least 0.9)::
+
+    .venv/bin/python benchmarks/studies/lead.py --data ../shared/data/dwm
+
+Each song is danced with seeds 0, 1 and 2 (``--seeds``) at every lead. Hit rates are pooled
+over songs and seeds (every kinematic beat counts once), with the smallest and largest song
+in brackets. Exit status 2 on a missing or unreadable
+checkpoint or dataset, or a checkpoint whose model has no lead control.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+if str(REPO) not in sys.path:  # run as a script from anywhere
+    sys.path.insert(0, str(REPO))
+
+import numpy as np  # noqa: E402
+
+#: Leads measured by default, ms (0 = none; 67 and 133 ms are 2 and 4 frames at 30 fps).
+LEADS_MS: tuple[float, ...] = (0.0, 67.0, 133.0)
+
+
+def lead_frames(lead_ms: float) -> int:
+    """Frames (30 fps) of a lead of ``lead_ms`` ms, as the stream rounds it."""
+    from models.timebase import FPS
+
+    return int(round(lead_ms * FPS / 1000.0))
+
+
+def seen_hits(kin: np.ndarray, mus: np.ndarray, delay: int) -> tuple[int, int]:
+    """(kinematic beats within +-2 frames of a music beat, kinematic beats) of motion with beats at
+    frames ``kin`` shown ``delay`` frames late."""
+    from models.evaluation.beats import beat_hit_rate
+
+    return int(round(beat_hit_rate(kin + delay, mus) * len(kin))), len(kin)
+
+
+def measure_song(model, features: np.ndarray, mus: np.ndarray, leads: Sequence[float],
+                 seeds: Sequence[int] = (0,)) -> dict[str, dict[str, list[int]]]:
+    """``{str(lead_ms): {"seen": [hits, beats], "no_lead": [hits, beats], "undelayed": [hits, beats]},
+    "chance": hit rate of beats at random frames}`` for one song, counts summed over ``seeds``: ``seen`` the lead's motion behind a display delay of
+    the lead, ``no_lead`` lead 0's motion behind the same delay, ``undelayed`` the lead's
+    motion with no delay. ``leads[0]`` must be 0."""
+    from models.evaluation.beats import kinematic_beats
+    from models.evaluation.evaluate import positions
+
+    from models.evaluation.beats import chance_hit_rate
+
+    out: dict = {f"{ms:g}": {"seen": [0, 0], "no_lead": [0, 0], "undelayed": [0, 0]} for ms in leads}
+    out["chance"] = chance_hit_rate(mus, len(features))
+    for seed in seeds:
+        kins = {ms: kinematic_beats(positions(model.generate(features, seed=seed, lead=ms))) for ms in leads}
+        for ms in leads:
+            d, row = lead_frames(ms), out[f"{ms:g}"]
+            for key, kin, delay in (("seen", kins[ms], d), ("no_lead", kins[leads[0]], d), ("undelayed", kins[ms], 0)):
+                row[key] = [a + b for a, b in zip(row[key], seen_hits(kin, mus, delay))]
+    return out
+
+
+def table(results: dict[str, dict], leads: Sequence[float]) -> str:
+    """Markdown: per lead, pooled hit rates [smallest, largest song] and the ratio to lead 0's."""
+    def rate(ms: float, key: str) -> tuple[float, float, float]:
+        rows = [r[f"{ms:g}"][key] for r in results.values()]
+        per = [h / max(n, 1) for h, n in rows]
+        return sum(h for h, _ in rows) / max(sum(n for _, n in rows), 1), min(per), max(per)
+
+    ref = rate(0.0, "undelayed")[0]
+    lines = ["| lead (ms) | frames | hit rate seen behind a display delay of the lead | "
+             "ratio to lead 0 (no delay) | lead 0's motion behind the same delay | the lead's motion, no delay |",
+             "| ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for ms in leads:
+        seen, nolead, undelayed = rate(ms, "seen"), rate(ms, "no_lead"), rate(ms, "undelayed")
+        cell = lambda r: f"{r[0]:.3f} [{r[1]:.2f}, {r[2]:.2f}]"  # noqa: E731
+        lines.append(f"| {ms:g} | {lead_frames(ms)} | {cell(seen)} | {seen[0] / max(ref, 1e-9):.2f} | "
+                     f"{cell(nolead)} | {cell(undelayed)} |")
+    return "\n".join(lines)
+
+
+def song_table(results: dict[str, dict], leads: Sequence[float]) -> str:
+    """Markdown: per song, lead 0's hit rate, and per other lead the ratio to it of the lead's
+    motion behind its delay and of lead 0's motion behind the same delay."""
+    rest = [ms for ms in leads if ms != 0]
+    head = "| song | lead 0 hit rate | " + " | ".join(f"{ms:g} ms: with the lead / without" for ms in rest) + " |"
+    lines = [head, "| --- | ---: |" + " ---: |" * len(rest)]
+    for song, row in results.items():
+        ref = row["0"]["undelayed"][0] / max(row["0"]["undelayed"][1], 1)
+        cells = []
+        for ms in rest:
+            seen, nolead = (row[f"{ms:g}"][k][0] / max(row[f"{ms:g}"][k][1], 1) for k in ("seen", "no_lead"))
+            cells.append(f"{seen / max(ref, 1e-9):.2f} / {nolead / max(ref, 1e-9):.2f}")
+        lines.append(f"| {song} | {ref:.3f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def run(checkpoint: str, data_root: str | Path, cache_dir: str | Path | None, leads: Sequence[float],
+        seeds: Sequence[int] = (0,), songs: Sequence[str] | None = None, log=print) -> dict[str, dict]:
+    """Load, generate and score every validation dance (see the module docstring); ``{song: measure_song(...)}``."""
+    import torch
+
+    from models.errors import ConfigError
+    from models.evaluation.evaluate import EvalOptions, clip_music_beats, load_clips, validation_names
+    from models.generate import load_model
+    from models.networks.dance_vq import DanceVQ
+
+    lm = load_model(checkpoint)
+    if not isinstance(lm.model, DanceVQ):
+        raise ConfigError(f"{checkpoint}: model {type(lm.model).__name__} has no lead control (dance_vq models do)")
+    opts = EvalOptions(cache_dir=cache_dir, progress=False)
+    names = validation_names(data_root, songs, opts)
+    out: dict[str, dict] = {}
+    with torch.no_grad():
+        for i, c in enumerate(load_clips(data_root, names, lm.features, opts), 1):
+            log(f"  [{i}/{len(names)}] {c.name}: lead {', '.join(f'{x:g}' for x in leads)} ms")
+            out[c.name] = measure_song(lm.model, c.features, clip_music_beats(data_root, c), leads, seeds)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\nHit rates")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter,
+                                epilog="Exit status 2 on a missing or unreadable checkpoint or dataset, "
+                                       "or a checkpoint whose model has no lead control.")
+    p.add_argument("--checkpoint", default="models/assets/default.pt", metavar="CKPT",
+                   help="a dance_vq checkpoint (default: models/assets/default.pt)")
+    p.add_argument("--data", required=True, metavar="DIR", help="the DWM dataset directory (holds DANCE_* dirs)")
+    p.add_argument("--cache", default=".cache/corpus", metavar="DIR", help="corpus cache (default .cache/corpus)")
+    p.add_argument("--leads", type=float, nargs="+", default=list(LEADS_MS), metavar="MS",
+                   help=f"leads, ms, each in [0, 200], the first 0 (default {' '.join(f'{x:g}' for x in LEADS_MS)})")
+    p.add_argument("--songs", nargs="+", metavar="NAME", help="only these validation dances (default: all)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], metavar="N",
+                   help="generation seeds, each run at every lead, counts summed (default 0 1 2)")
+    p.add_argument("--json", metavar="OUT", help="also write every song's counts as JSON")
+    a = p.parse_args(argv)
+    if any(not 0.0 <= x <= 200.0 for x in a.leads) or a.leads[0] != 0.0:
+        p.error("--leads must each be in [0, 200] ms, the first 0 (the reference)")
+    import torch
+
+    from models.errors import PerformerError
+
+    torch.set_num_threads(1)
+    try:
+        results = run(a.checkpoint, a.data, a.cache, a.leads, a.seeds, a.songs, log=lambda m: print(m, file=sys.stderr))
+    except (PerformerError, OSError) as e:
+        print(f"lead.py: {e}", file=sys.stderr)
+        return 2
+    print(f"The lead on {len(results)} validation dances ({a.checkpoint}, seeds {' '.join(map(str, a.seeds))}): "
+          "beat hit rate (+-2 frames), pooled over songs and seeds [smallest, largest song]\n")
+    print(table(results, a.leads))
+    chance = np.mean([row["chance"] for row in results.values()])
+    print(f"\n(Kinematic beats at random frames would hit {chance:.3f} of the time: the mean over the songs of "
+          "models.evaluation.beats.chance_hit_rate.)")
+    print("\nPer song: ratio to the song's lead 0 hit rate (no delay) of what the audience sees behind a "
+          "display delay of the lead, with the lead / without it\n")
+    print(song_table(results, a.leads))
+    if a.json:
+        Path(a.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(a.json).write_text(json.dumps(results, indent=1))
+        print(f"\nwrote {a.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,72 @@
+"""benchmarks/studies/lead.py: the lead measured as the audience sees it behind a display delay (docs/listening.md, "Lead")."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+_path = REPO / "benchmarks" / "studies" / "lead.py"
+_spec = importlib.util.spec_from_file_location("lead_bench", _path)
+lb = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(lb)
+
+
+def test_a_lead_keeps_the_beat_hits_behind_the_delay_and_lead_0_loses_them():
+    """A model whose every movement turns steadily, on a 15-frame pulse: the warp's speed dips
+    fall on the beats; seen 4 frames late, lead 133 ms keeps them there, lead 0 does not."""
+    import torch
+
+    from models.networks.dance_vq import DanceVQ
+    from test_dance_vq import BEAT, beat_music, turning_exemplars
+
+    m = DanceVQ(BEAT).eval()
+    turning_exemplars(m)
+    with torch.no_grad():
+        m.gate[0] = -50.0
+    x = beat_music(900)
+    beats = np.arange(0, 900, 15)
+    row = lb.measure_song(m, x, beats, (0.0, 133.0), seeds=(0, 1))
+    rate = {ms: {k: h / n for k, (h, n) in v.items()} for ms, v in row.items() if ms != "chance"}
+    assert rate["0"]["seen"] == rate["0"]["undelayed"] == rate["0"]["no_lead"] > 0.8
+    assert 0.3 < row["chance"] < 0.4  # +-2 frames of a beat every 15 frames: 5/15
+    assert rate["133"]["seen"] > 0.9 * rate["0"]["seen"]  # on the beat as the audience sees it
+    assert rate["133"]["no_lead"] < 0.6 * rate["0"]["seen"]  # without the lead: off it
+    assert rate["133"]["undelayed"] < 0.6 * rate["0"]["seen"]  # the lead's own motion is early
+    text = lb.table({"A": row, "B": row}, (0.0, 133.0))
+    assert text.count("\n") == 3 and "| 133 | 4 |" in text and "| 1.00 |" in text
+    songs = lb.song_table({"A": row}, (0.0, 133.0))
+    assert songs.count("\n") == 2 and songs.splitlines()[-1].startswith("| A | ")
+    assert [lb.lead_frames(ms) for ms in (0, 67, 133, 200)] == [0, 2, 4, 6]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--data", "x", "--leads", "0", "300"], "--leads must each be in [0, 200] ms"),
+    (["--data", "x", "--leads", "67", "133"], "the first 0"),
+    (["--data", "x", "--checkpoint", "/nonexistent/model.pt"], "lead.py: "),
+    (["--data", "x", "--checkpoint", str(REPO / "models" / "assets" / "dtm.pt")], "has no lead control"),
+])
+def test_bad_input_is_one_line_and_exit_2(args, message, capsys, tmp_path):
+    out = tmp_path / "l.json"
+    try:
+        code = lb.main([*args, "--json", str(out)])
+    except SystemExit as exc:  # argparse errors
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2 and message in err, err
+    assert not out.exists()
+
+
+@pytest.mark.slow
+@pytest.mark.data
+def test_default_checkpoint_on_one_validation_dance(dwm_root, tmp_path):
+    out = tmp_path / "l.json"
+    assert lb.main(["--data", str(dwm_root), "--cache", str(REPO / ".cache" / "corpus"), "--songs", "DANCE_W_28",
+                    "--seeds", "0", "--json", str(out)]) == 0
+    row = json.loads(out.read_text())["DANCE_W_28"]
+    rate = {ms: {k: h / n for k, (h, n) in v.items()} for ms, v in row.items() if ms != "chance"}
+    assert rate["133"]["seen"] > rate["133"]["no_lead"]  # the lead puts the delayed motion back on the beat
