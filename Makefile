@@ -41,11 +41,11 @@ $(STAMP): pyproject.toml constraints.txt
 	$(BIN)/pip install -q --disable-pip-version-check -c constraints.txt -e '.[dev]'
 	touch $(STAMP)
 
-# The live path's numba kernels, compiled once into __pycache__ (models/jit.py) so that
-# the first `performer run` does not compile them (about 4 s) inside its warm-up.
-$(JIT_STAMP): $(STAMP) models/jit.py models/features/spectral.py models/features/context.py models/networks/dance_jit.py \
-		realtime/pose_jit.py
-	$(BIN)/python -m models.jit
+# The live path's numba kernels, compiled once into __pycache__ (realtime/kernels.py) so that
+# the first `performer run` loads them instead of compiling them inside its warm-up.
+$(JIT_STAMP): $(STAMP) realtime/kernels.py models/features/spectral.py models/features/context.py \
+		models/networks/dance_jit.py realtime/pose_jit.py
+	$(BIN)/python -m realtime.kernels
 	touch $(JIT_STAMP)
 
 # make constraints: resolve pyproject.toml's dependencies afresh (newest releases) in a

@@ -10,8 +10,8 @@ Each model kind runs the way it is meant to run (:func:`run_model`):
   the output cropped back;
 * ``lstm``: one forward over the features padded at the end with ``output_delay``
   repeated frames; output frame ``t + delay`` is pose ``t``;
-* ``dance_vq`` (the dancing performer, docs/training.md): :meth:`DanceVQ.generate`, the
-  live stream (:class:`models.networks.dance_stream.DanceStream`) run over the whole song
+* ``dance_vq`` (the dancing performer, docs/training.md): :func:`models.networks.dance_stream.generate`,
+  the live stream (:class:`models.networks.dance_stream.DanceStream`) run over the whole song
   with a seed (default 0) and a style (default: the music decides);
 * ``gcn``: :meth:`models.networks.gcn.GCNDancer.generate_poses` on the whole song: its
   music classifier hears the raw audio (passed as ``audio``), seeded GP noise, one
@@ -147,6 +147,7 @@ def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, see
 
     from models.networks.blend import blend_track
     from models.networks.causal import CausalGenerator
+    from models.networks.dance_vq import DanceVQ
     from models.networks.generator import LEVELS
     from models.networks.streaming import offline_windowed, sanitize_features
 
@@ -165,14 +166,12 @@ def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, see
     x, _ = sanitize_features(x)
     if getattr(model, "needs_audio", False):  # gcn: style from the raw waveform, whole song at once
         return model.generate_poses(x, audio, seed=seed)
-    if callable(getattr(model, "generate", None)):  # a whole-song procedure of its own (dtm, dance_vq)
+    if isinstance(model, DanceVQ):  # its live stream, every frame at once
+        from models.networks.dance_stream import generate as stream_generate
+
+        return stream_generate(model, x, seed=int(seed or 0), style=style, energy=energy, lead=lead)
+    if callable(getattr(model, "generate", None)):  # a whole-song procedure of its own (dtm)
         kw = {"seed": int(seed or 0)} if getattr(model, "stochastic", False) else {}
-        if takes_style:
-            kw["style"] = style
-            if energy != 1.0:
-                kw["energy"] = energy
-            if lead != 0.0:
-                kw["lead"] = lead
         return model.generate(x, **kw)
     t = len(x)
     delay = int(getattr(model, "output_delay", 0))

@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import Any
 
 from models.errors import ConfigError
+from realtime.endpoints import parse_control_endpoint, parse_endpoint, parse_networks
 
 DEFAULT_OSC = "127.0.0.1:39539"  # VMC protocol's usual receiver port (VSeeFace, VMC receivers)
 DEFAULT_WS = "127.0.0.1:8765"
@@ -324,14 +325,10 @@ class RunConfig:
 
     def control_endpoint(self) -> tuple[str, int] | None:
         """(host, port) the OSC control input binds (a bare port: 127.0.0.1), or None (off)."""
-        from realtime.osc_control import parse_control_endpoint
-
         return None if self.control_osc is None else parse_control_endpoint(self.control_osc)
 
     def control_networks(self) -> list | None:
         """The ``control_allow`` networks (ipaddress objects), or None when none are given (any sender)."""
-        from realtime.osc_control import parse_networks
-
         return parse_networks(self.control_allow) if self.control_allow else None
 
 
@@ -348,15 +345,6 @@ _TYPES: dict[str, tuple[type, ...]] = {
     "control_osc": (str, int), "control_allow": (list, str), "performer": (list,),
 }
 assert set(_TYPES) == set(_FIELDS)
-
-
-def parse_endpoint(text: str, what: str = "endpoint") -> tuple[str, int]:
-    """``"HOST:PORT"`` (``"[::1]:PORT"`` for IPv6) → (host, port); ConfigError if malformed."""
-    host, sep, port = str(text).rpartition(":")
-    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
-    if not sep or not host or not (port.isascii() and port.isdigit()) or not 1 <= int(port) <= 65535:
-        raise ConfigError(f"{what} address must be HOST:PORT with a port in 1..65535, got {text!r}")
-    return host, int(port)
 
 
 def _checked_key(key: str, value: object, types: dict[str, tuple[type, ...]], known, p: Path, where: str = "") -> str:

@@ -248,6 +248,11 @@ class RollingStats:
         return float(np.percentile(vals, q)) if len(vals) else float("nan")
 
 
+#: Seconds of noise the warm-up runs before its silence (:meth:`Engine._warm_up`): the live
+#: path's kernels that only sound reaches get compiled (or loaded) before the first frame.
+KERNEL_NOISE_S: float = 1.0
+
+
 @dataclass
 class EngineConfig:
     """Knobs of :class:`Engine`. ``performer run`` sets the first five from ``--smoothing``,
@@ -256,7 +261,7 @@ class EngineConfig:
     smoothing: float = 0.0  # [0, 1): exponential smoothing weight (see PoseSmoother)
     offset_ms: float = 0.0  # >0 delays sending and shifts audio_time; <0 only shifts audio_time
     threads: int | None = 1  # torch.set_num_threads at start (None: leave torch alone)
-    warmup_s: float = 3.0  # seconds of silence run through the pipeline at start, then reset
+    warmup_s: float = 3.0  # s of silence run through the pipeline at start after KERNEL_NOISE_S of noise (0: none)
     duration_s: float | None = None  # stop after this much input audio (None: until the source ends)
     ring_seconds: float = 2.0  # audio ring capacity
     max_read: int = 8192  # most input samples processed per worker step
@@ -937,25 +942,42 @@ class Engine:
 
     # -- internals ---------------------------------------------------------------------
     def _warm_up(self) -> None:
-        """Run ``warmup_s`` of silence through the extractors and every model, then reset them."""
+        """Run :data:`KERNEL_NOISE_S` of noise, then ``warmup_s`` of silence, through the extractors,
+        every model and the pose guard, then reset them (``warmup_s`` 0: no warm-up at all).
+
+        The noise takes the paths only sound takes (the dance_vq music gate), in device-sized
+        blocks and in large ones (pushes of one frame and of several), so that every numba kernel
+        of the live path is compiled, or loaded from numba's cache, here and not inside the
+        first streamed frames (:mod:`realtime.kernels`)."""
         t0 = time.perf_counter()
-        n = int(self.config.warmup_s * self.source.sample_rate)
+        rate = self.source.sample_rate
+        if self.config.warmup_s > 0:
+            noise = (0.1 * np.random.default_rng(0).standard_normal(int(KERNEL_NOISE_S * rate))).astype(np.float32)
+            half = len(noise) // 2
+            for step, lo, hi in ((512, 0, half), (self.config.max_read, half, len(noise))):
+                for i in range(lo, hi, step):
+                    self._warm_block(noise[i : min(i + step, hi)])
+        n = int(self.config.warmup_s * rate)
         block = np.zeros(min(self.config.max_read, max(n, 1)), dtype=np.float32)
         done = 0
         while done < n:
             k = min(len(block), n - done)
-            for g in self._groups:
-                feats = g.extractor.push(block[:k])
-                if len(feats):
-                    for lane in g.lanes:
-                        poses = lane.model.push(feats)
-                        pose = np.empty(POSE_DIM, np.float32)
-                        for row in np.asarray(poses, dtype=np.float32):
-                            if row.shape == pose.shape:  # a non-finite row is skipped, as the guard skips it
-                                lane.smoother.smooth_into(row, pose)
+            self._warm_block(block[:k])
             done += k
         self._do_reset()
         self.warmup_seconds = time.perf_counter() - t0
+
+    def _warm_block(self, block: np.ndarray) -> None:
+        """One warm-up block (n,) float32 through every extractor, model and pose guard; nothing sent."""
+        for g in self._groups:
+            feats = g.extractor.push(block)
+            if len(feats):
+                for lane in g.lanes:
+                    poses = lane.model.push(feats)
+                    pose = np.empty(POSE_DIM, np.float32)
+                    for row in np.asarray(poses, dtype=np.float32):
+                        if row.shape == pose.shape:  # a non-finite row is skipped, as the guard skips it
+                            lane.smoother.smooth_into(row, pose)
 
     def _do_reset(self) -> None:
         self._reset_requested.clear()

@@ -46,6 +46,7 @@ import time
 from collections.abc import Callable, Sequence
 
 from models.errors import ConfigError, NetworkError, PerformerError, short_repr
+from realtime.endpoints import IpNetwork
 
 log = logging.getLogger(__name__)
 
@@ -53,8 +54,6 @@ ControlHandler = Callable[..., None]
 """Applies one control action, ``control(action, value)``, or for one performer of an
 ensemble ``control(action, value, performer=NAME)`` (:meth:`realtime.engine.Engine.control`);
 raises :class:`PerformerError` for a bad value. Called on the control thread."""
-
-IpNetwork = ipaddress.IPv4Network | ipaddress.IPv6Network
 
 #: OSC address -> (engine control action, kind of argument).
 ADDRESSES: dict[str, tuple[str, str]] = {
@@ -147,28 +146,6 @@ def parse_packet(data: bytes, depth: int = 0) -> list[tuple[str, str, list]]:
         out.extend(parse_packet(data[pos : pos + size], depth + 1))
         pos += size
     return out
-
-
-def parse_control_endpoint(text: str | int) -> tuple[str, int]:
-    """``"PORT"`` (host 127.0.0.1) or ``"HOST:PORT"`` (``"[::1]:PORT"`` for IPv6) -> (host, port)."""
-    from realtime.config import parse_endpoint
-
-    s = str(text).strip()
-    if s.isascii() and s.isdigit():
-        s = f"127.0.0.1:{s}"
-    return parse_endpoint(s, "control_osc")
-
-
-def parse_networks(items: Sequence[str]) -> list[IpNetwork]:
-    """``--control-allow`` values (an address, or a network like ``192.168.1.0/24``) -> networks."""
-    nets = []
-    for item in items:
-        try:
-            nets.append(ipaddress.ip_network(str(item).strip(), strict=False))
-        except ValueError:
-            raise ConfigError(f"control_allow must be an IP address or network like 192.168.1.0/24, "
-                              f"got {short_repr(item)}") from None
-    return nets
 
 
 class OscControl:

@@ -6,7 +6,7 @@ check, a copy, the smoother's einsums, comparisons and division, the state copy)
 hop. :func:`guard_smooth` does the same arithmetic in one call, in float32 and in the
 order NumPy computes it (a quaternion's squared norm paired as ``einsum`` adds its four
 products), so the poses are those of :class:`realtime.engine.PoseSmoother`'s NumPy code
-bit for bit (tests/test_engine.py). ``make setup`` compiles it ahead (models/jit.py).
+bit for bit (tests/test_engine.py). ``make setup`` compiles it ahead (realtime/kernels.py).
 """
 
 from __future__ import annotations

@@ -5,12 +5,13 @@ from __future__ import annotations
 from dataclasses import replace as dataclasses_replace
 
 import numpy as np
+
 import pytest
 import torch
 
 from models.errors import CheckpointError, ConfigError
 from models.networks.checkpoint import build_model, load_checkpoint, save_checkpoint
-from models.networks.dance_stream import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, DanceStream, idle_pose
+from models.networks.dance_stream import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, DanceStream, generate, idle_pose
 from models.networks.dance_vq import DanceVQ, DanceVQConfig, style_token
 from models.rig.humanoid import BONES
 from models.rig.motion import POSE_DIM
@@ -47,7 +48,7 @@ def quat_angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def test_live_stream_equals_the_whole_song_in_any_chunking():
     m = tiny_model()
     x = music(300)
-    whole = m.generate(x, seed=5)
+    whole = generate(m, x, seed=5)
     assert whole.shape == (300, POSE_DIM) and whole.dtype == np.float32 and np.isfinite(whole).all()
     np.testing.assert_allclose(np.linalg.norm(whole[:, 3:].reshape(300, -1, 4), axis=-1), 1.0, atol=1e-5)
     rng = np.random.default_rng(0)
@@ -67,14 +68,14 @@ def test_live_stream_equals_the_whole_song_in_any_chunking():
 def test_seed_and_style_change_the_dance_and_bad_styles_are_refused():
     m = tiny_model()
     x = music(200)
-    a, b = m.generate(x, seed=1), m.generate(x, seed=2)
+    a, b = generate(m, x, seed=1), generate(m, x, seed=2)
     assert np.abs(a - b).max() > 1e-3
-    c = m.generate(x, seed=1, style="waltz")
+    c = generate(m, x, seed=1, style="waltz")
     assert np.abs(a - c).max() > 1e-3
-    np.testing.assert_array_equal(m.generate(x, seed=1, style="auto"), a)
+    np.testing.assert_array_equal(generate(m, x, seed=1, style="auto"), a)
     assert style_token(None) == 0 and style_token("W") == 3
     with pytest.raises(ConfigError, match="unknown style 'tango'"):
-        m.generate(x, style="tango")
+        generate(m, x, style="tango")
     with pytest.raises(ConfigError, match="unknown style"):
         DanceStream(m).set_style("salsa")
 
@@ -425,7 +426,7 @@ def test_choreographic_memory_plays_real_movements_at_their_scale_and_hands_over
     assert info["codes_with_members"] >= 1 and bool((m.member_count > 0).all())  # unused codes borrow a neighbour's
     assert int(m.member_count.max()) <= 3
     m.eval()
-    out = m.generate(music(600), seed=0)[60:]  # after the fade-in from rest
+    out = generate(m, music(600), seed=0)[60:]  # after the fade-in from rest
     assert np.isfinite(out).all()
     # real movements at their own scale: the bones swing about as far as in the data
     ang = lambda p: quat_angles_deg(p, np.tile(poses.mean(0), (len(p), 1)))  # noqa: E731
@@ -557,7 +558,7 @@ def test_beat_warp_slows_the_motion_into_every_beat_and_streams_like_the_whole_s
     m = DanceVQ(BEAT).eval()
     turning_exemplars(m)
     x = beat_music(900)
-    warped = m.generate(x, seed=2)
+    warped = generate(m, x, seed=2)
     s, parts, i = DanceStream(m, seed=2), [], 0
     for k in np.random.default_rng(1).integers(0, 13, size=900):
         parts.append(s.push(x[i: i + k]))
@@ -565,7 +566,7 @@ def test_beat_warp_slows_the_motion_into_every_beat_and_streams_like_the_whole_s
     parts.append(s.push(x[i:]))
     np.testing.assert_allclose(np.concatenate(parts), warped, atol=1e-5)
     monkeypatch.setattr(ds, "BEAT_WARP", 0.0)
-    plain = m.generate(x, seed=2)
+    plain = generate(m, x, seed=2)
 
     def speed_by_phase(p: np.ndarray) -> np.ndarray:
         """Mean bone rotation between frames t-1 and t (degrees), by the step's midpoint's frames
@@ -643,11 +644,11 @@ def test_a_requested_style_dances_with_its_own_dancers_exemplars(monkeypatch):
                 m.member_style[k, j] = style
         m.member_count[:] = 2
     x = music(400)
-    hips = {s: m.generate(x, seed=0, style=s)[100:, 1] for s in ("chacha", "waltz")}
+    hips = {s: generate(m, x, seed=0, style=s)[100:, 1] for s in ("chacha", "waltz")}
     np.testing.assert_allclose(hips["chacha"], 1.1, atol=1e-3)  # only the cha-cha dancers' movements
     np.testing.assert_allclose(hips["waltz"], 0.7, atol=1e-3)  # only the waltz dancers'
     monkeypatch.setattr(ds, "STYLE_MEMBERS", False)  # without the filter motion matching keeps to the first
-    np.testing.assert_allclose(m.generate(x, seed=0, style="waltz")[100:, 1], 1.1, atol=1e-3)  # exemplar's kind
+    np.testing.assert_allclose(generate(m, x, seed=0, style="waltz")[100:, 1], 1.1, atol=1e-3)  # exemplar's kind
 
 
 def test_checkpoints_from_before_the_style_memory_still_load(tmp_path):
@@ -656,7 +657,7 @@ def test_checkpoints_from_before_the_style_memory_still_load(tmp_path):
     m2 = DanceVQ(TINY)
     m2.load_state_dict(state, strict=True)
     assert int(m2.member_style.abs().sum()) == 0 and float(m2.style_prior.abs().sum()) == 0.0
-    np.testing.assert_array_equal(m2.eval().generate(music(64), seed=1), m.generate(music(64), seed=1))
+    np.testing.assert_array_equal(generate(m2.eval(), music(64), seed=1), generate(m, music(64), seed=1))
 
 
 def test_style_memory_is_added_to_an_older_checkpoint_only_from_its_own_training_motion():
@@ -707,7 +708,7 @@ def test_energy_control_favours_calm_or_lively_movements_and_1_changes_nothing()
     assert np.all(np.diff(z) > 0) and abs(z.mean()) < 1e-5 and abs(z.std() - 1) < 1e-4  # the speeds' order
     np.testing.assert_array_equal(z, code_energy(s._members, m.member_count.numpy(), m.config.seg))
     x = music(800)
-    np.testing.assert_array_equal(m.generate(x, seed=3, energy=1.0), m.generate(x, seed=3))
+    np.testing.assert_array_equal(generate(m, x, seed=3, energy=1.0), generate(m, x, seed=3))
     drawn = {}
     for e in (0.0, 1.0, 2.0):
         st = DanceStream(m, seed=3)
@@ -717,7 +718,7 @@ def test_energy_control_favours_calm_or_lively_movements_and_1_changes_nothing()
     assert drawn[0.0] < drawn[1.0] - 0.5 and drawn[2.0] > drawn[1.0] + 0.5, drawn
     from models.generate import run_model  # performer generate's path takes it too; other models refuse it
 
-    np.testing.assert_array_equal(run_model(m, x, seed=3, energy=0.0), m.generate(x, seed=3, energy=0.0))
+    np.testing.assert_array_equal(run_model(m, x, seed=3, energy=0.0), generate(m, x, seed=3, energy=0.0))
     with pytest.raises(ConfigError, match="has no energy control"):
         run_model(build_model("causal", {"feature_dim": 10}), x, energy=1.5)
     for bad in (-0.1, 2.5, float("nan"), "high", None):
@@ -769,10 +770,10 @@ def test_a_lead_puts_the_beat_moves_that_many_frames_earlier():
     m = DanceVQ(BEAT).eval()
     turning_exemplars(m)
     x = beat_music(900)
-    v0 = speed_by_beat_phase(m.generate(x, seed=2))
+    v0 = speed_by_beat_phase(generate(m, x, seed=2))
     assert v0[[0, -1]].max() < 0.75 * 3.0 < 1.25 * 3.0 < v0[7]  # lead 0: slowest on the beat
     for ms, frames in ((67.0, 2), (133.0, 4), (200.0, 6)):
-        led = m.generate(x, seed=2, lead=ms)
+        led = generate(m, x, seed=2, lead=ms)
         np.testing.assert_allclose(speed_by_beat_phase(led, lead=frames), v0, atol=0.25)
         v = speed_by_beat_phase(led)
         assert v[[0, -1]].max() > 1.25 * v0[[0, -1]].max()  # not on the audio's beat any more
@@ -786,7 +787,7 @@ def test_a_lead_streams_like_the_whole_song_reads_no_audio_ahead_and_changes_at_
     turning_exemplars(m)
     x = beat_music(600)
     for ms in (0.0, 67.0, 133.0, 200.0):
-        whole = m.generate(x, seed=2, lead=ms)
+        whole = generate(m, x, seed=2, lead=ms)
         s, parts, i = DanceStream(m, seed=2, lead_ms=ms), [], 0
         for k in np.random.default_rng(int(ms)).integers(0, 13, size=600):
             parts.append(s.push(x[i: i + k]))
@@ -799,23 +800,23 @@ def test_a_lead_streams_like_the_whole_song_reads_no_audio_ahead_and_changes_at_
         assert len(steps.codes_drawn) == 4  # code steps on frames 0, 8, 16, ... whatever the lead (the stagger's)
         y = x.copy()
         y[300:] = beat_music(300, period=11.0, seed=9)  # other music from frame 300 on
-        np.testing.assert_array_equal(m.generate(y, seed=2, lead=ms)[:300], whole[:300])  # never heard early
+        np.testing.assert_array_equal(generate(m, y, seed=2, lead=ms)[:300], whole[:300])  # never heard early
     # a live change takes effect at the next code step (frame 104 after a call at frame 100), without a jump
     s = DanceStream(m, seed=2)
     before = s.push(x[:100])
     s.set_lead(133.0)
     after = s.push(x[100:])
-    plain = m.generate(x, seed=2)
+    plain = generate(m, x, seed=2)
     np.testing.assert_allclose(np.concatenate([before, after])[:104], plain[:104], atol=1e-6)
     assert not np.allclose(after[4:40], plain[104:140], atol=1e-3)
     steps = quat_angles_deg(after[1:], after[:-1]).max(1)
     assert steps[:10].max() < 2.0 * quat_angles_deg(plain[61:], plain[60:-1]).max()
     assert s.lead_ms == 133.0 and LEAD_RANGE_MS == (0.0, 200.0)
     s.reset()  # the lead is a setting: a reset keeps it, as style and energy
-    np.testing.assert_allclose(s.push(x), m.generate(x, seed=2, lead=133.0), atol=1e-5)
+    np.testing.assert_allclose(s.push(x), generate(m, x, seed=2, lead=133.0), atol=1e-5)
     from models.generate import run_model  # performer generate's path takes it too; other models refuse it
 
-    np.testing.assert_array_equal(run_model(m, x, seed=2, lead=67.0), m.generate(x, seed=2, lead=67.0))
+    np.testing.assert_array_equal(run_model(m, x, seed=2, lead=67.0), generate(m, x, seed=2, lead=67.0))
     with pytest.raises(ConfigError, match="has no lead control"):
         run_model(build_model("causal", {"feature_dim": 10}), x[:, :10], lead=67.0)
     for bad in (-1.0, 250.0, float("nan"), "soon", None):

@@ -18,11 +18,12 @@ _spec.loader.exec_module(ec)
 
 def test_measure_song_tracks_the_control_on_a_model_whose_codes_differ_in_speed(tmp_path):
     from models.evaluation.evaluate import positions
+    from models.networks.dance_stream import generate
     from test_dance_vq import music, speed_model
 
     m = speed_model(np.linspace(0.5, 8.0, 16))
     x = music(600)
-    real = positions(m.generate(x, seed=1))  # any moving reference: the ratios are relative to it
+    real = positions(generate(m, x, seed=1))  # any moving reference: the ratios are relative to it
     traces: dict = {}
     row = ec.measure_song(m, x, real, (0.0, 1.0, 2.0), seed=0, traces=traces)
     assert list(row) == ["0", "1", "2"] and set(traces) == {"0", "1", "2"}

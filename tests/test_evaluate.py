@@ -154,7 +154,7 @@ def test_clip_first_frame_is_where_its_features_start(eval_run):
     from models.data.dwm import load_dance
     from models.features.audio_io import load_audio
     from models.features.spectral import FeatureConfig, extract_features
-    from models.training.corpus import build_corpus
+    from models.data.corpus import build_corpus
 
     _, cache, root = eval_run
     _, names = split_dances(root, EvalOptions(dances_per_style=1))

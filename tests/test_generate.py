@@ -6,6 +6,8 @@ import re
 from pathlib import Path
 
 import numpy as np
+
+from models.networks.dance_stream import generate as stream_generate
 import pytest
 import soundfile as sf
 import torch
@@ -116,16 +118,16 @@ def test_energy_reaches_the_dancing_model_and_other_models_refuse_it(tmp_path, c
 
 
 def test_lead_reaches_the_dancing_model_and_other_models_refuse_it(tmp_path, capsys, tiny):
-    """performer generate --lead: the dance_vq default writes its lead stream (DanceVQ.generate's
+    """performer generate --lead: the dance_vq default writes its lead stream (dance_stream.generate's
     with that lead), a causal U-Net refuses it in one line, an out-of-range lead is a one-line error."""
     clip = bundled_clip_path()
     code, _, err = run_main(capsys, "generate", clip, "--out", tmp_path / "l.npz", "--lead", "133")
     assert code == 0, err
     lm = load_model(None)
     feats = extract_features(load_audio(clip, SAMPLE_RATE)[0], lm.features)
-    expected = lm.model.generate(feats, seed=0, lead=133.0)
+    expected = stream_generate(lm.model, feats, seed=0, lead=133.0)
     np.testing.assert_allclose(poses_of(tmp_path / "l.npz"), expected, atol=1e-5)
-    assert not np.allclose(expected, lm.model.generate(feats, seed=0), atol=1e-3)
+    assert not np.allclose(expected, stream_generate(lm.model, feats, seed=0), atol=1e-3)
     code, _, err = run_main(capsys, "generate", clip, "--out", tmp_path / "x.npz", "--lead", "67",
                             "--checkpoint", tiny)
     assert code == 2 and "has no lead control" in err and "Traceback" not in err

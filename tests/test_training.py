@@ -34,9 +34,9 @@ from models.rig.skeleton import load_default_skeleton
 from models.timebase import FPS, SAMPLE_RATE
 from models.training import losses
 from models.training import train as train_module
-from models.training.canonical import canonicalize, heading
+from models.data.canonical import canonicalize, heading
 from models.training.config import TrainConfig
-from models.training.corpus import build_corpus
+from models.data.corpus import build_corpus
 from models.training.train import LOG_FIELDS, train
 from realtime import cli
 

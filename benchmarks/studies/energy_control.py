@@ -2,7 +2,7 @@
 
 For every validation dance (``models.data.split``, the split ``performer evaluate`` uses)
 the checkpoint generates the whole tempo-1 corpus clip from the song's features once per
-energy level (``DanceVQ.generate(..., energy=e)``: the live stream's frames, all at once;
+energy level (``dance_stream.generate(model, ..., energy=e)``: the live stream's frames, all at once;
 the same seed for every level, so the levels differ only by the control), and each dance
 is compared with the real dancer's on the same song (forward kinematics of both):
 

@@ -4,7 +4,7 @@ A display chain (renderer, projector, LED wall, stream encoder) shows the pose s
 audio time t at t + D. With ``--lead D`` the performer sends the pose it takes at t + D,
 so the audience sees it on time. For each validation dance of the DWM dataset and each
 lead L (ms; L frames at 30 fps, ``round(L * 30 / 1000)``), the dancing checkpoint's live
-stream (``DanceVQ.generate(..., lead=L)``: a fresh stream fed the song's frames, as
+stream (``dance_stream.generate(model, ..., lead=L)``: a fresh stream fed the song's frames, as
 ``performer run`` feeds them) is scored as the audience sees it behind a display of delay
 L: its kinematic beats (``models.evaluation.beats.kinematic_beats``) shifted L frames
 later, against the music beats ``performer evaluate`` scores with (``librosa.beat.beat_track``
@@ -61,13 +61,14 @@ def measure_song(model, features: np.ndarray, mus: np.ndarray, leads: Sequence[f
     motion with no delay. ``leads[0]`` must be 0."""
     from models.evaluation.beats import kinematic_beats
     from models.evaluation.evaluate import positions
+    from models.networks.dance_stream import generate as stream_generate
 
     from models.evaluation.beats import chance_hit_rate
 
     out: dict = {f"{ms:g}": {"seen": [0, 0], "no_lead": [0, 0], "undelayed": [0, 0]} for ms in leads}
     out["chance"] = chance_hit_rate(mus, len(features))
     for seed in seeds:
-        kins = {ms: kinematic_beats(positions(model.generate(features, seed=seed, lead=ms))) for ms in leads}
+        kins = {ms: kinematic_beats(positions(stream_generate(model, features, seed=seed, lead=ms))) for ms in leads}
         for ms in leads:
             d, row = lead_frames(ms), out[f"{ms:g}"]
             for key, kin, delay in (("seen", kins[ms], d), ("no_lead", kins[leads[0]], d), ("undelayed", kins[ms], 0)):

@@ -3,7 +3,7 @@
 Two real WebSocket servers (``realtime.ws_server.WebSocketSink``, serving
 ``clients/web/dist`` exactly as ``performer run --ws`` does) each stream one pose array
 to its own viewer page in headless Chromium: on the left the real dance's canonical
-poses from the training corpus (``models.training.corpus.build_corpus``: in place,
+poses from the training corpus (``models.data.corpus.build_corpus``: in place,
 facing +Z, the form the models learn), on the right what the checkpoint generates from
 the same clip's features (``models.generate.run_model``, as ``performer generate``
 runs it). Both arrays share the 30 fps grid of the clip, so frame t of each side is
@@ -150,7 +150,7 @@ def load_tracks(a: argparse.Namespace) -> Tracks:
     from models.features.audio_io import load_audio
     from models.generate import load_model, run_model
     from models.timebase import HOP, SAMPLE_RATE
-    from models.training.corpus import build_corpus
+    from models.data.corpus import build_corpus
 
     torch.set_num_threads(min(2, torch.get_num_threads()))
     loaded = load_model(a.checkpoint)

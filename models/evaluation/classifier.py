@@ -71,6 +71,12 @@ def make_windows(features: np.ndarray, length: int = WINDOW, hop: int = WINDOW_H
     return np.stack([f[s : s + length] for s in starts])
 
 
+def classifier_windows(pos: Sequence[np.ndarray]) -> np.ndarray:
+    """Style-classifier windows ``(N, 64, C)`` of every sequence of positions ``(T, J, 3)`` m, concatenated."""
+    wins = [make_windows(motion_features(p)) for p in pos]
+    return np.concatenate(wins) if wins else np.zeros((0, 0, 0), np.float32)
+
+
 def _block(c_in: int, c_out: int, stride: int) -> list[nn.Module]:
     return [nn.Conv1d(c_in, c_out, 5, stride=stride, padding=2), nn.BatchNorm1d(c_out), nn.ReLU()]
 

@@ -1,7 +1,7 @@
 """Evaluation driver: generate motion for every validation dance and score it.
 
 For each checkpoint, every dance of the split is generated from its tempo-1 corpus
-clip (:mod:`models.training.corpus`: features and canonical target poses on one
+clip (:mod:`models.data.corpus`: features and canonical target poses on one
 30 fps grid) the way the model runs (:func:`models.generate.run_model`). Generated
 and real poses go through forward kinematics on the default skeleton
 (:func:`models.rig.kinematics.fk`: 21 bone heads + 9 end sites, metres) and are
@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from models.errors import DataError
+from models.evaluation.classifier import classifier_windows
 from models.timebase import FPS, HOP, SAMPLE_RATE
 
 #: Frames per segment of the per-sequence metrics (10 s at 30 fps).
@@ -135,7 +136,7 @@ def validation_names(data_root: str | Path, songs: list[str] | None, opts: EvalO
 
 def load_clips(data_root: str | Path, names: list[str], feature_config, opts: EvalOptions) -> list:
     """Tempo-1 corpus clips of ``names``, cut to ``opts.max_frames``."""
-    from models.training.corpus import build_corpus
+    from models.data.corpus import build_corpus
 
     clips = build_corpus(data_root, names, feature_config, (1.0,), opts.cache_dir, opts.progress)
     if opts.max_frames is not None:
@@ -203,14 +204,6 @@ def real_set(data_root: str | Path, clips: list, with_beats: bool = True, progre
 
 
 # --------------------------------------------------------------------------- classifier
-
-
-def classifier_windows(pos: Sequence[np.ndarray]) -> np.ndarray:
-    """Style-classifier windows ``(N, 64, C)`` of every sequence, concatenated."""
-    from models.evaluation.classifier import make_windows, motion_features
-
-    wins = [make_windows(motion_features(p)) for p in pos]
-    return np.concatenate(wins) if wins else np.zeros((0, 0, 0), np.float32)
 
 
 def style_classifier(train: RealSet, epochs: int, seed: int, cache_dir: str | Path | None):

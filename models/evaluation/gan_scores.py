@@ -28,13 +28,12 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from models.errors import DataError
+from models.evaluation.classifier import classifier_windows
 
 
 def labelled_windows(positions: Sequence[np.ndarray], styles: Sequence[str],
                      class_names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     """Classifier windows of every sequence and the class index of its style."""
-    from models.evaluation.evaluate import classifier_windows
-
     xs, ys = [], []
     for p, s in zip(positions, styles):
         if s not in class_names:

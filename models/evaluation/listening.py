@@ -1,7 +1,7 @@
 """Does the performer listen? Tempo, beat, ramp and presence figures of a dance_vq model (issue 25).
 
 Three sets, all generated offline with the live stream
-(:class:`models.networks.dance_stream.DanceStream`, as :meth:`DanceVQ.generate` runs it,
+(:class:`models.networks.dance_stream.DanceStream`, as :func:`models.networks.dance_stream.generate` runs it,
 pushed frame by frame so its idle weight is read after every frame), scored on FK
 positions of the default skeleton (``(T, 30, 3)`` m at 30 fps). docs/metrics.md has one
 paragraph per figure; ``benchmarks/listening.py`` and ``performer evaluate --listening``
@@ -305,7 +305,7 @@ def perform(lm, audio: np.ndarray, seed: int = 0) -> tuple[np.ndarray, np.ndarra
     """(poses (T, P), idle weight after every frame (T,)) of a loaded dance_vq model ``lm``
     (:class:`models.generate.LoadedModel`) on ``audio`` (n,) at 22050 Hz, T = n // HOP:
     features as ``performer generate`` computes them, the live stream pushed frame by frame
-    (the same poses as :meth:`DanceVQ.generate` with ``seed``)."""
+    (the same poses as :func:`models.networks.dance_stream.generate` with ``seed``)."""
     from models.features.spectral import extract_features
     from models.networks.dance_stream import DanceStream
 

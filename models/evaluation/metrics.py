@@ -446,7 +446,7 @@ def in_place(pos: np.ndarray, root: int = 0) -> np.ndarray:
     """Positions ``(T, J, 3)`` m with joint ``root``'s horizontal (x, z) path subtracted.
 
     Y is up, so this keeps every height (hip bounce included) and removes travel over
-    the floor: the frame the models are trained in (``models.training.canonical``),
+    the floor: the frame the models are trained in (``models.data.canonical``),
     where the real dances' root x and z are already 0.
     """
     pos = _positions(pos, "pos")

@@ -7,7 +7,7 @@ Every ``seg`` frames (frame ``t = seg * k``) the stream appends audio token ``k`
 window of the last ``window_codes`` tokens (128 frames), asks the code predictor for the
 next code, draws it from the stream's own seeded generator, and decodes that code's
 ``seg`` poses from the last ``decoder_context`` codes; the frames in between read them
-out. :meth:`DanceVQ.generate` pushes a whole song through a fresh stream, so offline and
+out. :func:`generate` pushes a whole song through a fresh stream, so offline and
 live give the same poses for the same seed and style, however the frames are chunked.
 
 **On the beat.** The decided movement is played back through a beat warp: slower into
@@ -251,7 +251,7 @@ def sign_continuous(windows: np.ndarray) -> np.ndarray:
 
 def _cached_dips(model: DanceVQ, members: np.ndarray, seg: int) -> np.ndarray:
     """:func:`member_dips` of ``model``'s exemplars, kept on the model: the forward kinematics
-    of every exemplar took 0.4-0.6 s, paid by every new stream (each song ``DanceVQ.generate``
+    of every exemplar took 0.4-0.6 s, paid by every new stream (each song :func:`generate`
     runs, each ``build_pipeline``). Recomputed when ``member_poses`` changes (another tensor,
     or the same one written in place: its version counter moves)."""
     t = model.member_poses
@@ -709,3 +709,10 @@ class DanceStream:
             blend_track(out[None], np.ones((1, k)), self._prev_quat)
         self._prev_quat = out[-1, 3:].reshape(-1, 4).copy()
         return out
+
+
+def generate(model: DanceVQ, features: np.ndarray, seed: int = 0, style: str | None = None,
+             energy: float = 1.0, lead: float = 0.0) -> np.ndarray:
+    """Poses (T, P) float32 for features (T, D) at 30 fps: a fresh stream's frames, all at once
+    (``seed``, ``style``, ``energy``, ``lead`` in ms: as :class:`DanceStream` takes them)."""
+    return DanceStream(model, seed=seed, style=style, energy=energy, lead_ms=lead).push(features)

@@ -28,7 +28,7 @@ Timing: pose ``t`` describes the instant feature frame ``t`` ends (30 fps). Code
 covers poses ``8k .. 8k + 7`` and is chosen when feature frame ``8k`` arrives, from audio
 up to that frame: no look-ahead, and the movement of the next 267 ms is committed to at
 its start (anticipation, as a dancer does). :class:`~models.networks.dance_stream.DanceStream`
-runs this frame by frame; :meth:`DanceVQ.generate` runs the same code over a whole song,
+runs this frame by frame; :func:`~models.networks.dance_stream.generate` runs it over a whole song,
 so offline and live are the same arithmetic.
 """
 
@@ -262,8 +262,8 @@ class CodePredictor(nn.Module):
 class DanceVQ(nn.Module):
     """Motion codebook + causal code predictor (see the module docstring); one checkpoint."""
 
-    stochastic: bool = True  # generate(seed=...) samples codes: the same seed gives the same dance
-    takes_style: bool = True  # generate(style=...): auto, chacha, rumba, waltz
+    stochastic: bool = True  # run_model(seed=...) samples codes: the same seed gives the same dance
+    takes_style: bool = True  # run_model(style=...): auto, chacha, rumba, waltz
 
     def __init__(self, config: DanceVQConfig) -> None:
         super().__init__()
@@ -375,12 +375,3 @@ class DanceVQ(nn.Module):
         cdf = (p / p.sum()).cumsum()
         cdf /= cdf[-1]
         return int(cdf.searchsorted(rng.random(), side="right"))
-
-    def generate(self, features: np.ndarray, seed: int = 0, style: str | None = None,
-                 energy: float = 1.0, lead: float = 0.0) -> np.ndarray:
-        """Poses (T, P) float32 for features (T, D): the live stream's frames, all at once
-        (``energy``: :meth:`~models.networks.dance_stream.DanceStream.set_energy`; ``lead``, ms:
-        :meth:`~models.networks.dance_stream.DanceStream.set_lead`)."""
-        from models.networks.dance_stream import DanceStream
-
-        return DanceStream(self, seed=seed, style=style, energy=energy, lead_ms=lead).push(features)

@@ -361,7 +361,7 @@ class DanceToMusic(nn.Module):
         styles, _ = self.style(torch.from_numpy(np.stack(windows)))
         units = self.dance_units(styles, num_units, seed).numpy()
         poses = warp_units(units, beats, t, c.frames_per_beat)
-        poses[:, [0, 2]] = 0.0  # canonical: no horizontal root travel (models.training.canonical)
+        poses[:, [0, 2]] = 0.0  # canonical: no horizontal root travel (models.data.canonical)
         return blend_track(poses[None].astype(np.float32), np.ones((1, t)))
 
 

@@ -202,19 +202,6 @@ class Skeleton:
             raise DataError(f"offsets must be {NUM_POINTS} finite [x, y, z] triples", source=path)
         return cls(offsets=off[:NUM_BONES], end_offsets=off[NUM_BONES:])
 
-    @classmethod
-    def from_positions(
-        cls, world_positions_m: np.ndarray, *, symmetric: bool = False, per_frame: bool = False
-    ) -> "Skeleton":
-        """Fit rest offsets to DWM joint positions (T, 23, 3) in metres.
-
-        See :func:`models.rig.retarget.fit_skeleton` (imported here lazily because the
-        fit needs the retargeting frames, which depend on this module).
-        """
-        from models.rig.retarget import fit_skeleton
-
-        return fit_skeleton(world_positions_m, symmetric=symmetric, per_frame=per_frame)
-
 
 def load_default_skeleton(path: str | Path | None = None) -> Skeleton:
     """The canonical rest skeleton shipped in ``models/assets/humanoid_rest.json``.

@@ -439,7 +439,7 @@ def training_clips(cfg, fcfg, data_root: str | Path, cache_dir: str | Path | Non
     """(the predictor's clips: the trusted dances at every tempo of ``cfg.tempos``; the motion
     clips the codebook and its memory learn from: those plus the other training dances at
     tempo 1)."""
-    from models.training.corpus import build_corpus
+    from models.data.corpus import build_corpus
 
     verified, others, _ = training_dances(cfg, data_root)
     train_clips = build_corpus(data_root, verified, fcfg, tuple(cfg.tempos), cache_dir, progress)
@@ -456,13 +456,13 @@ def train_dance_vq(cfg, data_root: str | Path, out_dir: str | Path, cache_dir: s
     from models.rig.humanoid import BONES
     from models.rig.motion import POSE_DIM
     from models.rig.skeleton import load_default_skeleton
-    from models.training.corpus import build_corpus
-    from models.training.train import _seed_all
+    from models.data.corpus import build_corpus
+    from models.training.sampler import seed_all
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(cfg.threads)
-    _seed_all(cfg.seed)
+    seed_all(cfg.seed)
     opts = DanceVQTrainOptions.from_dict(cfg.dance)
     fcfg = FeatureConfig(**cfg.features)
 

@@ -324,13 +324,13 @@ def train_dtm(cfg, data_root: str | Path, out_dir: str | Path, cache_dir: str | 
     from models.rig.humanoid import BONES
     from models.rig.motion import POSE_DIM
     from models.rig.skeleton import load_default_skeleton
-    from models.training.corpus import build_corpus
-    from models.training.train import _seed_all
+    from models.data.corpus import build_corpus
+    from models.training.sampler import seed_all
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(cfg.threads)
-    _seed_all(cfg.seed)
+    seed_all(cfg.seed)
     opts = DTMTrainOptions.from_dict(cfg.dtm)
     fcfg = FeatureConfig(**cfg.features)
     if fcfg.kind != "logmel_onset":

@@ -54,8 +54,8 @@ from models.training import losses
 from models.training.config import TrainConfig
 from models.training.resume import resume_or_start, save_state
 from models.training.runlog import RunLog
-from models.training.corpus import Clip, build_corpus
-from models.training.train import SegmentSampler, _seed_all
+from models.data.corpus import Clip, build_corpus
+from models.training.sampler import SegmentSampler, seed_all
 
 LOG_FIELDS = ["step", "stage", "loss_rot", "loss_pos", "loss_g_gan", "loss_d", "d_real", "d_fake", "frames_per_s",
               "val_rot_l1", "val_pos_l1_m", "val_energy"]
@@ -297,7 +297,7 @@ def train_gcn(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cach
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(cfg.threads)
-    _seed_all(cfg.seed)
+    seed_all(cfg.seed)
     fcfg = FeatureConfig(**cfg.features)
     opts, net_cfg = GCNTrainOptions.pop_from(dict(cfg.model_config))
     if cfg.segment % TIME_FACTOR:

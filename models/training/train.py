@@ -1,7 +1,7 @@
 """The training loop: regression stage, then regression + conditional GAN stage.
 
-Read top to bottom: data (corpus + segment sampler), models, one step, evaluation,
-checkpoints. Everything the run writes goes to ``out_dir``:
+Read top to bottom: data (corpus + segment sampler of :mod:`models.training.sampler`), models,
+one step, evaluation, checkpoints. Everything the run writes goes to ``out_dir``:
 
 - ``last.pt`` / ``best.pt``: model checkpoints (:mod:`models.networks.checkpoint`);
   ``best.pt`` has the lowest validation rotation L1 seen (with ``ema_decay`` > 0, both
@@ -15,9 +15,7 @@ checkpoints. Everything the run writes goes to ``out_dir``:
 from __future__ import annotations
 
 import json
-import random
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -38,47 +36,9 @@ from models.training import losses
 from models.training.config import TrainConfig
 from models.training.resume import resume_or_start, save_state
 from models.training.runlog import RunLog
+from models.training.sampler import SegmentSampler, seed_all
 from models.training.schedule import learning_rate
-from models.training.corpus import Clip, build_corpus
-
-
-@dataclass
-class Batch:
-    features: torch.Tensor  # (B, D, T)
-    poses: torch.Tensor  # (B, POSE_DIM, T)
-
-
-class SegmentSampler:
-    """Random fixed-length segments, clips weighted by how many segments they hold."""
-
-    def __init__(self, clips: list[Clip], segment: int, rng: np.random.Generator) -> None:
-        self.clips, self.starts = [], []
-        for c in clips:  # valid starts: segments holding no frame of a frozen mocap run
-            if c.num_frames < segment:
-                continue
-            bad = np.concatenate([[0], np.cumsum(~c.valid)])
-            ok = np.flatnonzero(bad[segment:] - bad[:-segment] == 0)
-            if len(ok):
-                self.clips.append(c)
-                self.starts.append(ok)
-        if not self.clips:
-            raise ValueError(f"no clip holds {segment} valid frames in a row")
-        counts = np.array([len(s) for s in self.starts], dtype=np.float64)
-        self.p = counts / counts.sum()
-        self.segment = segment
-        self.rng = rng
-
-    def sample(self, batch_size: int) -> Batch:
-        idx = self.rng.choice(len(self.clips), size=batch_size, p=self.p)
-        feats, poses = [], []
-        for i in idx:
-            c = self.clips[i]
-            s = int(self.rng.choice(self.starts[i]))
-            feats.append(c.features[s : s + self.segment])
-            poses.append(c.poses[s : s + self.segment])
-        f = torch.from_numpy(np.stack(feats)).transpose(1, 2).contiguous()
-        p = torch.from_numpy(np.stack(poses)).transpose(1, 2).contiguous()
-        return Batch(f, p)
+from models.data.corpus import Clip, build_corpus
 
 
 def align_output(model: torch.nn.Module, pred: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -163,12 +123,6 @@ def set_train(model: torch.nn.Module, frozen_norms: list[torch.nn.Module]) -> No
         m.eval()
 
 
-def _seed_all(seed: int) -> None:
-    random.seed(seed)
-    np.random.seed(seed)
-    torch.manual_seed(seed)
-
-
 LOSS_PANELS = (("regression losses", ("loss_rot", "loss_fk", "loss_vel", "loss_acc"), True),
                ("GAN losses", ("loss_g_gan", "loss_d"), False),
                ("beat loss (speed on beats / mean speed)", ("loss_beat",), False),
@@ -249,7 +203,7 @@ def train(cfg: TrainConfig, data_root: str | Path, out_dir: str | Path, cache_di
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(cfg.threads)
-    _seed_all(cfg.seed)
+    seed_all(cfg.seed)
     fcfg = FeatureConfig(**cfg.features)
     if cfg.w_beat > 0 and not fcfg.beat_phase:
         raise ConfigError("w_beat > 0 needs the beat-phase feature columns: set beat_phase = true under [features]")

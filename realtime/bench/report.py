@@ -214,7 +214,7 @@ def _baseline_lines(r: dict, notes: dict[str, str]) -> list[str]:
     if "offline" in r:
         o = r["offline"]
         name = o.get("model", "causal")
-        how = "offline pass (DanceVQ.generate)" if name == "dance_vq" else "windowed"
+        how = "offline pass (dance_stream.generate)" if name == "dance_vq" else "windowed"
         lines += [
             f"## Offline generation of the whole file ({_f(o['audio_s'], 1)} s, {o['threads']} torch threads)",
             "",

@@ -200,7 +200,7 @@ def naive_baseline(net) -> tuple[object | None, str]:
     A causal U-Net has one: :class:`~models.networks.streaming.NaiveWindowGenerator` reruns
     the whole 128-frame window every frame and emits the same poses as the streaming step,
     so the two differ in cost only. A ``dance_vq`` model has none: its stream is its
-    offline pass (:meth:`~models.networks.dance_vq.DanceVQ.generate` pushes the song
+    offline pass (:func:`~models.networks.dance_stream.generate` pushes the song
     through the same :class:`~models.networks.dance_stream.DanceStream`), it carries state
     from code to code (the playing movement, the sampler), and a window rerun from scratch
     would dance a different dance; its predictor already reads its whole 16-code window
@@ -285,7 +285,7 @@ def stream_vs_offline(checkpoint: Path, features: np.ndarray, seed: int = 0, pha
     """Streaming equals offline: the engine's pose model fed ``features`` a few frames per push
     (0-3 frames, seeded: the engine pushes 0, 1 or 2 per audio block) against the offline pass
     (:func:`models.generate.run_model`: ``offline_windowed`` for a causal U-Net,
-    ``DanceVQ.generate`` for dance_vq) on the same features. Returns frames, the chunking
+    ``dance_stream.generate`` for dance_vq) on the same features. Returns frames, the chunking
     and the largest absolute difference of any pose value.
 
     ``phase``: a staggered performer of an ensemble (:attr:`realtime.engine.Performer.phase`):
@@ -389,7 +389,7 @@ def offline_rtf(audio: Path, checkpoint: Path, baseline_checkpoint: Path | None 
     Decoding to 22050 Hz, :func:`~models.features.spectral.extract_features`, then the
     checkpoint's offline pass, :func:`models.generate.run_model` (what ``performer
     generate`` runs: :func:`~models.networks.streaming.offline_windowed`, 128-frame windows,
-    hop 64, batches of 32, for a causal U-Net; :meth:`~models.networks.dance_vq.DanceVQ.generate`
+    hop 64, batches of 32, for a causal U-Net; :func:`~models.networks.dance_stream.generate`
     for dance_vq), and the offline paper generator ("unet_gan", non-causal, windowed;
     random weights unless ``baseline_checkpoint``: same cost). Wall and process-CPU
     seconds for each stage; current torch thread setting. The checkpoint's figures are

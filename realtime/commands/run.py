@@ -128,7 +128,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     m.add_argument("--offset-ms", type=float, metavar="MS",
                    help="positive: delay output by MS and add MS to audio_time; negative: only subtract from "
                         "audio_time (a lead is only possible for receivers that schedule by audio_time)")
-    m.add_argument("--warmup", type=float, metavar="S", help="seconds of silence run at start (default 3)")
+    m.add_argument("--warmup", type=float, metavar="S",
+                   help="seconds of silence run at start, after 1 s of noise that readies the compiled kernels "
+                        "(default 3; 0: no warm-up)")
     e = p.add_argument_group("ensemble (docs/show.md)")
     e.add_argument("--performer", action="append", metavar="NAME[,KEY=VALUE...]",
                    help="one performer of an ensemble on the same audio input; repeat for each. Keys: checkpoint, "
@@ -269,6 +271,7 @@ def _describe(sinks, source, pipeline, control=None) -> str:
 def run(args: argparse.Namespace) -> int:
     from realtime.config import resolve_run_config
     from realtime.engine import Engine, EngineConfig
+    from realtime.kernels import uncached_kernels
     from realtime.pipeline import build_pipeline
     from realtime.status import StatusLine
 
@@ -312,6 +315,10 @@ def run(args: argparse.Namespace) -> int:
             print("\n".join(f"performer run: {line}" for line in lines), file=sys.stderr)
         else:
             print(f"performer run: {_describe(sinks, source, pipeline, control)}", file=sys.stderr)
+    compiling = [] if args.quiet or not cfg.warmup else uncached_kernels()
+    if compiling:  # a first run (empty numba cache): the warm-up compiles them, seconds to a minute
+        print(f"performer run: compiling the live path's {len(compiling)} numba kernels (first run only: "
+              f"they are cached for the next)...", file=sys.stderr)
     try:
         engine.start()
     except BaseException:
@@ -322,6 +329,8 @@ def run(args: argparse.Namespace) -> int:
         if server is not None:
             server.close()
         raise
+    if compiling:
+        print(f"performer run: warm-up done in {engine.warmup_seconds:.1f} s", file=sys.stderr)
     if control is not None:
         control.start()
     status = None if args.quiet else StatusLine(lambda: _stats(engine, control))

@@ -5,7 +5,7 @@ Alignment: feature frame ``f`` of a song ends at audio time ``(f + 1) / 30`` s
 (:func:`models.features.spectral.frame_time_s`). Target poses are the mocap joint
 positions resampled by cubic spline at exactly those times (within the span the
 mocap covers, :func:`models.data.alignment.motion_timestamps`), retargeted onto the
-humanoid rig and canonicalised (:mod:`models.training.canonical`). So pose ``t`` of a
+humanoid rig and canonicalised (:mod:`models.data.canonical`). So pose ``t`` of a
 clip and feature ``t`` describe the same instant, and the pose never depends on
 audio after it.
 
@@ -34,7 +34,7 @@ from models.features.audio_io import load_audio
 from models.features.spectral import FeatureConfig, extract_features, frame_time_s
 from models.rig.retarget import retarget
 from models.rig.skeleton import load_default_skeleton
-from models.training.canonical import canonicalize
+from models.data.canonical import canonicalize
 from models.timebase import FPS, SAMPLE_RATE
 
 CORPUS_VERSION = 1
