@@ -92,12 +92,17 @@ WARP_PULL: float = 0.05
 #: against 1.20x over the listening set's songs, 1.25x over 0.8x). False plays every
 #: movement at its own pace.
 FOLLOW_TEMPO: bool = True
+#: The tempo also chooses: the code logits move by ``TEMPO_GAIN * log2(T / T_ref) * z``, z each
+#: code's movement speed (as the energy control's), so faster music favours livelier movements
+#: as well as playing them faster (the predictor alone picks natively slower exemplars for
+#: faster music as often as not).
+TEMPO_GAIN: float = 5.0
 #: Playback rates a movement may take (a movement plays ``r * seg`` of its exemplar's frames
 #: over its ``seg`` frames; its window holds ``2 seg``).
 RATE_RANGE: tuple[float, float] = (0.55, 1.75)
 #: Follower confidence (:attr:`~models.networks.tempo.TempoFollower.confidence`) below which the
 #: rate is blended towards 1 (no clear pulse: the movements' own pace).
-RATE_CONFIDENCE: float = 0.3
+RATE_CONFIDENCE: float = 0.15
 #: Quantile of the exemplars' mean joint speeds that no movement's played speed exceeds.
 SPEED_CAP: float = 0.98
 #: Classifier-free guidance of a requested style (Ho & Salimans 2021): the logits move from
@@ -538,6 +543,9 @@ class DanceStream:
             bias = self._energy_bias  # read once: the control thread may swap it
             if bias is not None:  # livelier or calmer codes (set_energy)
                 logits = logits + bias
+            tilt = self._tempo_tilt()
+            if tilt != 0.0:  # faster music, livelier movements (TEMPO_GAIN)
+                logits = logits + tilt * self._code_energy
             self._tokens.append(token)
             # the next step's window but its newest token is known now: its layers run on the frames between
             nxt = list(self._tokens)[-(pred.window - 1):]
@@ -578,6 +586,14 @@ class DanceStream:
         self._play(best, self._rate_for(*pairs[i]))
         self._commit(pairs[i][0])
         self._has_cont = True
+
+    def _tempo_tilt(self) -> float:
+        """:data:`TEMPO_GAIN` times the music's tempo over the memory's mean tempo, in octaves,
+        times the follower's confidence (0 without a tempo or with FOLLOW_TEMPO off)."""
+        period = self._tempo.period
+        if not FOLLOW_TEMPO or TEMPO_GAIN == 0.0 or period <= 0.0 or self._ref_period <= 0.0:
+            return 0.0
+        return TEMPO_GAIN * math.log2(self._ref_period / period) * min(1.0, self._tempo.confidence / RATE_CONFIDENCE)
 
     def _rate_for(self, code: int, member: int) -> float:
         """The playback rate of exemplar ``member`` of ``code`` now (:data:`FOLLOW_TEMPO`; the
