@@ -1,0 +1,140 @@
+"""Tempo following (issue 25 part 1): models/networks/tempo.py and DanceStream's playback rate."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import librosa
+import numpy as np
+import pytest
+
+import models.networks.dance_stream as ds
+from models.features.audio_io import load_audio
+from models.features.spectral import extract_features
+from models.generate import load_model
+from models.networks.tempo import (TEMPO_RANGE, TempoFollower, fold_period, onset_density, song_period,
+                                   track_periods)
+from models.timebase import FPS
+
+
+def pulse_columns(period: float, frames: int, onsets_per_beat: int = 2, clarity: float = 0.5,
+                  reported_octave: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(logp, clarity, onset) columns of a steady pulse of ``period`` frames with
+    ``onsets_per_beat`` evenly spaced onsets a beat; the tracker reports the period
+    ``2 ** reported_octave`` times too long (an octave slip)."""
+    t = np.arange(frames)
+    step = period / onsets_per_beat
+    onset = np.zeros(frames)
+    onset[np.round(np.arange(0, frames, step)).astype(int).clip(0, frames - 1)] = 1.0
+    logp = np.full(frames, math.log2(period / 15.0) + reported_octave)
+    return logp, np.full(frames, clarity), onset + 0.01 * np.sin(t)
+
+
+def test_fold_period_brings_any_tempo_into_the_danced_range():
+    lo, hi = (60.0 * FPS / b for b in reversed(TEMPO_RANGE))
+    for bpm in (20, 45, 59, 60, 100, 169, 180, 200, 400):
+        p = fold_period(60.0 * FPS / bpm)
+        assert lo - 1e-9 <= p <= hi + 1e-9
+        assert math.log2(p * bpm / (60.0 * FPS)) % 1 == pytest.approx(0.0, abs=1e-9)  # whole octaves
+    assert 60.0 * FPS / fold_period(60.0 * FPS / 180) == pytest.approx(90.0)  # drum and bass: half time
+    assert 60.0 * FPS / fold_period(60.0 * FPS / 100) == pytest.approx(100.0)
+
+
+def test_onset_density_counts_onsets_per_second():
+    _, _, onset = pulse_columns(15.0, 240, onsets_per_beat=2)  # 120 bpm, eighth notes: 4 a second
+    assert onset_density(onset) == pytest.approx(4.0, abs=0.2)
+    assert onset_density(onset[:30]) == 0.0  # under 2 s: unknown
+
+
+def test_the_follower_picks_the_same_metrical_level_whatever_octave_the_tracker_reports():
+    for slip in (-1, 0, 1):
+        logp, c, onset = pulse_columns(20.0, 600, reported_octave=slip)
+        assert track_periods(logp, c, onset)[-1] == pytest.approx(20.0, rel=0.02)
+
+
+def test_a_stretched_pulse_gives_a_stretched_tempo():
+    """The octave is chosen by onsets a beat, which stretching does not change: the same
+    pattern 1.25x faster and 0.8x slower keeps its ratio (the tracker's prior would not)."""
+    periods = {}
+    for rate in (0.8, 1.0, 1.25):
+        logp, c, onset = pulse_columns(18.0 / rate, 900)
+        periods[rate] = song_period(logp, c, onset)
+    assert periods[0.8] / periods[1.25] == pytest.approx(1.25 / 0.8, rel=0.03)
+
+
+def test_the_follower_ignores_one_frame_octave_slips_and_follows_a_tempo_change():
+    logp, c, onset = pulse_columns(20.0, 600)
+    logp[300::7] += 1.0  # the tracker jumps an octave now and then
+    p = track_periods(logp, c, None)
+    assert p[-1] == pytest.approx(20.0, rel=0.05)
+    logp2, c2, _ = pulse_columns(16.0, 600)  # the music speeds up 1.25x
+    f = TempoFollower()
+    for lp, cc in zip(np.concatenate([logp[:300], logp2[:300]]), np.concatenate([c[:300], c2[:300]])):
+        f.update(float(lp), float(cc))
+    assert f.period == pytest.approx(16.0, rel=0.03)  # within 10 s, well settled
+
+
+def test_the_stream_follower_is_the_offline_arithmetic():
+    lm = load_model(None)
+    y = load_audio("models/assets/clip.ogg")[0][: 12 * 22050]
+    feats = extract_features(y, lm.features)
+    s = ds.DanceStream(lm.model, seed=0)
+    cc, oc = lm.model.config.clarity_col, lm.model.config.onset_col
+    offline = track_periods(feats[:, cc + 1], feats[:, cc], feats[:, oc])
+    live = []
+    for t in range(len(feats)):
+        s.push(feats[t: t + 1])
+        live.append(s._tempo.period)
+    np.testing.assert_allclose(live, offline, rtol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def clip_stretched():
+    lm = load_model(None)
+    y = load_audio("models/assets/clip.ogg")[0]
+    return lm, {r: extract_features(librosa.effects.time_stretch(y, rate=r), lm.features) for r in (0.8, 1.25)}
+
+
+def _speed(lm, feats: np.ndarray) -> tuple[float, float]:
+    from models.evaluation.evaluate import positions
+
+    s = ds.DanceStream(lm.model, seed=0)
+    pos = positions(s.push(feats)[90:])
+    return float(np.linalg.norm(np.diff(pos, axis=0), axis=-1).mean() * FPS), 60.0 * FPS / s._tempo.period
+
+
+@pytest.mark.slow
+def test_the_same_music_faster_is_danced_faster(clip_stretched, monkeypatch):
+    """The bundled clip at 1.25x against 0.8x: the follower hears 1.56x the tempo and the
+    performer moves faster (2.06x measured; 0.95x with FOLLOW_TEMPO off, checked)."""
+    lm, feats = clip_stretched
+    (slow, t_slow), (fast, t_fast) = _speed(lm, feats[0.8]), _speed(lm, feats[1.25])
+    assert t_fast / t_slow == pytest.approx(1.25 / 0.8, rel=0.08)
+    assert fast / slow > 1.4
+    monkeypatch.setattr(ds, "FOLLOW_TEMPO", False)
+    (slow0, _), (fast0, _) = _speed(lm, feats[0.8]), _speed(lm, feats[1.25])
+    assert fast0 / slow0 < 1.2  # the movements' own pace: the tempo is what made the difference
+
+
+def test_a_checkpoint_without_a_tempo_memory_plays_every_movement_at_its_own_pace():
+    lm = load_model(None)
+    s = ds.DanceStream(lm.model, seed=0)
+    assert s._ref_period > 0
+    s._ref_period = 0.0  # what an older checkpoint (member_period all zero) gives
+    s._tempo.update(0.0, 0.5)
+    assert s._rate_for(0, 0) == 1.0 and s._tempo_tilt() == 0.0
+
+
+def test_clip_periods_give_stretched_copies_of_a_song_the_same_octave():
+    from models.training.dance_vq import clip_periods
+
+    logp, c, onset = pulse_columns(20.0, 900)
+    cfg = SimpleNamespace(clarity_col=1, onset_col=0, feature_dim=3)
+    model = SimpleNamespace(config=cfg)
+    feats = np.stack([onset, c, logp], axis=1)
+    base = SimpleNamespace(name="DANCE_X_1", tempo=1.0, features=feats)
+    fast = SimpleNamespace(name="DANCE_X_1", tempo=1.25, features=feats[::2])  # its own columns are ignored
+    out = clip_periods(model, [base, fast])
+    assert out[id(fast)] == pytest.approx(out[id(base)] / 1.25, rel=1e-9)
+    assert out[id(base)] == pytest.approx(song_period(logp, c, onset), rel=1e-9)
