@@ -200,18 +200,40 @@ def classifier_windows(pos: Sequence[np.ndarray]) -> np.ndarray:
     return np.concatenate(wins) if wins else np.zeros((0, 0, 0), np.float32)
 
 
+def classifier_cache_key(x: np.ndarray, y: np.ndarray, epochs: int, seed: int, styles: Sequence[str]) -> str:
+    """12 hex digits of sha1 over everything a trained style classifier depends on.
+
+    Its training windows ``x`` (N, 64, C) float32 and labels ``y`` (N,) byte for byte (so
+    the dances, their corpus poses, the FK and the numpy/scipy that computed them), the
+    epochs, seed and class names, the classifier's code (the bytes of
+    ``models/evaluation/classifier.py``: architecture and training loop), the torch version,
+    the CPU kernels torch uses (``torch.backends.cpu.get_cpu_capability()``) and the training
+    thread count (:data:`~models.evaluation.classifier.TRAIN_THREADS`): the weights depend
+    on each of them, and FD, diversity and GAN-test with the weights.
+    """
+    import torch
+
+    from models.evaluation import classifier as clf
+
+    h = hashlib.sha1()
+    h.update(np.ascontiguousarray(x, dtype=np.float32).tobytes())
+    h.update(np.ascontiguousarray(y, dtype=np.int64).tobytes())
+    h.update(Path(clf.__file__).read_bytes())
+    h.update(json.dumps([list(x.shape), int(epochs), int(seed), list(styles), torch.__version__,
+                         torch.backends.cpu.get_cpu_capability(), clf.TRAIN_THREADS]).encode())
+    return h.hexdigest()[:12]
+
+
 def style_classifier(train: RealSet, epochs: int, seed: int, cache_dir: str | Path | None):
     """Style classifier trained on real training motion; cached under ``cache_dir``.
 
-    The cache key covers the dance names, their frame counts, the epochs and the seed.
+    The file is ``style-classifier-<key>.pt`` with the key of :func:`classifier_cache_key`,
+    so a classifier trained on other motion, by other code, torch or CPU kernels is never
+    reused (each would give other FD figures); the key is the model's ``cache_key``.
     """
     from models.evaluation.classifier import load_classifier, save_classifier, train_style_classifier
 
     styles = sorted({c.style for c in train.clips})
-    key = json.dumps([[c.name, c.num_frames] for c in train.clips] + [epochs, seed, styles])
-    path = Path(cache_dir) / f"style-classifier-{hashlib.sha1(key.encode()).hexdigest()[:12]}.pt" if cache_dir else None
-    if path is not None and path.is_file():
-        return load_classifier(path)
     if len(styles) < 2:
         raise DataError(f"the style classifier needs at least 2 styles in the training dances, got {styles}")
     xs, ys = [], []
@@ -222,12 +244,18 @@ def style_classifier(train: RealSet, epochs: int, seed: int, cache_dir: str | Pa
     x, y = np.concatenate(xs), np.concatenate(ys)
     if len(x) == 0:
         raise DataError("training clips are shorter than one classifier window (64 frames)")
-    model = train_style_classifier(x, y, epochs=epochs, seed=seed, class_names=styles)
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp")
-        save_classifier(model, tmp)
-        tmp.replace(path)
+    key = classifier_cache_key(x, y, epochs, seed, styles)
+    path = Path(cache_dir) / f"style-classifier-{key}.pt" if cache_dir else None
+    if path is not None and path.is_file():
+        model = load_classifier(path)
+    else:
+        model = train_style_classifier(x, y, epochs=epochs, seed=seed, class_names=styles)
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix(".tmp")
+            save_classifier(model, tmp)
+            tmp.replace(path)
+    model.cache_key = key
     return model
 
 
@@ -297,8 +325,7 @@ def score(gen_pos: list[np.ndarray], gen_poses: list[np.ndarray], real: RealSet,
     """
     from tqdm import tqdm
 
-    from models.evaluation.classifier import embed
-    from models.evaluation.metrics import band_ratios, diversity, energy_ratio, frechet_distance, jerk
+    from models.evaluation.metrics import band_ratios
 
     per_dance: dict[str, dict[str, float]] = {}
     weighted: dict[str, float] = {}
@@ -313,18 +340,28 @@ def score(gen_pos: list[np.ndarray], gen_poses: list[np.ndarray], real: RealSet,
         bands = band_ratios(pg, pr)
         per_dance[c.name] = {**m, "band_amp": bands["band_amp"], "jitter": bands["jitter"]}
     row = {k: v / frames for k, v in weighted.items()}
-    row.update(pooled_beats(gen_pos, real.beats))
+    row.update(set_metrics(gen_pos, real, real_emb, classifier))
+    return row, per_dance
+
+
+def set_metrics(gen_pos: list[np.ndarray], real: RealSet, real_emb: np.ndarray, classifier) -> dict[str, float]:
+    """The row's set-level metrics of generated FK positions ``(T, 30, 3)`` m (same dance order as
+    ``real``): beat coverage, hit rate and chance, FD against ``real_emb``, diversity, energy
+    ratio, jerk (m/s³) and the band ratios ``band_amp`` and ``jitter``."""
+    from models.evaluation.classifier import embed
+    from models.evaluation.metrics import band_ratios, diversity, energy_ratio, frechet_distance, jerk
+
     emb = embed(classifier, _windows_or_fail(gen_pos))
     bands = band_ratios(gen_pos, real.positions)
-    row.update(
-        fd=frechet_distance(emb, real_emb),
-        diversity=diversity(emb),
-        energy_ratio=energy_ratio(gen_pos, real.positions),
-        jerk=jerk(gen_pos),
-        band_amp=bands["band_amp"],
-        jitter=bands["jitter"],
-    )
-    return row, per_dance
+    return {
+        **pooled_beats(gen_pos, real.beats),
+        "fd": frechet_distance(emb, real_emb),
+        "diversity": diversity(emb),
+        "energy_ratio": energy_ratio(gen_pos, real.positions),
+        "jerk": jerk(gen_pos),
+        "band_amp": bands["band_amp"],
+        "jitter": bands["jitter"],
+    }
 
 
 def band_rms_m(pos: Sequence[np.ndarray]) -> dict[str, float]:
@@ -474,6 +511,7 @@ def evaluate(checkpoints: Sequence[str | Path], data_root: str | Path, opts: Eva
         "dances": eval_names,
         "frames": [c.num_frames for c in real.clips],
         "classifier_train_dances": [c.name for c in train.clips],
+        "classifier_key": classifier.cache_key,
     }
     return results, details
 
