@@ -100,6 +100,20 @@ def test_style_classifier_cache_is_keyed_by_the_motion_it_learns(tmp_path):
     assert style_classifier(_toy_train_set(), 2, 0, tmp_path).cache_key not in (a.cache_key, moved.cache_key)
 
 
+@pytest.mark.data
+def test_the_default_evaluation_judges_with_the_packaged_classifier(dwm_root):
+    """The training split at 10 epochs, seed 0 gets the shipped classifier (the same on every machine), not a fresh one."""
+    from models.evaluation.evaluate import PACKAGED_CLASSIFIER, RealSet, packaged_classifier, style_classifier
+
+    train, _ = split_dances(dwm_root, EvalOptions())
+    judge = packaged_classifier(train, 10, 0)
+    assert judge is not None and judge.class_names == ["C", "R", "W"] and judge.trained_on["dances"] == train
+    assert packaged_classifier(train, 9, 0) is None and packaged_classifier(train[1:], 10, 0) is None
+    clips = [type("Clip", (), {"name": n, "style": n.split("_")[1]})() for n in train]
+    used = style_classifier(RealSet(clips, [], []), 10, 0, None)  # no motion needed: it is not trained
+    assert used.cache_key == judge.cache_key and PACKAGED_CLASSIFIER.parent.name == "assets"
+
+
 def test_style_classifier_weights_do_not_follow_the_callers_thread_count():
     """Trained on 2 threads the weights differ; the classifier trains on TRAIN_THREADS whatever the caller set."""
     import torch

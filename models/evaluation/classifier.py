@@ -192,14 +192,18 @@ def predict(model: StyleClassifier, windows: np.ndarray) -> np.ndarray:
     return model(torch.from_numpy(x)).argmax(dim=1).numpy()
 
 
-def save_classifier(model: StyleClassifier, path: str | os.PathLike) -> None:
-    """Write the classifier (config, class names, weights) to ``path`` with ``torch.save``."""
+def save_classifier(model: StyleClassifier, path: str | os.PathLike, trained_on: dict | None = None) -> None:
+    """Write the classifier (config, class names, weights) to ``path`` with ``torch.save``.
+
+    ``trained_on``: what it learned from (JSON-like: dances, epochs, seed, ...), read back as
+    ``model.trained_on`` (None when not given)."""
     payload = {
         "format": _FORMAT,
         "version": _VERSION,
         "config": dict(model.config),
         "class_names": model.class_names,
         "state_dict": model.state_dict(),
+        "trained_on": trained_on,
     }
     torch.save(payload, os.fspath(path))
 
@@ -222,4 +226,5 @@ def load_classifier(path: str | os.PathLike) -> StyleClassifier:
     except RuntimeError as exc:
         raise CheckpointError(f"weights do not match the stored config: {exc}", source=path) from None
     model.class_names = payload.get("class_names")
+    model.trained_on = payload.get("trained_on")
     return model.eval()
