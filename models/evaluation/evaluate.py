@@ -207,9 +207,9 @@ def classifier_cache_key(x: np.ndarray, y: np.ndarray, epochs: int, seed: int, s
     the dances, their corpus poses, the FK and the numpy/scipy that computed them), the
     epochs, seed and class names, the classifier's code (the bytes of
     ``models/evaluation/classifier.py``: architecture and training loop), the torch version,
-    the CPU kernels torch uses (``torch.backends.cpu.get_cpu_capability()``) and the training
-    thread count (:data:`~models.evaluation.classifier.TRAIN_THREADS`): the weights depend
-    on each of them, and FD, diversity and GAN-test with the weights.
+    the CPU (:func:`cpu_kernels`) and the training thread count
+    (:data:`~models.evaluation.classifier.TRAIN_THREADS`): the weights depend on each of
+    them, and FD, diversity and GAN-test with the weights.
     """
     import torch
 
@@ -220,8 +220,27 @@ def classifier_cache_key(x: np.ndarray, y: np.ndarray, epochs: int, seed: int, s
     h.update(np.ascontiguousarray(y, dtype=np.int64).tobytes())
     h.update(Path(clf.__file__).read_bytes())
     h.update(json.dumps([list(x.shape), int(epochs), int(seed), list(styles), torch.__version__,
-                         torch.backends.cpu.get_cpu_capability(), clf.TRAIN_THREADS]).encode())
+                         cpu_kernels(), clf.TRAIN_THREADS]).encode())
     return h.hexdigest()[:12]
+
+
+def cpu_kernels() -> list[str]:
+    """What picks torch's float kernels on this machine: ATen's CPU capability, the CPU's feature
+    flags (Linux ``/proc/cpuinfo``; oneDNN trains other weights on an AVX2 CPU than on an AVX-512
+    one, measured with ``ONEDNN_MAX_CPU_ISA=AVX2``) and the variables that cap them."""
+    import os
+    import platform
+
+    import torch
+
+    flags = platform.processor()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            flags = next((line.split(":", 1)[1].strip() for line in f if line.startswith("flags")), flags)
+    except OSError:
+        pass
+    return [torch.backends.cpu.get_cpu_capability(), flags,
+            *(f"{v}={os.environ.get(v, '')}" for v in ("ONEDNN_MAX_CPU_ISA", "ATEN_CPU_CAPABILITY", "MKL_CBWR"))]
 
 
 #: The packaged style classifier: the judge behind FD, diversity, GAN-test and the style
