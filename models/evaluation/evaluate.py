@@ -247,7 +247,7 @@ def cpu_kernels() -> list[str]:
 #: benchmarks, trained once on the training split's real motion (10 epochs, seed 0) and
 #: shipped like FID's fixed network, because one trained afresh differs from machine to
 #: machine (the oneDNN kernels of AVX2 and AVX-512 CPUs, the thread count give other
-#: weights) and FD with it (12.9 to 16.0 for the default, real 4.4 to 5.2). Rewrite it only
+#: weights) and FD with it (8.0 to 16.0 for the default, real 4.4 to 5.2). Rewrite it only
 #: on purpose: ``python -m models.evaluation.evaluate --write-classifier --data DWM``, then
 #: ``python tests/test_eval_reference.py headline --data DWM --write`` and the docs' FD figures.
 PACKAGED_CLASSIFIER = Path(__file__).resolve().parents[1] / "assets" / "style_classifier.pt"
