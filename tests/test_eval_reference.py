@@ -55,13 +55,14 @@ REL = 1e-5
 PACKAGES = ("numpy", "scipy", "librosa", "soundfile", "audioread", "soxr", "numba", "torch")
 DEFAULT_REFERENCE = Path(__file__).resolve().parent / "data" / "default_reference.json"
 #: Relative tolerance of the default's pinned headline numbers (HEADLINE). Measured (2026-11-26,
-#: this file's ``headline`` command): a rerun, 2 torch threads for the generation and feature noise
-#: of 1e-6 of each column's std (float-kernel differences of another CPU or build) move them by
-#: at most 1.5e-7 relative (beat hit rate and fd_real not at all), so 1e-5 leaves 60x room. The
-#: dance is one sample of its code draws: what flips one draw (noise of 1e-4: a different dance)
-#: moves every number but fd_real by 0.85 % (jerk) to 27 % (FD), like a change of the playback
-#: (BEAT_WARP 0: beat hit rate 0.462 -> 0.288; temperature 0.9: jitter 0.925 -> 0.875, FD 12.96
-#: -> 13.92), so no tolerance between the two would be honest: the pins hold the same dance.
+#: this file's ``headline`` command): a rerun, 2 torch threads for the generation, torch's kernels
+#: capped at AVX2 or SSE4.1 (ONEDNN_MAX_CPU_ISA, MKL_CBWR, ATEN_CPU_CAPABILITY: an older CPU) and
+#: feature noise of 1e-6 of each column's std move them by at most 1.5e-7 relative (beat hit
+#: rate not at all), so 1e-5 leaves 60x room. The dance is one sample of its code draws: what
+#: flips one draw (feature noise of 1e-4: another dance) moves every number but fd_real by 0.85 %
+#: (jerk) to 27 % (FD), as much as a change of the playback does (BEAT_WARP 0: beat hit rate
+#: 0.462 -> 0.288; temperature 0.9: jitter 0.925 -> 0.875, FD 12.96 -> 13.92), so a tolerance
+#: wide enough for another dance would pass those changes too: the pins hold the same dance.
 HEADLINE_REL = 1e-5
 
 
