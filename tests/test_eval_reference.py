@@ -17,6 +17,20 @@ Update the reference (docs/install.md, "Updating the pins") only for a change th
 How far the metrics move when the features do (what REL can see):
 
     python tests/test_eval_reference.py perturb --data ../shared/data/dwm 1e-4 1e-3 1e-2
+
+The shipped default (``models/assets/default.pt``) is pinned too, by its headline numbers on
+the whole validation split as ``performer evaluate`` prints them: dance-scale amplitude and
+jitter ratios, jerk, beat hit rate, FD and the real row's FD (the style classifier itself),
+stored in ``tests/data/default_reference.json`` and compared within :data:`HEADLINE_REL`.
+After a meant change of the default's playback (e.g. its tempo following) or checkpoint, print
+the new values in the file's format (about 30 s of CPU), put them in the docs where the old ones
+stand (README, docs/training.md: ``performer evaluate --checkpoint models/assets/default.pt ...``
+prints the same digits) and write them:
+
+    python tests/test_eval_reference.py headline --data ../shared/data/dwm           # print
+    python tests/test_eval_reference.py headline --data ../shared/data/dwm --write   # rewrite
+
+``--noise`` and ``--threads`` print what feature noise or a second torch thread would move.
 """
 
 from __future__ import annotations
@@ -39,6 +53,17 @@ REFERENCE = Path(__file__).resolve().parent / "data" / "eval_reference.json"
 REL = 1e-5
 #: Packages whose versions the reference records (shown when the numbers differ).
 PACKAGES = ("numpy", "scipy", "librosa", "soundfile", "audioread", "soxr", "numba", "torch")
+DEFAULT_REFERENCE = Path(__file__).resolve().parent / "data" / "default_reference.json"
+#: Relative tolerance of the default's pinned headline numbers (HEADLINE). Measured (2026-11-26,
+#: this file's ``headline`` command): a rerun, 2 torch threads for the generation, torch's kernels
+#: capped at AVX2 or SSE4.1 (ONEDNN_MAX_CPU_ISA, MKL_CBWR, ATEN_CPU_CAPABILITY: an older CPU) and
+#: feature noise of 1e-6 of each column's std move them by at most 1.5e-7 relative (beat hit
+#: rate not at all), so 1e-5 leaves 60x room. The dance is one sample of its code draws: what
+#: flips one draw (feature noise of 1e-4: another dance) moves every number but fd_real by 0.85 %
+#: (jerk) to 27 % (FD), as much as a change of the playback does (BEAT_WARP 0: beat hit rate
+#: 0.462 -> 0.288; temperature 0.9: jitter 0.925 -> 0.875, FD 12.96 -> 13.92), so a tolerance
+#: wide enough for another dance would pass those changes too: the pins hold the same dance.
+HEADLINE_REL = 1e-5
 
 
 def sha256(path: Path) -> str:
@@ -49,6 +74,16 @@ def installed_versions() -> dict[str, str]:
     return {p: metadata.version(p) for p in PACKAGES}
 
 
+def noisy(features, noise: float):
+    """``features`` (T, D) plus seeded Gaussian noise of ``noise`` times each column's std (0: unchanged)."""
+    import numpy as np
+
+    if not noise:
+        return features
+    rng = np.random.default_rng(0)
+    return features + (noise * features.std(0) * rng.standard_normal(features.shape)).astype(features.dtype)
+
+
 def per_dance_metrics(data_root: Path, checkpoint: Path, dances: list[str], max_frames: int,
                       noise: float = 0.0) -> dict[str, dict]:
     """Paired metrics of each dance as ``performer evaluate`` computes them (its defaults:
@@ -56,7 +91,6 @@ def per_dance_metrics(data_root: Path, checkpoint: Path, dances: list[str], max_
 
     ``noise``: add seeded Gaussian noise of this fraction of each feature column's standard
     deviation to the features first (how sensitive the metrics are; 0 for the check)."""
-    import numpy as np
     import torch
 
     from models.evaluation.evaluate import EvalOptions, _audio_kw, _quats, load_clips, paired_metrics, positions
@@ -68,10 +102,7 @@ def per_dance_metrics(data_root: Path, checkpoint: Path, dances: list[str], max_
         lm = load_model(checkpoint)
         out = {}
         for clip in load_clips(data_root, dances, lm.features, opts):
-            if noise:
-                rng = np.random.default_rng(0)
-                clip.features = clip.features + (noise * clip.features.std(0) *
-                                                 rng.standard_normal(clip.features.shape)).astype(clip.features.dtype)
+            clip.features = noisy(clip.features, noise)
             with torch.no_grad():
                 poses = run_model(lm.model, clip.features, opts.window, opts.hop, **_audio_kw(lm.model, data_root, clip))
             out[clip.name] = paired_metrics(positions(poses), positions(clip.poses), _quats(poses), _quats(clip.poses),
@@ -134,6 +165,68 @@ def test_shipped_model_evaluates_to_the_stored_numbers(dwm_root: Path) -> None:
         "(make setup installs constraints.txt; docs/install.md)")
 
 
+HEADLINE = ("band_amp", "jitter", "jerk", "beat_hit_rate", "fd", "fd_real")
+
+
+def default_headline(data_root: Path, cache_dir: Path | None, noise: float = 0.0, threads: int = 1) -> dict[str, float]:
+    """The default's headline numbers on the validation split, as ``performer evaluate
+    --checkpoint models/assets/default.pt`` computes them (its defaults: seed 0, one torch
+    thread, the packaged style classifier; corpus clips cached under ``cache_dir``), keyed as
+    :data:`HEADLINE`. ``noise``: feature noise as in :func:`noisy`; ``threads``: torch threads
+    of the generation (both to measure what the pins can see)."""
+    import torch
+
+    from models.evaluation.classifier import embed
+    from models.evaluation.evaluate import (EvalOptions, classifier_windows, load_clips, positions, real_set,
+                                            set_metrics, split_dances, style_classifier)
+    from models.evaluation.metrics import frechet_distance
+    from models.generate import load_model, run_model
+    from models.networks.streaming import torch_threads
+
+    opts = EvalOptions(cache_dir=cache_dir, progress=False)
+    lm = load_model(REPO / "models" / "assets" / "default.pt")
+    train_names, val_names = split_dances(data_root, opts)
+    real = real_set(data_root, load_clips(data_root, val_names, lm.features, opts), progress=False)
+    train = real_set(data_root, load_clips(data_root, train_names, lm.features, opts), False, False)
+    classifier = style_classifier(train, opts.classifier_epochs, opts.seed, cache_dir)
+    real_emb = embed(classifier, classifier_windows(real.positions))
+    with torch_threads(threads), torch.no_grad():
+        gen = [positions(run_model(lm.model, noisy(c.features, noise))) for c in real.clips]
+    row = set_metrics(gen, real, real_emb, classifier)
+    row["fd_real"] = frechet_distance(real_emb, embed(classifier, classifier_windows(train.positions)))
+    return {k: float(row[k]) for k in HEADLINE}
+
+
+def headline_differences(expected: dict[str, float], got: dict[str, float], rel: float = HEADLINE_REL) -> list[str]:
+    """One line per headline number further than ``rel`` (relative) from the pinned one."""
+    return [f"{k}: pinned {expected[k]!r}, now {got[k]!r}"
+            for k in HEADLINE if got[k] != pytest.approx(expected[k], rel=rel, abs=1e-12)]
+
+
+def test_headline_differences_catch_a_moved_number() -> None:
+    ref = json.loads(DEFAULT_REFERENCE.read_text())["headline"]
+    assert set(ref) == set(HEADLINE)
+    assert headline_differences(ref, dict(ref)) == []
+    for k in HEADLINE:
+        near = {**ref, k: ref[k] * (1 + 0.5 * HEADLINE_REL)}
+        far = {**ref, k: ref[k] * (1 - 2 * HEADLINE_REL)}
+        assert headline_differences(ref, near) == [] and len(headline_differences(ref, far)) == 1, k
+
+
+@pytest.mark.slow  # 55-60 s on 2 busy cores, about 25 s of CPU, corpus cached (a fresh clone builds it first)
+@pytest.mark.data
+def test_shipped_default_keeps_its_headline_numbers(dwm_root: Path) -> None:
+    ref = json.loads(DEFAULT_REFERENCE.read_text())
+    assert sha256(REPO / "models" / "assets" / "default.pt") == ref["checkpoint_sha256"], (
+        "models/assets/default.pt is not the file tests/data/default_reference.json was written with; if it "
+        "was replaced on purpose: python tests/test_eval_reference.py headline --data DWM --write")
+    got = default_headline(dwm_root, REPO / ".cache" / "corpus")
+    bad = headline_differences(ref["headline"], got)
+    assert not bad, ("the default's headline numbers on the validation split moved (a meant change: "
+                     "python tests/test_eval_reference.py headline --data DWM --write, and the docs' figures):\n  "
+                     + "\n  ".join(bad))
+
+
 def write_reference(per_dance_json: Path) -> None:
     """Rewrite the reference's numbers from a ``performer evaluate`` run of its command."""
     ref = json.loads(REFERENCE.read_text())
@@ -170,8 +263,27 @@ if __name__ == "__main__":
     p = sub.add_parser("perturb", help="how far the metrics move with noise on the features")
     p.add_argument("--data", type=Path, required=True, help="the DWM dataset directory")
     p.add_argument("scales", type=float, nargs="+", help="noise, as a fraction of each feature column's std")
+    h = sub.add_parser("headline", help="print the default's headline numbers in default_reference.json's format")
+    h.add_argument("--data", type=Path, required=True, help="the DWM dataset directory")
+    h.add_argument("--cache", type=Path, default=REPO / ".cache" / "corpus", help="corpus and classifier cache")
+    h.add_argument("--noise", type=float, default=0.0, help="feature noise (fraction of each column's std)")
+    h.add_argument("--threads", type=int, default=1, help="torch threads of the generation")
+    h.add_argument("--write", action="store_true", help="rewrite tests/data/default_reference.json with them")
     a = parser.parse_args()
+    if a.cmd == "headline" and a.write and (a.noise or a.threads != 1):
+        parser.error("--write takes the unperturbed numbers: leave out --noise and --threads")
     if a.cmd == "write":
         write_reference(a.per_dance)
-    else:
+    elif a.cmd == "perturb":
         perturb(a.data, a.scales)
+    else:
+        values = default_headline(a.data, a.cache, a.noise, a.threads)
+        out = {"checkpoint": "models/assets/default.pt",
+               "checkpoint_sha256": sha256(REPO / "models" / "assets" / "default.pt"),
+               "command": "python tests/test_eval_reference.py headline --data ../shared/data/dwm --write",
+               "versions": installed_versions(), "headline": values}
+        text = json.dumps(out, indent=1) + "\n"
+        print(text, end="")
+        if a.write:
+            DEFAULT_REFERENCE.write_text(text)
+            print(f"wrote {DEFAULT_REFERENCE}")

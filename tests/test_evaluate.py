@@ -70,6 +70,73 @@ def test_pooled_beats_weigh_sequences_by_beats():
     assert pooled["beat_hit_chance"] == pytest.approx((each[0]["beat_hit_chance"] * 300 + each[1]["beat_hit_chance"] * 600) / 900)
 
 
+def _toy_train_set(shift: float = 0.0):
+    """A RealSet of two toy 'dances' (C: slow swing, W: fast), 200 frames of FK-shaped positions."""
+    from models.evaluation.evaluate import RealSet
+
+    t = np.arange(200)[:, None, None] / 30.0
+    clips, pos = [], []
+    for style, freq in (("C", 0.5), ("W", 3.0)):
+        p = np.zeros((200, 30, 3), np.float32) + np.linspace(0, 1.7, 30)[None, :, None]
+        p[..., 0] += (0.3 * np.sin(2 * np.pi * freq * t[..., 0]) + shift).astype(np.float32)
+        clips.append(type("Clip", (), {"name": f"DANCE_{style}_1", "style": style, "num_frames": 200})())
+        pos.append(p)
+    return RealSet(clips, pos, [])
+
+
+def test_style_classifier_cache_is_keyed_by_the_motion_it_learns(tmp_path):
+    """The same dances and frame counts with other motion (as other corpus code, FK or numpy would give)
+    train and cache a classifier of their own instead of reusing one trained on the old motion."""
+    from models.evaluation.classifier import embed
+    from models.evaluation.evaluate import classifier_windows, style_classifier
+
+    a = style_classifier(_toy_train_set(), 1, 0, tmp_path)
+    again = style_classifier(_toy_train_set(), 1, 0, tmp_path)
+    assert again.cache_key == a.cache_key and len(list(tmp_path.glob("style-classifier-*.pt"))) == 1
+    moved = style_classifier(_toy_train_set(shift=1e-3), 1, 0, tmp_path)
+    assert moved.cache_key != a.cache_key and len(list(tmp_path.glob("style-classifier-*.pt"))) == 2
+    x = classifier_windows(_toy_train_set().positions)
+    np.testing.assert_array_equal(embed(again, x), embed(a, x))
+    assert style_classifier(_toy_train_set(), 2, 0, tmp_path).cache_key not in (a.cache_key, moved.cache_key)
+
+
+@pytest.mark.data
+def test_the_default_evaluation_judges_with_the_packaged_classifier(dwm_root):
+    """The training split at 10 epochs, seed 0 gets the shipped classifier (the same on every machine), not a fresh one."""
+    from models.evaluation.evaluate import PACKAGED_CLASSIFIER, RealSet, packaged_classifier, style_classifier
+
+    train, _ = split_dances(dwm_root, EvalOptions())
+    judge = packaged_classifier(train, 10, 0)
+    assert judge is not None and judge.class_names == ["C", "R", "W"] and judge.trained_on["dances"] == train
+    assert packaged_classifier(train, 9, 0) is None and packaged_classifier(train[1:], 10, 0) is None
+    clips = [type("Clip", (), {"name": n, "style": n.split("_")[1]})() for n in train]
+    used = style_classifier(RealSet(clips, [], []), 10, 0, None)  # no motion needed: it is not trained
+    assert used.cache_key == judge.cache_key and PACKAGED_CLASSIFIER.parent.name == "assets"
+
+
+def test_style_classifier_weights_do_not_follow_the_callers_thread_count():
+    """Trained on 2 threads the weights differ; the classifier trains on TRAIN_THREADS whatever the caller set."""
+    import torch
+
+    from models.evaluation import classifier as C
+
+    x = np.random.default_rng(0).normal(size=(128, 64, 60)).astype(np.float32)  # two batches of 64
+    y = np.arange(len(x)) % 3
+
+    def weights(model) -> bytes:
+        return b"".join(v.numpy().tobytes() for v in model.state_dict().values())
+
+    one = weights(C.train_style_classifier(x, y, epochs=1, seed=0, threads=1))
+    assert weights(C.train_style_classifier(x, y, epochs=1, seed=0, threads=2)) != one
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        assert weights(C.train_style_classifier(x, y, epochs=1, seed=0)) == one
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
+
+
 @pytest.mark.parametrize("first_frame", [0, 14, 31])
 def test_music_beats_land_on_clip_frames(first_frame):
     """A click at song time tau is clip frame 30 tau - first_frame - 1 (the frame that ends then)."""

@@ -66,6 +66,12 @@ def test_style_letters_and_margin():
     assert sc.margin({"C": 0.5, "R": 0.3, "W": 0.2}, "W") == pytest.approx(-0.3)
 
 
+def test_a_margin_of_exactly_the_threshold_counts():
+    """42 of 70 windows against 28 is a margin of 0.2 (0.19999999999999996 in floats): the song is won."""
+    row = {"style": "C", "real": {"C": 1.0, "R": 0.0, "W": 0.0}, "chacha": {"C": 42 / 70, "R": 28 / 70, "W": 0.0}}
+    assert sc.summary({"DANCE_C_2": row}, requests=("chacha",))["chacha"]["songs_clear"] == 1
+
+
 def test_too_short_a_dance_is_a_data_error(toy_classifier):
     from models.errors import DataError
 

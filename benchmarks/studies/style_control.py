@@ -104,7 +104,8 @@ def summary(results: dict[str, dict], requests: Sequence[str | None] = REQUESTS,
             shares.append(row[col][cls])
             margins.append(margin(row[col], cls))
         out[col] = {"mean_share": float(np.mean(shares)), "min_margin": float(np.min(margins)),
-                    "songs_clear": int(sum(m >= clear for m in margins)), "songs": len(margins)}
+                    # 1e-9: a margin of exactly `clear` in window counts (0.6 - 0.4) is 0.19999999999999996
+                    "songs_clear": int(sum(m >= clear - 1e-9 for m in margins)), "songs": len(margins)}
     return out
 
 

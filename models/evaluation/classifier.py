@@ -35,6 +35,10 @@ WINDOW: int = 64
 WINDOW_HOP: int = 32
 _FORMAT = "performer-style-classifier"
 _VERSION = 1
+#: torch intra-op threads the classifier is trained on, whatever the caller's setting: the
+#: trained weights differ between 1 and 2 threads (the order of the float sums in the
+#: convolutions' backward pass), and FD, diversity and GAN-test move with the weights.
+TRAIN_THREADS: int = 1
 
 
 def motion_features(pos: np.ndarray, fps: float = FPS, root: int = 0) -> np.ndarray:
@@ -131,15 +135,20 @@ def train_style_classifier(
     batch_size: int = 64,
     lr: float = 1e-3,
     class_names: Sequence[str] | None = None,
+    threads: int = TRAIN_THREADS,
 ) -> StyleClassifier:
     """Train a :class:`StyleClassifier` on real-motion windows; returns it in eval mode.
 
     ``windows``: ``(N, L, C)`` float (from :func:`make_windows`); ``labels``: ``(N,)``
     ints in ``[0, n_classes)``. Adam, cross-entropy weighted by inverse class
     frequency (the DWM styles are unbalanced: Waltz has ~5x the frames of Cha-cha).
-    Deterministic for a given ``seed`` (the global torch RNG is left untouched).
+    Deterministic for a given ``seed`` on one torch build and CPU: it trains on ``threads``
+    torch threads (default :data:`TRAIN_THREADS`; the caller's count is restored after),
+    since the weights depend on the thread count; the global torch RNG is left untouched.
     ``class_names`` (e.g. ``["C", "R", "W"]``) are stored with the model.
     """
+    from models.networks.streaming import torch_threads
+
     x = _windows(windows)
     y = np.asarray(labels)
     if y.shape != (x.shape[0],) or not np.issubdtype(y.dtype, np.integer) or y.min() < 0:
@@ -148,7 +157,7 @@ def train_style_classifier(
     if y.max() >= n_classes or len(np.unique(y)) < 2:
         raise DataError(f"needs labels from at least 2 classes within [0, {n_classes})", source="labels")
 
-    with torch.random.fork_rng(devices=[]):
+    with torch.random.fork_rng(devices=[]), torch_threads(threads):
         torch.manual_seed(seed)
         model = StyleClassifier(x.shape[2], n_classes)
         model.class_names = [str(c) for c in class_names] if class_names is not None else None
@@ -189,14 +198,18 @@ def predict(model: StyleClassifier, windows: np.ndarray) -> np.ndarray:
     return model(torch.from_numpy(x)).argmax(dim=1).numpy()
 
 
-def save_classifier(model: StyleClassifier, path: str | os.PathLike) -> None:
-    """Write the classifier (config, class names, weights) to ``path`` with ``torch.save``."""
+def save_classifier(model: StyleClassifier, path: str | os.PathLike, trained_on: dict | None = None) -> None:
+    """Write the classifier (config, class names, weights) to ``path`` with ``torch.save``.
+
+    ``trained_on``: what it learned from (JSON-like: dances, epochs, seed, ...), read back as
+    ``model.trained_on`` (None when not given)."""
     payload = {
         "format": _FORMAT,
         "version": _VERSION,
         "config": dict(model.config),
         "class_names": model.class_names,
         "state_dict": model.state_dict(),
+        "trained_on": trained_on,
     }
     torch.save(payload, os.fspath(path))
 
@@ -219,4 +232,5 @@ def load_classifier(path: str | os.PathLike) -> StyleClassifier:
     except RuntimeError as exc:
         raise CheckpointError(f"weights do not match the stored config: {exc}", source=path) from None
     model.class_names = payload.get("class_names")
+    model.trained_on = payload.get("trained_on")
     return model.eval()

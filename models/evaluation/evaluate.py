@@ -206,18 +206,88 @@ def real_set(data_root: str | Path, clips: list, with_beats: bool = True, progre
 # --------------------------------------------------------------------------- classifier
 
 
-def style_classifier(train: RealSet, epochs: int, seed: int, cache_dir: str | Path | None):
-    """Style classifier trained on real training motion; cached under ``cache_dir``.
+def classifier_cache_key(x: np.ndarray, y: np.ndarray, epochs: int, seed: int, styles: Sequence[str]) -> str:
+    """12 hex digits of sha1 over everything a trained style classifier depends on.
 
-    The cache key covers the dance names, their frame counts, the epochs and the seed.
+    Its training windows ``x`` (N, 64, C) float32 and labels ``y`` (N,) byte for byte (so
+    the dances, their corpus poses, the FK and the numpy/scipy that computed them), the
+    epochs, seed and class names, the classifier's code (the bytes of
+    ``models/evaluation/classifier.py``: architecture and training loop), the torch version,
+    the CPU (:func:`cpu_kernels`) and the training thread count
+    (:data:`~models.evaluation.classifier.TRAIN_THREADS`): the weights depend on each of
+    them, and FD, diversity and GAN-test with the weights.
+    """
+    import torch
+
+    from models.evaluation import classifier as clf
+
+    h = hashlib.sha1()
+    h.update(np.ascontiguousarray(x, dtype=np.float32).tobytes())
+    h.update(np.ascontiguousarray(y, dtype=np.int64).tobytes())
+    h.update(Path(clf.__file__).read_bytes())
+    h.update(json.dumps([list(x.shape), int(epochs), int(seed), list(styles), torch.__version__,
+                         cpu_kernels(), clf.TRAIN_THREADS]).encode())
+    return h.hexdigest()[:12]
+
+
+def cpu_kernels() -> list[str]:
+    """What picks torch's float kernels on this machine: ATen's CPU capability, the CPU's feature
+    flags (Linux ``/proc/cpuinfo``; oneDNN trains other weights on an AVX2 CPU than on an AVX-512
+    one, measured with ``ONEDNN_MAX_CPU_ISA=AVX2``) and the variables that cap them."""
+    import os
+    import platform
+
+    import torch
+
+    flags = platform.processor()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            flags = next((line.split(":", 1)[1].strip() for line in f if line.startswith("flags")), flags)
+    except OSError:
+        pass
+    return [torch.backends.cpu.get_cpu_capability(), flags,
+            *(f"{v}={os.environ.get(v, '')}" for v in ("ONEDNN_MAX_CPU_ISA", "ATEN_CPU_CAPABILITY", "MKL_CBWR"))]
+
+
+#: The packaged style classifier: the judge behind FD, diversity, GAN-test and the style
+#: benchmarks, trained once on the training split's real motion (10 epochs, seed 0) and
+#: shipped like FID's fixed network, because one trained afresh differs from machine to
+#: machine (the oneDNN kernels of AVX2 and AVX-512 CPUs, the thread count give other
+#: weights) and FD with it (8.0 to 16.0 for the default, real 4.4 to 5.2). Rewrite it only
+#: on purpose: ``python -m models.evaluation.evaluate --write-classifier --data DWM``, then
+#: ``python tests/test_eval_reference.py headline --data DWM --write`` and the docs' FD figures.
+PACKAGED_CLASSIFIER = Path(__file__).resolve().parents[1] / "assets" / "style_classifier.pt"
+
+
+def packaged_classifier(dances: Sequence[str], epochs: int, seed: int, path: Path = PACKAGED_CLASSIFIER):
+    """The classifier at ``path`` if it was trained on exactly ``dances`` with ``epochs`` and ``seed``, else None."""
+    from models.evaluation.classifier import load_classifier
+
+    if not path.is_file():
+        return None
+    model = load_classifier(path)
+    meta = model.trained_on or {}
+    if meta.get("dances") != list(dances) or meta.get("epochs") != epochs or meta.get("seed") != seed:
+        return None
+    model.cache_key = f"packaged:{meta.get('key')}"
+    return model
+
+
+def style_classifier(train: RealSet, epochs: int, seed: int, cache_dir: str | Path | None, packaged: bool = True):
+    """Style classifier trained on real training motion.
+
+    The packaged one (:data:`PACKAGED_CLASSIFIER`) when it was trained on these dances with
+    these epochs and seed and ``packaged`` is set (the default evaluation: the same judge on
+    every machine); otherwise trained and cached under ``cache_dir`` as
+    ``style-classifier-<key>.pt`` with the key of :func:`classifier_cache_key`, so a classifier
+    trained on other motion, by other code, torch or CPU kernels is never reused. The key
+    (``packaged:<key>`` for the packaged one) is the model's ``cache_key``.
     """
     from models.evaluation.classifier import load_classifier, save_classifier, train_style_classifier
 
+    if packaged and (model := packaged_classifier([c.name for c in train.clips], epochs, seed)) is not None:
+        return model
     styles = sorted({c.style for c in train.clips})
-    key = json.dumps([[c.name, c.num_frames] for c in train.clips] + [epochs, seed, styles])
-    path = Path(cache_dir) / f"style-classifier-{hashlib.sha1(key.encode()).hexdigest()[:12]}.pt" if cache_dir else None
-    if path is not None and path.is_file():
-        return load_classifier(path)
     if len(styles) < 2:
         raise DataError(f"the style classifier needs at least 2 styles in the training dances, got {styles}")
     xs, ys = [], []
@@ -228,13 +298,34 @@ def style_classifier(train: RealSet, epochs: int, seed: int, cache_dir: str | Pa
     x, y = np.concatenate(xs), np.concatenate(ys)
     if len(x) == 0:
         raise DataError("training clips are shorter than one classifier window (64 frames)")
-    model = train_style_classifier(x, y, epochs=epochs, seed=seed, class_names=styles)
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp")
-        save_classifier(model, tmp)
-        tmp.replace(path)
+    key = classifier_cache_key(x, y, epochs, seed, styles)
+    path = Path(cache_dir) / f"style-classifier-{key}.pt" if cache_dir else None
+    if path is not None and path.is_file():
+        model = load_classifier(path)
+    else:
+        model = train_style_classifier(x, y, epochs=epochs, seed=seed, class_names=styles)
+        model.trained_on = {"dances": [c.name for c in train.clips], "epochs": epochs, "seed": seed, "key": key}
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix(".tmp")
+            save_classifier(model, tmp, model.trained_on)
+            tmp.replace(path)
+    model.cache_key = key
     return model
+
+
+def write_packaged_classifier(data_root: str | Path, out: Path = PACKAGED_CLASSIFIER, cache_dir: str | Path | None = ".cache/corpus",
+                              log=print) -> None:
+    """Train the default evaluation's classifier afresh (training split, 10 epochs, seed 0) and write it to ``out``."""
+    from models.evaluation.classifier import save_classifier
+    from models.generate import load_model
+
+    opts = EvalOptions(cache_dir=cache_dir, progress=False)
+    train_names, _ = split_dances(data_root, opts)
+    train = real_set(data_root, load_clips(data_root, train_names, load_model().features, opts), False, False)
+    model = style_classifier(train, opts.classifier_epochs, opts.seed, None, packaged=False)
+    save_classifier(model, out, model.trained_on)
+    log(f"wrote {out} (key {model.cache_key}, {len(train_names)} training dances)")
 
 
 # --------------------------------------------------------------------------- metrics
@@ -303,8 +394,7 @@ def score(gen_pos: list[np.ndarray], gen_poses: list[np.ndarray], real: RealSet,
     """
     from tqdm import tqdm
 
-    from models.evaluation.classifier import embed
-    from models.evaluation.metrics import band_ratios, diversity, energy_ratio, frechet_distance, jerk
+    from models.evaluation.metrics import band_ratios
 
     per_dance: dict[str, dict[str, float]] = {}
     weighted: dict[str, float] = {}
@@ -319,18 +409,28 @@ def score(gen_pos: list[np.ndarray], gen_poses: list[np.ndarray], real: RealSet,
         bands = band_ratios(pg, pr)
         per_dance[c.name] = {**m, "band_amp": bands["band_amp"], "jitter": bands["jitter"]}
     row = {k: v / frames for k, v in weighted.items()}
-    row.update(pooled_beats(gen_pos, real.beats))
+    row.update(set_metrics(gen_pos, real, real_emb, classifier))
+    return row, per_dance
+
+
+def set_metrics(gen_pos: list[np.ndarray], real: RealSet, real_emb: np.ndarray, classifier) -> dict[str, float]:
+    """The row's set-level metrics of generated FK positions ``(T, 30, 3)`` m (same dance order as
+    ``real``): beat coverage, hit rate and chance, FD against ``real_emb``, diversity, energy
+    ratio, jerk (m/s³) and the band ratios ``band_amp`` and ``jitter``."""
+    from models.evaluation.classifier import embed
+    from models.evaluation.metrics import band_ratios, diversity, energy_ratio, frechet_distance, jerk
+
     emb = embed(classifier, _windows_or_fail(gen_pos))
     bands = band_ratios(gen_pos, real.positions)
-    row.update(
-        fd=frechet_distance(emb, real_emb),
-        diversity=diversity(emb),
-        energy_ratio=energy_ratio(gen_pos, real.positions),
-        jerk=jerk(gen_pos),
-        band_amp=bands["band_amp"],
-        jitter=bands["jitter"],
-    )
-    return row, per_dance
+    return {
+        **pooled_beats(gen_pos, real.beats),
+        "fd": frechet_distance(emb, real_emb),
+        "diversity": diversity(emb),
+        "energy_ratio": energy_ratio(gen_pos, real.positions),
+        "jerk": jerk(gen_pos),
+        "band_amp": bands["band_amp"],
+        "jitter": bands["jitter"],
+    }
 
 
 def band_rms_m(pos: Sequence[np.ndarray]) -> dict[str, float]:
@@ -480,6 +580,7 @@ def evaluate(checkpoints: Sequence[str | Path], data_root: str | Path, opts: Eva
         "dances": eval_names,
         "frames": [c.num_frames for c in real.clips],
         "classifier_train_dances": [c.name for c in train.clips],
+        "classifier_key": classifier.cache_key,
     }
     return results, details
 
@@ -500,3 +601,14 @@ def run_evaluation(checkpoints: Sequence[str | Path], data_root: str | Path, out
     log(title)
     log(markdown_table(results))
     return paths
+
+
+if __name__ == "__main__":
+    import argparse
+
+    parser = argparse.ArgumentParser(description="Rewrite the packaged style classifier (PACKAGED_CLASSIFIER).")
+    parser.add_argument("--write-classifier", action="store_true", required=True, help="train it afresh and write it")
+    parser.add_argument("--data", required=True, help="the DWM dataset directory")
+    parser.add_argument("--cache", default=".cache/corpus", help="corpus cache (default .cache/corpus)")
+    a = parser.parse_args()
+    write_packaged_classifier(a.data, cache_dir=a.cache)

@@ -13,6 +13,9 @@ dance: accuracies of the motion style classifier of :mod:`models.evaluation.clas
   generated set is varied and faithful enough to stand in for real training data.
 
 Both are window accuracies (64-frame windows, hop 32, :func:`classifier_windows`).
+GAN-test uses the evaluation's classifier (the packaged one by default: the same on every
+machine); GAN-train's classifier is trained afresh, so its value can differ with the
+CPU's float kernels (:data:`models.evaluation.evaluate.PACKAGED_CLASSIFIER` says why).
 For the real-data row both are the real classifier's accuracy on real validation
 windows, the ceiling the two are read against. :func:`models.evaluation.evaluate.evaluate`
 adds them as the optional keys ``gan_train`` and ``gan_test`` when
