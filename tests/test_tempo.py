@@ -120,10 +120,12 @@ def test_the_same_music_faster_is_danced_faster(clip_stretched, monkeypatch):
 def test_a_checkpoint_without_a_tempo_memory_plays_every_movement_at_its_own_pace():
     lm = load_model(None)
     s = ds.DanceStream(lm.model, seed=0)
-    assert s._ref_period > 0
-    s._ref_period = 0.0  # what an older checkpoint (member_period all zero) gives
-    s._tempo.update(0.0, 0.5)
-    assert s._rate_for(0, 0) == 1.0 and s._tempo_tilt() == 0.0
+    s._tempo.update(0.0, 0.5)  # 120 bpm, clear
+    s._tempo.conf = 1.0
+    code = int(np.flatnonzero(lm.model.member_count.numpy() > 0)[0])
+    assert s._member_period[code, 0] > 0 and s._rate_for(code, 0) != 1.0
+    s._member_period[:] = 0.0  # what an older checkpoint (member_period all zero) gives
+    assert s._rate_for(code, 0) == 1.0
 
 
 def test_clip_periods_give_stretched_copies_of_a_song_the_same_octave():

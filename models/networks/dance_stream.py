@@ -80,23 +80,16 @@ WARP_LAG: float = 1.5
 #: Pull of the warp's lag back to :data:`WARP_LAG` per frame, so a drifting phase estimate
 #: cannot run it into either bound.
 WARP_PULL: float = 0.05
-#: Tempo following: each movement plays at ``r = T / T_ref``, T the music's tempo
+#: Tempo following: each movement plays at ``r = T / T_src``, T the music's tempo
 #: (:class:`models.networks.tempo.TempoFollower`, in the range the performer dances at) and
-#: T_ref the memory's mean tempo (the geometric mean over its exemplars of the tempo of the
-#: song each was danced to, ``DanceVQ.member_period``: 93 bpm for the shipped model),
+#: T_src the tempo of the song its exemplar was danced to (``DanceVQ.member_period``: the
+#: shipped memory's cha-cha 124, rumba 104, waltz 84 bpm, measured by the same follower),
 #: blended towards 1 as the pulse fades (the follower's confidence), within
 #: :data:`RATE_RANGE` and never faster than the fastest exemplars of the memory move
-#: (:data:`SPEED_CAP`). Each exemplar's own tempo as the reference (``T / T_src``) was
-#: measured too: the predictor picks slow waltz exemplars for fast music as often as not,
-#: which then hit the rate's upper bound, so the same song faster sped up less (1.15x
-#: against 1.20x over the listening set's songs, 1.25x over 0.8x). False plays every
-#: movement at its own pace.
+#: (:data:`SPEED_CAP`). So a waltz played to a waltz moves at the dancers' own pace, and
+#: the same song faster gives the same dance faster. False plays every movement at its
+#: own pace.
 FOLLOW_TEMPO: bool = True
-#: The tempo also chooses: the code logits move by ``TEMPO_GAIN * log2(T / T_ref) * z``, z each
-#: code's movement speed (as the energy control's), so faster music favours livelier movements
-#: as well as playing them faster (the predictor alone picks natively slower exemplars for
-#: faster music as often as not).
-TEMPO_GAIN: float = 5.0
 #: Playback rates a movement may take (a movement plays ``r * seg`` of its exemplar's frames
 #: over its ``seg`` frames; its window holds ``2 seg``).
 RATE_RANGE: tuple[float, float] = (0.55, 1.75)
@@ -394,8 +387,6 @@ class DanceStream:
         self._speed_cap = float(np.quantile(speed[real], SPEED_CAP)) if real.any() else np.inf
         self._member_speed = speed
         self._member_period = model.member_period.numpy().astype(np.float64)  # (K, M); 0 unknown
-        known = self._member_period[real & (self._member_period > 0)]
-        self._ref_period = float(np.exp(np.log(known).mean())) if len(known) else 0.0  # the memory's mean tempo
         self.energy = 1.0
         self._energy_bias: np.ndarray | None = None  # ENERGY_GAIN * (energy - 1) * z; None at 1
         self.set_energy(energy)
@@ -543,9 +534,6 @@ class DanceStream:
             bias = self._energy_bias  # read once: the control thread may swap it
             if bias is not None:  # livelier or calmer codes (set_energy)
                 logits = logits + bias
-            tilt = self._tempo_tilt()
-            if tilt != 0.0:  # faster music, livelier movements (TEMPO_GAIN)
-                logits = logits + tilt * self._code_energy
             self._tokens.append(token)
             # the next step's window but its newest token is known now: its layers run on the frames between
             nxt = list(self._tokens)[-(pred.window - 1):]
@@ -587,18 +575,9 @@ class DanceStream:
         self._commit(pairs[i][0])
         self._has_cont = True
 
-    def _tempo_tilt(self) -> float:
-        """:data:`TEMPO_GAIN` times the music's tempo over the memory's mean tempo, in octaves,
-        times the follower's confidence (0 without a tempo or with FOLLOW_TEMPO off)."""
-        period = self._tempo.period
-        if not FOLLOW_TEMPO or TEMPO_GAIN == 0.0 or period <= 0.0 or self._ref_period <= 0.0:
-            return 0.0
-        return TEMPO_GAIN * math.log2(self._ref_period / period) * min(1.0, self._tempo.confidence / RATE_CONFIDENCE)
-
     def _rate_for(self, code: int, member: int) -> float:
-        """The playback rate of exemplar ``member`` of ``code`` now (:data:`FOLLOW_TEMPO`; the
-        same for every exemplar but for the speed cap)."""
-        src = self._ref_period
+        """The playback rate of exemplar ``member`` of ``code`` now (:data:`FOLLOW_TEMPO`)."""
+        src = self._member_period[code, member]
         period = self._tempo.period
         if not FOLLOW_TEMPO or src <= 0.0 or period <= 0.0:
             return 1.0
