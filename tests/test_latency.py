@@ -121,7 +121,7 @@ def test_timing_sink_records_release_and_send_of_every_frame(checkpoint):
     timing = TimingSink(100)
     eng.sinks.append(timing)
     eng.start()
-    eng.wait(30)
+    assert eng.wait(30), "the engine did not finish 2 s of audio within 30 s"
     eng.close()
     n = timing.count
     assert asked == [1] and src.started_at is not None
