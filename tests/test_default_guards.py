@@ -62,6 +62,7 @@ def bone_steps_deg(poses: np.ndarray) -> np.ndarray:
     return np.degrees(2 * np.arccos(dot)).max(1)
 
 
+@pytest.mark.slow
 def test_beat_warp_puts_the_speed_dips_on_the_beats(shipped):
     """Speed dips (kinematic beats) land on the clip's beats, not half a beat off them: the hit
     rate against the beats is at least 0.5 and at least 3x the rate against the same beats
@@ -78,6 +79,7 @@ def test_beat_warp_puts_the_speed_dips_on_the_beats(shipped):
         assert on >= 0.5 and on >= 3 * off, f"seed {seed}: beat hit rate {on:.2f} on the beats, {off:.2f} half a beat off"
 
 
+@pytest.mark.slow
 def test_energy_control_calms_and_livens_the_dance(shipped):
     """Energy 0 and 2 against 1 (the default), same seed, so only the control differs: motion
     energy (velocity spread of the FK positions) at most 0.75x at 0 and at least 1.1x at 2.
@@ -89,6 +91,7 @@ def test_energy_control_calms_and_livens_the_dance(shipped):
     assert calm <= 0.75 and lively >= 1.1, f"motion energy at 0 and 2: {calm:.2f}x and {lively:.2f}x the default's"
 
 
+@pytest.mark.slow
 def test_music_detector_settles_on_loud_applause_that_the_energy_threshold_lets_through(shipped):
     """12 s of the clip, 10 s of synthetic applause at half the clip's RMS level, the clip
     again: the applause is far above the silence threshold (only the music detector can take
@@ -115,6 +118,7 @@ def test_music_detector_settles_on_loud_applause_that_the_energy_threshold_lets_
     assert len(back) and back[0] <= 1.5 * FPS, "not dancing again within 1.5 s of the music's return"
 
 
+@pytest.mark.slow
 def test_idle_fade_steps_no_further_than_the_dance(shipped):
     """12 s of the clip, 4 s of silence, 8 s of the clip: the performer fades into the idle
     and back over FADE_FRAMES each way, and no frame-to-frame bone step in either fade is
