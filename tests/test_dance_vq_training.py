@@ -126,5 +126,5 @@ def test_train_dance_vq_writes_a_playable_checkpoint_with_exemplars(tmp_path):
     # the silence threshold: below every training song's frames (its 0.5th percentile minus 3)
     energy = np.concatenate([c.features[:, m.config.energy_col] for c in clips])
     assert -1e8 < float(m.gate[0]) < energy.min()
-    poses = m.generate(np.concatenate([c.features for c in clips])[:200], seed=0)
+    poses = DanceStream(m.eval(), seed=0).push(np.concatenate([c.features for c in clips])[:200])
     assert poses.shape == (200, POSE_DIM) and np.isfinite(poses).all()

@@ -4,8 +4,8 @@ the bundled clip (32 s, 120 BPM, a beat every 15 frames at 30 fps) so that no sh
 is needed, with bounds that fail when the behaviour is switched off (docs/testing.md lists
 the mutation each test was seen to catch).
 
-Only public API: :meth:`DanceVQ.generate`, :class:`DanceStream` (``push``, ``idle_weight``)
-and the feature extractor the engine runs.
+Only public API: :class:`DanceStream` (its constructor's seed and energy, ``push``,
+``idle_weight``), the model's gate and config, and the feature extractor the engine runs.
 """
 
 from __future__ import annotations
@@ -45,6 +45,11 @@ def features(lm, audio: np.ndarray) -> np.ndarray:
     return extract_features(np.asarray(audio, np.float32), lm.features)
 
 
+def dance(lm, feats: np.ndarray, seed: int = 0, energy: float = 1.0) -> np.ndarray:
+    """Poses (T, P) of a fresh live stream given all of ``feats`` (T, D) at once (the offline pass)."""
+    return DanceStream(lm.model, seed=seed, energy=energy).push(feats)
+
+
 def stream(lm, feats: np.ndarray, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """(poses (T, P), idle weight after each frame (T,)) of a live stream fed one frame at a time."""
     s = DanceStream(lm.model, seed=seed)
@@ -72,7 +77,7 @@ def test_beat_warp_puts_the_speed_dips_on_the_beats(shipped):
     f = features(lm, clip)
     beats = np.arange(0.0, len(f), BEAT)
     for seed in (0, 1):
-        kin = kinematic_beats(positions(lm.model.generate(f, seed=seed)))
+        kin = kinematic_beats(positions(dance(lm, f, seed=seed)))
         kin = kin[kin >= 30]  # from 1 s on: the beat tracker has locked
         on, off = beat_hit_rate(kin, beats), beat_hit_rate(kin, beats + BEAT / 2)
         assert on >= 0.5 and on >= 3 * off, f"seed {seed}: beat hit rate {on:.2f} on the beats, {off:.2f} half a beat off"
@@ -85,7 +90,7 @@ def test_energy_control_calms_and_livens_the_dance(shipped):
     Measured on the clip, seed 0: 0.49x and 1.20x (1.0x both with ``ENERGY_GAIN = 0``)."""
     lm, clip = shipped
     f = features(lm, clip)
-    spread = {e: velocity_spread(positions(lm.model.generate(f, seed=0, energy=e))[30:]) for e in (0.0, 1.0, 2.0)}
+    spread = {e: velocity_spread(positions(dance(lm, f, seed=0, energy=e))[30:]) for e in (0.0, 1.0, 2.0)}
     calm, lively = spread[0.0] / spread[1.0], spread[2.0] / spread[1.0]
     assert calm <= 0.75 and lively >= 1.1, f"motion energy at 0 and 2: {calm:.2f}x and {lively:.2f}x the default's"
 
