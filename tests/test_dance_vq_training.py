@@ -113,11 +113,9 @@ def test_train_dance_vq_writes_a_playable_checkpoint_with_exemplars(tmp_path):
     # the exemplars: codes that the training motion uses hold real windows of it
     counts = m.member_count.numpy()
     assert counts.sum() > 0 and counts.max() <= 2
-    from models.training.corpus import build_corpus
-    from models.training.dance_vq import training_dances
+    from models.training.dance_vq import training_clips
 
-    train_names, _, _ = training_dances(cfg, root)
-    clips = build_corpus(root, train_names, fcfg, (1.0,), tmp_path / "cache", False)
+    _, clips = training_clips(cfg, fcfg, root, tmp_path / "cache", False)  # the motion the run learnt from
     motion = np.concatenate([c.poses for c in clips])
     k = int(np.flatnonzero(counts)[0])
     window = m.member_poses[k, 0].float().numpy()  # (2 seg, P) float16 in the checkpoint
