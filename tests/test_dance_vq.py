@@ -370,18 +370,16 @@ def test_checkpoint_round_trip_and_the_engine_pipeline(tmp_path):
     ext = pipe.extractor_factory(44100)
     feats = ext.push(np.random.default_rng(0).normal(scale=0.1, size=44100).astype(np.float32))
     assert pipe.model.push(feats).shape == (len(feats), POSE_DIM)
+    from models.networks.causal import CausalGenerator
+
+    causal = tmp_path / "c.pt"
+    c = build_model("causal", {"feature_dim": fcfg.dim, "channels": [8, 8, 8, 8, 8]})
+    assert isinstance(c, CausalGenerator)
+    save_checkpoint(causal, c, model_name="causal", generator_config=c.config,
+                    feature_config={**fcfg.to_dict(), "fingerprint": fcfg.fingerprint()},
+                    rig={"bones": list(BONES), "pose_dim": POSE_DIM})
+    build_pipeline(causal)  # loads and runs without a style
     with pytest.raises(CheckpointError, match="takes no style"):
-        from models.generate import default_checkpoint_path
-
-        causal = tmp_path / "c.pt"
-        from models.networks.causal import CausalGenerator
-
-        c = build_model("causal", {"feature_dim": fcfg.dim, "channels": [8, 8, 8, 8, 8]})
-        assert isinstance(c, CausalGenerator)
-        save_checkpoint(causal, c, model_name="causal", generator_config=c.config,
-                        feature_config={**fcfg.to_dict(), "fingerprint": fcfg.fingerprint()},
-                        rig={"bones": list(BONES), "pose_dim": POSE_DIM})
-        assert default_checkpoint_path().name == "default.pt"
         build_pipeline(causal, style="waltz")
 
 
@@ -652,12 +650,28 @@ def test_a_requested_style_dances_with_its_own_dancers_exemplars(monkeypatch):
 
 
 def test_checkpoints_from_before_the_style_memory_still_load(tmp_path):
+    """A state dict without ``member_style`` and ``style_prior`` loads strictly, and the model
+    it loads into forgets whatever style memory it held: both buffers become zeros (unknown),
+    so a requested style then dances as a model that never had one."""
     m = tiny_model()
+    with torch.no_grad():  # a style memory in the source, which the old checkpoint does not carry
+        m.member_style[:] = 1 + torch.arange(m.member_style.numel()).reshape(m.member_style.shape) % 3
+        m.style_prior[:, 1:] = torch.randn(TINY.codebook, 3)
     state = {k: v for k, v in m.state_dict().items() if k not in ("member_style", "style_prior")}
     m2 = DanceVQ(TINY)
+    with torch.no_grad():  # and stale values in the target, which the load must clear
+        m2.member_style.fill_(3)
+        m2.style_prior.normal_(0.0, 5.0)
     m2.load_state_dict(state, strict=True)
     assert int(m2.member_style.abs().sum()) == 0 and float(m2.style_prior.abs().sum()) == 0.0
-    np.testing.assert_array_equal(generate(m2.eval(), music(64), seed=1), generate(m, music(64), seed=1))
+    m2.eval()
+    x = music(64)
+    np.testing.assert_array_equal(DanceStream(m2, seed=1).push(x), DanceStream(m, seed=1).push(x))  # auto reads no style memory
+    with torch.no_grad():
+        m.member_style.zero_()
+        m.style_prior.zero_()
+    waltz = {k: DanceStream(v, seed=1, style="waltz").push(x) for k, v in (("old", m2), ("zeroed", m))}
+    np.testing.assert_array_equal(waltz["old"], waltz["zeroed"])
 
 
 def test_style_memory_is_added_to_an_older_checkpoint_only_from_its_own_training_motion():

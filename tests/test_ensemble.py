@@ -271,7 +271,7 @@ def test_one_extractor_per_feature_config_and_each_staggered_stream_equals_its_o
     eng = Engine(FileSource(clip_audio, SAMPLE_RATE, realtime=False), config=EngineConfig(warmup_s=0.5),
                  performers=perfs)
     eng.start()
-    eng.wait(60)
+    assert eng.wait(60), "the engine did not finish the clip within 60 s"
     eng.close()
     assert len(loaded) == 1  # the checkpoint was loaded once for the three
     ext = eng.extractors

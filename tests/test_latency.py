@@ -1,14 +1,20 @@
 """The latency regression suite: statistics, budgets, CLI, and short real-time runs with guard budgets.
 
-The two runs marked ``latency`` replay a few seconds of the bundled clip in real time
-through real performer processes and loopback receivers; their budgets are guards
-against gross (5x) regressions, not the targets (see docs/latency.md for those).
+The runs marked ``latency`` replay a few seconds of the bundled clip in real time through
+real performer processes and loopback receivers. The shipped default (models/assets/default.pt,
+the dancing performer) runs against guards of 5x its targets (benchmarks/budgets.toml):
+per-hop p99 25 ms (target 5), end-to-end p99 75 ms to the OSC and WebSocket receivers
+(target 15), peak RSS 3000 MB (target 600), at most 2 frames lost (target 0). The guards
+catch gross regressions on a busy CI machine, not a missed target: ``make bench`` checks
+the targets (docs/latency.md). The concurrency sweep and the ensemble bench check their
+plumbing on small models (a random-weight causal U-Net, a tiny dance_vq).
 """
 
 from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,11 +36,14 @@ from realtime.engine import Engine, EngineConfig, rest_pose
 from realtime.vmc import VmcEncoder
 from realtime.wire import encode_frame
 
+REPO = Path(__file__).resolve().parents[1]
+
+#: 5x the targets of benchmarks/budgets.toml's [latency] table (lost frames: 2 for 0).
 GUARDS = """
 [latency]
-per_hop_ms_p99 = { max = 50.0 }
-e2e_osc_ms_p99 = { max = 150.0 }
-e2e_ws_ms_p99 = { max = 150.0 }
+per_hop_ms_p99 = { max = 25.0 }
+e2e_osc_ms_p99 = { max = 75.0 }
+e2e_ws_ms_p99 = { max = 75.0 }
 peak_rss_mb = { max = 3000.0 }
 lost_frames = { max = 2 }
 """
@@ -121,7 +130,7 @@ def test_timing_sink_records_release_and_send_of_every_frame(checkpoint):
     timing = TimingSink(100)
     eng.sinks.append(timing)
     eng.start()
-    eng.wait(30)
+    assert eng.wait(30), "the engine did not finish 2 s of audio within 30 s"
     eng.close()
     n = timing.count
     assert asked == [1] and src.started_at is not None
@@ -250,18 +259,25 @@ def test_bench_latency_lead_reaches_the_performer_process(tmp_path, capsys, chec
 
 @pytest.mark.latency
 @pytest.mark.slow
-def test_latency_run_within_guard_budgets(tmp_path, checkpoint, capsys):
+def test_shipped_default_latency_run_within_guard_budgets(tmp_path, capsys):
+    """8 s of the clip through the shipped default (no --checkpoint) against :data:`GUARDS`."""
+    from models.generate import default_checkpoint_path, load_model
+
+    assert load_model(default_checkpoint_path()).name == "dance_vq"
     guards = tmp_path / "guards.toml"
     guards.write_text(GUARDS)
+    budgets = {b.metric: b.limit for b in bud.load_budgets(REPO / "benchmarks" / "budgets.toml") if b.kind == "latency"}
+    for b in bud.load_budgets(guards):  # the guards are what the docstring says: 5x the targets
+        assert b.limit == (2 if b.metric == "lost_frames" else 5 * budgets[b.metric]), b
     out = tmp_path / "out"
     code = main(["bench", "latency", "--audio", str(bundled_clip_path()), "--seconds", "8", "--naive-seconds", "0",
-                 "--no-offline", "--checkpoint", str(checkpoint), "--warmup", "1", "--out", str(out),
-                 "--budgets", str(guards)])
+                 "--no-offline", "--warmup", "1", "--out", str(out), "--budgets", str(guards)])
     printed = capsys.readouterr().out
     assert code == 0, printed
     for name in ("latency.json", "latency.md", "latency_hist.png", "latency_timeline.png", "frames.npz"):
         assert (out / name).stat().st_size > 0
     r = json.loads((out / "latency.json").read_text())
+    assert r["checkpoint_source"] == "packaged default" and r["checkpoint"] == str(default_checkpoint_path())
     s, a = r["streaming"], r["algorithmic"]
     assert s["frames"] == 8 * FPS - 1 and s["lost_osc"] == 0 and s["lost_ws"] == 0
     # causality of the measurement: release <= send <= receipt, per the medians

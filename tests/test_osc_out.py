@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import logging
 import socket
 
@@ -12,7 +11,7 @@ from pythonosc.dispatcher import Dispatcher
 from pythonosc.osc_server import BlockingOSCUDPServer
 from test_vmc import random_pose, tpose_offsets
 
-from models.errors import ConfigError, NetworkError, PerformerError, RigError
+from models.errors import ConfigError, NetworkError, RigError
 from models.rig.humanoid import BONES, NUM_BONES
 from realtime.frame import PoseFrame
 from realtime.osc_out import OscSink, PlainOscEncoder
@@ -121,18 +120,18 @@ def test_bad_targets_and_options_are_refused():
         OscSink("no-such-host.invalid", 9000, "plain")
 
 
-def test_default_offsets_come_from_the_rig_skeleton():
-    if importlib.util.find_spec("models.rig.skeleton") is None:
-        with pytest.raises(RigError, match="default skeleton"):
-            rest_offsets(None)
-        return
+def test_default_offsets_come_from_the_rig_skeleton(receiver):
+    """The shipped skeleton is part of the package: without offsets, a VMC sink sends the default
+    skeleton's bone offsets (mirrored in x for Unity), not an error and not a T-pose."""
     from models.rig.skeleton import load_default_skeleton
 
-    try:
-        want = load_default_skeleton().offsets
-    except PerformerError as exc:  # the shipped asset is missing or broken: same clear error
-        with pytest.raises(type(exc)):
-            OscSink("127.0.0.1", 9000, "vmc")
-    else:
-        np.testing.assert_array_equal(rest_offsets(None), want)
-        OscSink("127.0.0.1", 9000, "vmc").close()
+    want = load_default_skeleton().offsets
+    np.testing.assert_array_equal(rest_offsets(None), want)
+    server, got = receiver
+    with OscSink("127.0.0.1", server.server_address[1], "vmc") as sink:
+        sink.send(_frame())
+        _receive(server, got, 2)
+    bones = got[1: 1 + NUM_BONES]
+    assert [args[0] for _, args in bones] == list(BONES)
+    for j, (_, args) in enumerate(bones[1:], start=1):
+        np.testing.assert_allclose(args[1:4], want[j] * [-1, 1, 1], atol=1e-6)

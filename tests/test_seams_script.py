@@ -19,13 +19,34 @@ def _ratios(out: str) -> list[float]:
     return [float(c) for c in row[0].strip().strip("|").split("|")[1:]]
 
 
-def test_default_on_the_clip_has_invisible_seams_and_the_threshold_sets_the_exit(capsys):
+def test_default_on_the_clip_is_measured_at_its_real_handover_and_the_threshold_sets_the_exit(capsys):
+    """Centred on the handover (8k + 2, the beat warp's lag) the shipped default's ratio on the
+    clip is 1.10-1.31 as the tempo following has changed (target 1.2, docs/training.md; see
+    docs/testing.md); the guard allows 1.4, below the moderate seam of the next test."""
     ckpt = str(default_checkpoint_path())
-    assert seams.main(["--checkpoint", ckpt]) == 0
+    assert seams.handover_offset() == 2
+    assert seams.main(["--checkpoint", ckpt, "--max", "1.4"]) == 0
     (ratio,) = _ratios(capsys.readouterr().out)
-    assert 0.5 < ratio <= 1.2
+    assert 1.0 < ratio <= 1.4
     assert seams.main(["--checkpoint", ckpt, "--max", str(ratio - 0.01)]) == 1
     assert _ratios(capsys.readouterr().out) == [ratio]  # deterministic
+    assert seams.main(["--checkpoint", ckpt, "--handover-offset", "2", "--max", "1.4"]) == 0
+    assert _ratios(capsys.readouterr().out) == [ratio]
+
+
+def test_a_moderate_seam_at_the_handover_is_caught(monkeypatch, capsys):
+    """A shorter inertialization (4 frames instead of 16: each new movement's offset from the
+    last decays within half a movement) leaves a moderate seam: 1.51-2.03 at the handover,
+    caught; centred on the code step (offset 0) it reads 0.32-0.74, smoother than the dance."""
+    import models.networks.dance_stream as ds
+
+    ckpt = str(default_checkpoint_path())
+    monkeypatch.setattr(ds, "DECAY_FRAMES", 4)
+    assert seams.main(["--checkpoint", ckpt, "--max", "1.4"]) == 1
+    (ratio,) = _ratios(capsys.readouterr().out)
+    assert ratio > 1.4
+    assert seams.main(["--checkpoint", ckpt, "--max", "1.4", "--handover-offset", "0"]) == 0
+    assert _ratios(capsys.readouterr().out)[0] < 1.0
 
 
 def test_missing_and_offline_checkpoints_are_refused(tmp_path, capsys):

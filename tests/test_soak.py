@@ -1,4 +1,4 @@
-"""Short soak: 2 minutes of audio replayed as fast as possible through the full engine with a
+"""Short soak: 3 minutes of audio replayed as fast as possible through the full engine with a
 VMC receiver and two WebSocket clients in other processes (benchmarks/soak.py; the hour-long
 run is ``make soak``, its figures are in docs/reliability.md)."""
 
@@ -21,20 +21,30 @@ _spec.loader.exec_module(soak)
 
 
 @pytest.mark.slow
-def test_two_minute_soak(tmp_path):
+def test_three_minute_soak_keeps_the_engine_sound_and_the_dance_stable(tmp_path):
+    """3 minutes of the bundled clip looped through the shipped default (about 20 s here): the
+    engine's checks and the stability verdict on 6 stretches of 30 s against the validation
+    dances' 8.01 cm band RMS (docs/reliability.md), which must pass: a dance that shrinks,
+    freezes, drifts or explodes fails the soak and this test. Measured: amplitude 0.97-1.26x,
+    root within 0.36 m vertically. Playing the decoder's movements instead of the exemplars
+    fails 2 of the 6 stretches (0.39x the amplitude; a point at 20.5 m/s)."""
     out = tmp_path / "soak.json"
-    res = subprocess.run([sys.executable, "benchmarks/soak.py", "--minutes", "2", "--json", str(out), "--quiet"],
-                         cwd=REPO, capture_output=True, text=True, timeout=300)
-    assert res.returncode == 0, res.stdout + res.stderr
+    res = subprocess.run([sys.executable, "benchmarks/soak.py", "--minutes", "3", "--json", str(out), "--quiet",
+                          "--stability-ref-m", "0.0801"], cwd=REPO, capture_output=True, text=True, timeout=400)
     r = json.loads(out.read_text())
-    assert r["ok"] and not r["failures"]
-    assert r["frames"] == r["checked_frames"] == r["expected_frames"] == 2 * 60 * 30
+    assert res.returncode == 0 and r["ok"] and not r["failures"], r["failures"]
+    assert r["frames"] == r["checked_frames"] == r["expected_frames"] == 3 * 60 * 30
     assert r["nan_frames"] == r["nonfinite_sent"] == r["index_gaps"] == 0
     assert r["udp_receiver"]["nonfinite"] == 0 and r["udp_receiver"]["frames"] > 0.9 * r["frames"]
     assert r["ws_clients"]["nonfinite"] == 0 and min(r["ws_clients"]["frames"]) > 0.5 * r["frames"]
     assert r["ws_clients"]["closes"] == {"1001": 2}  # both clients stayed until the server shut down
     assert r["rss_growth_pct"] < 5.0 and r["fds_end"] <= r["fds_warm"]
     assert r["osc"]["errors"] == 0
+    st = r["stability"]
+    assert st["ok"] and st["ref_m"] == 0.0801 and st["tail_frames"] == 0
+    assert [(s["start_s"], s["end_s"]) for s in st["stretches"]] == [(30.0 * k, 30.0 * (k + 1)) for k in range(6)]
+    assert all(s["finite"] and 0.5 <= s["amp_ratio"] <= 1.5 for s in st["stretches"])
+    assert "stability: 6 stretches of 30 s, 0 failing" in res.stdout
 
 
 def test_pose_tap_hands_every_frame_to_the_stability_monitor_in_order():
@@ -68,22 +78,6 @@ def test_stability_and_song_options_are_checked_before_the_run(args, message, ca
     with pytest.raises(SystemExit) as exc:
         soak.main(["--minutes", "1", *args])
     assert exc.value.code == 2 and message in capsys.readouterr().err
-
-
-@pytest.mark.slow
-def test_one_minute_soak_with_the_stability_check(tmp_path):
-    out = tmp_path / "soak.json"
-    res = subprocess.run([sys.executable, "benchmarks/soak.py", "--minutes", "1", "--json", str(out), "--quiet",
-                          "--stability-ref-m", "0.0801"], cwd=REPO, capture_output=True, text=True, timeout=300)
-    r = json.loads(out.read_text())
-    st = r["stability"]
-    assert [(s["start_s"], s["end_s"]) for s in st["stretches"]] == [(0.0, 30.0), (30.0, 60.0)]
-    assert st["ref_m"] == 0.0801 and st["tail_frames"] == 0
-    assert all(s["finite"] and s["amp_m"] > 0 for s in st["stretches"])
-    # only the stability verdict may fail here (the shipped model is judged, not the engine)
-    assert [f for f in r["failures"] if not f.startswith("stability: ")] == []
-    assert res.returncode == (0 if st["ok"] else 1) and r["ok"] == st["ok"]
-    assert "stability: 2 stretches of 30 s" in res.stdout
 
 
 def _song(path: Path, seconds: float, bpm: float, seed: int) -> Path:
@@ -140,5 +134,5 @@ def test_one_minute_soak_of_two_songs_looped_names_the_songs_of_every_stretch(tm
     assert r["frames"] == r["expected_frames"] == 1800 and r["nan_frames"] == 0
     assert [s["songs"] for s in r["stability"]["stretches"]] == [["one 0.0-20.0 s", "two 0.0-10.0 s"],
                                                                  ["two 10.0-25.0 s", "one 0.0-15.0 s"]]
-    assert [f for f in r["failures"] if not f.startswith("stability: ")] == []
+    assert res.returncode == 0 and r["ok"] and not r["failures"], r["failures"]
     assert "looped: one (20 s), two (25 s)" in res.stdout

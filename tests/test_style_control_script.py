@@ -98,10 +98,22 @@ def test_bad_input_is_one_line_and_exit_2(args, message, capsys, tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.data
-def test_default_checkpoint_on_the_validation_split(dwm_root, tmp_path):
+def test_default_checkpoint_wins_its_styles_on_the_validation_split(dwm_root, tmp_path):
+    """The shipped default danced in each style to the 6 validation songs (seed 0): waltz and
+    rumba win every song by the documented margin (0.2; docs/training.md, "Style"), and
+    cha-cha wins at least 3 songs by 0.15 (docs/testing.md has the measured margins). With
+    the guidance and the prior off (``STYLE_GUIDANCE = 1.0``, ``STYLE_PRIOR = 0.0``) waltz
+    loses the cha-cha and rumba songs, rumba the waltz songs, and cha-cha wins by 0.15 on
+    one song."""
     out = tmp_path / "s.json"
     assert sc.main(["--data", str(dwm_root), "--cache", str(REPO / ".cache" / "corpus"), "--json", str(out)]) == 0
     import json
 
     d = json.loads(out.read_text())
     assert len(d["songs"]) == 6 and set(d["summary"]) == {"real", "auto", "chacha", "rumba", "waltz"}
+    s = d["summary"]
+    won = {k: f"{v['songs_clear']}/{v['songs']} (smallest margin {v['min_margin']:+.2f})" for k, v in s.items()}
+    assert s["waltz"]["songs_clear"] == 6 and s["rumba"]["songs_clear"] == 6, won
+    chacha = [sc.margin(row["chacha"], "C") for row in d["songs"].values()]
+    assert sum(m >= 0.15 for m in chacha) >= 3, f"cha-cha margins {np.round(chacha, 2)}"
+    assert s["real"]["songs_clear"] == 6, won  # the judge reads the real dancers right

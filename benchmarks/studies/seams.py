@@ -5,9 +5,13 @@ For each checkpoint and song, generates the motion the way ``performer run`` str
 streamed output, tests/test_generate.py) and prints ``seam_ratio``: the mean angular
 acceleration of the frames within 2 of a window boundary over that of the other frames
 (target: at most 1.2; 1.0 means the boundaries are invisible). A ``dance_vq`` checkpoint
-(the dancing performer) has no windows to blend; its seams are the starts of its 8-frame
-movements, where one real exemplar hands over to the next (inertialization), so for it the
-ratio is taken at every movement start with a radius of 1 frame::
+(the dancing performer) has no windows to blend; its seams are its handovers, where one real
+exemplar hands over to the next (inertialization), so for it the ratio is taken at every
+handover with a radius of 1 frame. The code step is frame ``8k``, but the beat warp plays
+the movement about ``WARP_LAG`` (1.5) frames late, so the handover shows at frame
+``8k + round(WARP_LAG)`` (8k + 2): there the ratio is centred (``--handover-offset`` sets
+another; the old centre, 0, sits in the calm just before the handover and reads a seam as
+smaller than the motion around it)::
 
     .venv/bin/python benchmarks/studies/seams.py --checkpoint models/assets/default.pt \\
         --audio models/assets/clip.ogg /path/to/dwm/DANCE_W_5/audio.mp3
@@ -23,6 +27,14 @@ import sys
 from pathlib import Path
 
 
+def handover_offset() -> int:
+    """Frames from a dance_vq code step (8k) to where its movement's handover shows: the beat
+    warp's mean lag, rounded (``models.networks.dance_stream.WARP_LAG``)."""
+    from models.networks.dance_stream import WARP_LAG
+
+    return int(round(WARP_LAG))
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--checkpoint", nargs="+", default=["models/assets/default.pt"], help="causal checkpoints")
@@ -30,6 +42,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--window", type=int, default=128, help="window in frames (default 128)")
     p.add_argument("--hop", type=int, default=64, help="hop in frames (default 64)")
     p.add_argument("--max", type=float, default=1.2, help="exit 1 above this ratio (default 1.2)")
+    p.add_argument("--handover-offset", type=int, default=None, metavar="FRAMES",
+                   help="dance_vq: frames from the code step 8k to the handover the ratio is centred on "
+                        "(default round(WARP_LAG) of models/networks/dance_stream.py: 2)")
     a = p.parse_args(argv)
     import torch
 
@@ -59,7 +74,8 @@ def main(argv: list[str] | None = None) -> int:
             poses = run_model(m.model, extract_features(samples, m.features), window=a.window, hop=a.hop)
             if m.name == "dance_vq":
                 seg = m.model.config.seg
-                ratios.append(seam_ratio(poses, seg, seg, radius=1))
+                off = handover_offset() if a.handover_offset is None else a.handover_offset
+                ratios.append(seam_ratio(poses[off % seg:], seg, seg, radius=1))  # frame 0 = a handover
             else:
                 ratios.append(seam_ratio(poses, a.window, a.hop))
         worst = max(worst, *ratios)

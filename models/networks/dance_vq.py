@@ -4,11 +4,16 @@ Why a codebook. A regressor from music to pose (the causal U-Net) is asked for o
 where the dancers did many; its loss is smallest at their average, so it hedges towards
 the mean pose and trembles around it (docs/training.md). Here the music never picks a
 pose: it picks, every ``seg`` frames, one of ``codebook`` short movements learned from
-the dancers (choreographic memory, Bailando, Siyao et al., CVPR 2022), and a decoder
-writes the movement out. What comes out is always one of the dancers' movements, at
-their amplitude, whatever the music; the music decides which, and when.
+the dancers (choreographic memory, Bailando, Siyao et al., CVPR 2022). The movement played
+is one of that code's exemplars: real ``2 seg``-frame windows of the dancers' poses kept in
+the checkpoint (``member_poses``, up to ``members`` per code; the shipped default holds
+1,519 for 512 codes), the one that best continues the motion, bent onto it
+(:mod:`models.networks.dance_stream`). The decoder writes a movement out only for a code
+without exemplars (a model trained with ``members = 0``; none in the shipped default).
+What comes out is one of the dancers' movements, at their amplitude, whatever the music;
+the music decides which, and when.
 
-Three networks, one checkpoint:
+Three networks and the exemplars, one checkpoint:
 
 * :class:`MotionEncoder` (training only): poses ``(B, T, P)`` standardised ->
   ``(B, code_dim, T / seg)``, non-causal 1-D convolutions with stride 2 (x3 for seg 8).
@@ -17,7 +22,8 @@ Three networks, one checkpoint:
   restarted from the batch).
 * :class:`MotionDecoder`: codes -> poses, **causal over codes**: the ``seg`` frames of
   code ``k`` depend on codes ``k - 7 .. k`` only (kernel-2 convolutions, dilations
-  1, 2, 4), so a movement continues the one before it.
+  1, 2, 4), so a movement continues the one before it. It trains the codebook and plays
+  codes that have no exemplars.
 * :class:`CodePredictor`: a causal Transformer over the last ``window_codes`` code steps
   (16 x 8 = 128 frames, the engine's window). Token ``k`` holds the standardised audio
   features of frames ``8k - 7 .. 8k``, the code chosen at step ``k - 1`` (its own output,
