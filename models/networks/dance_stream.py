@@ -80,15 +80,18 @@ WARP_LAG: float = 1.5
 #: Pull of the warp's lag back to :data:`WARP_LAG` per frame, so a drifting phase estimate
 #: cannot run it into either bound.
 WARP_PULL: float = 0.05
-#: Tempo following: each movement plays at ``r = T / T_src``, T the music's tempo
+#: Tempo following: each movement plays at ``r = T / T_ref``, T the music's tempo
 #: (:class:`models.networks.tempo.TempoFollower`, in the range the performer dances at) and
-#: T_src the tempo of the song its exemplar was danced to (``DanceVQ.member_period``: the
-#: shipped memory's cha-cha 124, rumba 104, waltz 84 bpm, measured by the same follower),
+#: T_ref the memory's mean tempo (the geometric mean over its exemplars of the tempo of the
+#: song each was danced to, ``DanceVQ.member_period``: 93 bpm for the shipped model),
 #: blended towards 1 as the pulse fades (the follower's confidence), within
 #: :data:`RATE_RANGE` and never faster than the fastest exemplars of the memory move
-#: (:data:`SPEED_CAP`). So a waltz played to a waltz moves at the dancers' own pace, and
-#: the same song faster gives the same dance faster. False plays every movement at its
-#: own pace.
+#: (:data:`SPEED_CAP`); the rate moves from the last movement's to the new one's over the
+#: movement, so a change of tempo never jerks. Each exemplar's own song tempo as the
+#: reference (``T / T_src``) was measured too (docs/listening.md): the rate then jumps
+#: between exemplars of different styles at every handover (jerk 2.1x the dancers',
+#: bone steps up to 49.6 degrees), for no gain in how the pace follows the music. False
+#: plays every movement at its own pace.
 FOLLOW_TEMPO: bool = True
 #: Playback rates a movement may take (a movement plays ``r * seg`` of its exemplar's frames
 #: over its ``seg`` frames; its window holds ``2 seg``).
@@ -387,6 +390,8 @@ class DanceStream:
         self._speed_cap = float(np.quantile(speed[real], SPEED_CAP)) if real.any() else np.inf
         self._member_speed = speed
         self._member_period = model.member_period.numpy().astype(np.float64)  # (K, M); 0 unknown
+        known = self._member_period[real & (self._member_period > 0)]
+        self._ref_period = float(np.exp(np.log(known).mean())) if len(known) else 0.0  # the memory's mean tempo
         self.energy = 1.0
         self._energy_bias: np.ndarray | None = None  # ENERGY_GAIN * (energy - 1) * z; None at 1
         self.set_energy(energy)
@@ -427,7 +432,8 @@ class DanceStream:
         # movement and its continuation, bent to continue the motion), read at frame
         # seg + rate * j - lag of the movement's frame j
         self._played = np.zeros((3 * self.seg, self.pose_dim), np.float32)
-        self._rate = 1.0  # exemplar frames per frame of the current movement (tempo following)
+        self._rate = 1.0  # exemplar frames per frame at the end of the current movement (tempo following)
+        self._rate_from = 1.0  # ... and at its start
         self._tempo = TempoFollower()
         self._onsets = np.zeros(DENSITY_WINDOW, np.float64)  # the last DENSITY_WINDOW onset strengths, a ring
         self._density = 0.0  # their onset density (per s), taken at each code step
@@ -567,7 +573,7 @@ class DanceStream:
             c0 = pairs[0]
             beat = self._next_beat(self._rate_for(*c0))
             frame, clarity = beat if beat is not None else (-1, 0.0)
-            at = self.seg + self._rate * self.seg  # where the playing movement has got to
+            at = self.seg + self._advance(self.seg)  # where the playing movement has got to
             cont = np.stack([warp_pose(self._played, at), warp_pose(self._played, at + 1.0)])
             i, best = match_exemplar(cands, dips, cont, self._decay, frame, BEAT_WEIGHT * clarity,
                                      self.seg, VEL_CAP)  # match_exemplar's quaternions are unit already
@@ -577,7 +583,7 @@ class DanceStream:
 
     def _rate_for(self, code: int, member: int) -> float:
         """The playback rate of exemplar ``member`` of ``code`` now (:data:`FOLLOW_TEMPO`)."""
-        src = self._member_period[code, member]
+        src = self._ref_period
         period = self._tempo.period
         if not FOLLOW_TEMPO or src <= 0.0 or period <= 0.0:
             return 1.0
@@ -592,10 +598,16 @@ class DanceStream:
         if not self.codes_drawn:  # before the first movement there is only its first pose
             self._played[: self.seg] = window[0]
         else:
-            at = self._rate * self.seg  # the current movement's end, seg frames back
+            at = self._advance(self.seg)  # the current movement's end, seg frames back
             self._played[: self.seg] = [warp_pose(self._played, at + i) for i in range(self.seg)]
         self._played[self.seg:] = window
+        self._rate_from = self._rate if self.codes_drawn else rate
         self._rate = rate
+
+    def _advance(self, j: int) -> float:
+        """Exemplar frames the current movement has played by its frame ``j``: the rate moves
+        linearly from ``_rate_from`` (frame 0) towards ``_rate`` (frame seg)."""
+        return j * self._rate_from + (self._rate - self._rate_from) * j * (j - 1) / (2 * self.seg)
 
     def _commit(self, code: int) -> None:
         """Record ``code`` as played (``self._play`` has started its movement)."""
@@ -622,13 +634,14 @@ class DanceStream:
         beat warp: frame ``seg + rate * j - lag`` of ``self._played``, between two frames nlerped
         (``warp_pose``; the lag moves by ``rate * BEAT_WARP * w * cos(theta)`` a frame; see
         :data:`BEAT_WARP`)."""
-        x = self.seg + self._rate * j
+        x = self.seg + self._advance(j)
         if self._beat_cols is None or BEAT_WARP <= 0.0:  # no beat tracker, or no warp: the movement as it is
             return warp_pose(self._played, x)
         ccos, clarity = float(self._raw[self._beat_cols[0]]), float(self._raw[self._beat_cols[2]])
         depth = BEAT_WARP * min(1.0, max(clarity, 0.0) / WARP_CLARITY)
         cos = ccos / clarity if clarity > 1e-9 else 0.0
-        lag = self._lag + self._rate * depth * cos - WARP_PULL * (self._lag - WARP_LAG)
+        rate = self._advance(j + 1) - self._advance(j)  # exemplar frames this frame plays
+        lag = self._lag + rate * depth * cos - WARP_PULL * (self._lag - WARP_LAG)
         self._lag = min(max(lag, 0.0), 2.0 * WARP_LAG)
         return warp_pose(self._played, x - self._lag)
 
