@@ -57,7 +57,7 @@ LOGIT_TAU: float = 4.0
 #: Logit below which a dancing performer hears no music.
 MARGIN_STOP: float = 2.0
 #: Logit above which an idle performer hears music again.
-MARGIN_START: float = 3.0
+MARGIN_START: float = 1.5
 #: Frames of music an idle performer must hear before it dances again (0.1 s; the fade
 #: after it takes 0.67 s: back within a second).
 START_FRAMES: int = 3

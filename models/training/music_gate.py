@@ -416,7 +416,7 @@ def programme(rng: np.random.Generator, songs: list[np.ndarray], pool: list[np.n
     return np.concatenate(parts).astype(np.float32), np.concatenate(labels)
 
 
-def programme_features(fcfg, songs: list[np.ndarray], rng: np.random.Generator, minutes: float = 40.0,
+def programme_features(fcfg, songs: list[np.ndarray], rng: np.random.Generator, minutes: float = 60.0,
                        pool_size: int = 80, progress: bool = False) -> list[tuple[np.ndarray, np.ndarray]]:
     """``minutes`` of random :func:`programme` s as (features (T, D), labels (T,)) pairs."""
     from models.features.spectral import extract_features
@@ -477,7 +477,7 @@ def fit_network(x: np.ndarray, y: np.ndarray, seed: int = 0, steps: int = 400) -
     return mg.pack(mean, std, w1, b1, w2, b2)
 
 
-def fit_presence(model, fcfg, songs: list[np.ndarray], rng: np.random.Generator, minutes: float = 40.0,
+def fit_presence(model, fcfg, songs: list[np.ndarray], rng: np.random.Generator, minutes: float = 60.0,
                  progress: bool = False) -> dict[str, float]:
     """Fit ``model``'s presence detector (its ``presence`` buffer) on ``songs`` (training songs'
     audio, (n,) at 22050 Hz) and the synthetic material; returns the training accuracy per class."""
@@ -495,6 +495,14 @@ def fit_presence(model, fcfg, songs: list[np.ndarray], rng: np.random.Generator,
     return acc
 
 
+def training_songs(data_root: str | Path) -> list[str]:
+    """The training split's dance names (models.data.split), in its order: the songs the detector hears."""
+    from models.data.dwm import dance_dirs
+    from models.data.split import split_names
+
+    return split_names([d.name for d in dance_dirs(data_root)])[0]
+
+
 def song_audio(data_root: str | Path, names: list[str]) -> list[np.ndarray]:
     """The training songs' audio (n,) at 22050 Hz."""
     from models.data.dwm import load_dance
@@ -508,12 +516,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--checkpoint", required=True, metavar="CKPT", help="a dance_vq checkpoint")
     p.add_argument("--data", required=True, metavar="DIR", help="the DWM dataset directory (its training songs)")
     p.add_argument("--out", required=True, metavar="CKPT", help="where to write the checkpoint with the fitted detector")
-    p.add_argument("--minutes", type=float, default=40.0, help="minutes of training programmes (default 40)")
+    p.add_argument("--minutes", type=float, default=60.0, help="minutes of training programmes (default 60)")
     p.add_argument("--seed", type=int, default=0, help="seed of the synthetic material and the fit (default 0)")
     a = p.parse_args(argv)
 
-    from models.data.dwm import dance_dirs
-    from models.data.split import split_names
     from models.errors import PerformerError
     from models.generate import load_model
     from models.networks.checkpoint import save_checkpoint
@@ -524,8 +530,7 @@ def main(argv: list[str] | None = None) -> int:
         lm = load_model(a.checkpoint)
         if not isinstance(lm.model, DanceVQ):
             raise PerformerError(f"{lm.path} is a {lm.name!r} model; the presence detector is dance_vq's")
-        train, _ = split_names([d.name for d in dance_dirs(a.data)])
-        songs = song_audio(a.data, train)
+        songs = song_audio(a.data, training_songs(a.data))
         fit_presence(lm.model, lm.features, songs, np.random.default_rng(a.seed), a.minutes, progress=True)
         meta = lm.meta
         save_checkpoint(a.out, lm.model, model_name=meta["model_name"], generator_config=lm.model.config,
