@@ -17,7 +17,8 @@ features as the engine computes them):
   ``held``, the share of the gap's frames after that in which it stays fully idle (target 1);
   ``back_s``, seconds from the music's return to fully dancing (target at most 1);
   ``max_step_deg``, the largest frame-to-frame bone rotation during both fades, against the
-  dance's own (no snap). The full stream runs (poses too).
+  dance's own (no snap); ``idle_step_deg``, the largest while fully idle (calm). The full
+  stream runs (poses too).
 
 It also prints the gate's own cost per frame (median and 99th percentile, microseconds).
 
@@ -107,6 +108,7 @@ def run_gap(lm, a: np.ndarray, gap: np.ndarray, b: np.ndarray, seed: int) -> dic
             "held": None if idle_at is None else float((w[idle_at:g1] >= 1.0).mean()),
             "back_s": None if back_at is None else (back_at - g1 + 1) / 30.0,
             "max_step_deg": float(steps[fades].max()) if len(fades) else 0.0,
+            "idle_step_deg": float(steps[idle_at:g1 - 1].max()) if idle_at is not None and g1 - 1 > idle_at else None,
             "dance_step_p99_deg": float(np.percentile(steps[dancing[dancing < len(steps)]], 99)),
             "idle_w": w.tolist(), "gap_frames": [g0, g1]}
 
@@ -179,12 +181,12 @@ def main(argv: list[str] | None = None) -> int:
             gap = gap * 10 ** ((rms_dbfs(a) - rms_dbfs(gap)) / 20)  # at the level of the music
         row = run_gap(lm, a, gap, b, args.seed)
         gap_rows.append({"gap": lab, "dbfs": rms_dbfs(gap) if lab != "silence" else None, **row})
-    print(f"\n| between songs | gap dBFS | settle (s) ≤ 2 | held | back (s) ≤ 1 | largest step in the fades (deg) | dance p99 (deg) |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+    print(f"\n| between songs | gap dBFS | settle (s) ≤ 2 | held | back (s) ≤ 1 | largest step in the fades (deg) | largest step while idle (deg) | dance p99 (deg) |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     f = lambda v, d=2: "never" if v is None else f"{v:.{d}f}"  # noqa: E731
     for r in gap_rows:
         print(f"| {r['gap']} | {f(r['dbfs'], 1) if r['dbfs'] is not None else '-'} | {f(r['settle_s'])} | {f(r['held'])} | "
-              f"{f(r['back_s'])} | {r['max_step_deg']:.1f} | {r['dance_step_p99_deg']:.1f} |")
+              f"{f(r['back_s'])} | {r['max_step_deg']:.1f} | {f(r['idle_step_deg'])} | {r['dance_step_p99_deg']:.1f} |")
     if args.json:
         args.json.write_text(json.dumps({"gate_us_median": float(np.median(cost_us)),
                                          "gate_us_p99": float(np.percentile(cost_us, 99)), "recordings": rec_rows, "gaps": [{k: v for k, v in r.items() if k != "idle_w"}
