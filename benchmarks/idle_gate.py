@@ -101,6 +101,8 @@ def run_gap(lm, a: np.ndarray, gap: np.ndarray, b: np.ndarray, seed: int) -> dic
     steps = bone_steps_deg(poses)
     idle_at = g0 + int(np.argmax(w[g0:g1] >= 1.0)) if (w[g0:g1] >= 1.0).any() else None
     back_at = g1 + int(np.argmax(w[g1:] <= 0.0)) if idle_at is not None and (w[g1:] <= 0.0).any() else None
+    still = np.flatnonzero((w[:-1] >= 1.0) & (w[1:] >= 1.0))  # steps between two fully idle frames
+    still = still[(still >= g0) & (still < g1)]
     fades = np.r_[g0:(idle_at or g1), g1:(back_at or len(w))]
     fades = fades[(fades > 0) & (fades < len(steps) + 1)] - 1
     dancing = np.r_[60:g0, g1 + 60:len(w) - 1] if back_at else np.r_[60:g0]
@@ -108,7 +110,7 @@ def run_gap(lm, a: np.ndarray, gap: np.ndarray, b: np.ndarray, seed: int) -> dic
             "held": None if idle_at is None else float((w[idle_at:g1] >= 1.0).mean()),
             "back_s": None if back_at is None else (back_at - g1 + 1) / 30.0,
             "max_step_deg": float(steps[fades].max()) if len(fades) else 0.0,
-            "idle_step_deg": float(steps[idle_at:g1 - 1].max()) if idle_at is not None and g1 - 1 > idle_at else None,
+            "idle_step_deg": float(steps[still].max()) if len(still) else None,
             "dance_step_p99_deg": float(np.percentile(steps[dancing[dancing < len(steps)]], 99)),
             "idle_w": w.tolist(), "gap_frames": [g0, g1]}
 
