@@ -40,7 +40,7 @@ from models.networks.blend import blend_track
 from models.networks.dance_jit import gate_ema, match_exemplar, push_history, renorm_pose, sanitize_rows, warp_pose
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ, style_token
-from models.networks.music_gate import START_FRAMES, MusicGate
+from models.networks.music_gate import ENERGY_COL, START_FRAMES, MusicGate
 from models.networks.streaming import FEATURE_LIMIT
 from models.rig.humanoid import BONE_INDEX
 from models.timebase import FPS
@@ -340,7 +340,7 @@ class DanceStream:
         self._gate_std = self._feat_std[self._gcols].astype(np.float64)
         self._gate_a = float(np.exp(-1.0 / GATE_TAU))
         self._gate_a_return = float(np.exp(-1.0 / GATE_TAU_RETURN))
-        fitted = bool(model.presence.abs().sum() > 0) and self._ecol is not None  # else the logistic detector
+        fitted = bool(model.presence.abs().sum() > 0) and self._ecol == ENERGY_COL  # else the logistic detector
         self._presence = MusicGate(self._feat_mean, self._feat_std, model.presence.numpy(), self._energy_min,
                                    c.clarity_col) if fitted else None
         self._members = _cached_members(model)  # (K, M, 2 seg, P), shared: never written
