@@ -8,8 +8,10 @@ STAMP   := $(VENV)/.installed
 JIT_STAMP := $(VENV)/.jit-compiled
 # System packages: PortAudio for live input, liblo-tools (oscdump) to prove the
 # OSC wire format, mono-mcs to compile and run the Unity receiver's C# OSC parser
-# against our encoder (tests/test_listen.py; about 20 s to install).
-APT_PKGS := libportaudio2 liblo-tools mono-mcs
+# against our encoder (tests/test_listen.py; about 20 s to install), espeak-ng for the
+# synthetic speech the idle gate's presence detector learns and is tested on
+# (models/training/music_gate.py, tests/test_music_gate.py).
+APT_PKGS := libportaudio2 liblo-tools mono-mcs espeak-ng
 
 .PHONY: setup system-deps web browser-deps demo test test-fast bench soak constraints clean help
 

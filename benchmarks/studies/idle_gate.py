@@ -1,21 +1,31 @@
-"""Between songs: how fast a dance_vq performer settles on silence or noise and dances again.
+"""Knowing when music plays: where a dance_vq performer dances, settles and dances again.
 
-Plays, through the model's live stream (:class:`models.networks.dance_stream.DanceStream`,
-features as the engine computes them), a programme of validation songs separated by
-gaps of silence, applause, crowd and room noise (``models.training.dance_vq.synthetic_noise``,
-other seeds than the detector was fitted on), and prints per gap:
+Two parts, both through the model's live stream (:class:`models.networks.dance_stream.DanceStream`,
+features as the engine computes them):
 
-* ``settle_s``: seconds from the end of the music to the performer fully idle (target <= 2);
-* ``back_s``: seconds from the music's return to the performer fully dancing (target <= 1);
-* ``max_step_deg``: the largest frame-to-frame bone rotation during both fades, against the
-  dance's own 99th percentile (no visible jump: not above it);
-* ``idle_sway_deg``: the largest frame-to-frame bone rotation while idle (calm).
+* **Recordings** (``--music``, default ../shared/data/music, and the validation songs of
+  ``--data``): each whole recording alone; ``idle``: the share of its frames after the first
+  3 s in which the performer is not fully dancing (idle weight above 0; target at most 0.02).
+  Only the gate runs here (:meth:`DanceStream.listen`: the idle weight depends on the
+  features alone).
+* **Between songs**: validation song, gap, the next validation song (20 s of each, from a
+  third into the song), for gaps of silence, applause (-20 and -35 dBFS), crowd babble
+  (-30, -45), room tone (-45, -60), pink noise (-30) and read speech (``--speech``, each
+  recording at the RMS level of the song before it), made by
+  :mod:`models.training.music_gate` with other seeds than its fit (dBFS: RMS level). Per gap:
+  ``settle_s``, seconds from the gap's start to the performer fully idle (target at most 2);
+  ``held``, the share of the gap's frames after that in which it stays fully idle (target 1);
+  ``back_s``, seconds from the music's return to fully dancing (target at most 1);
+  ``max_step_deg``, the largest frame-to-frame bone rotation during both fades, against the
+  dance's own (no snap); ``idle_step_deg``, the largest while fully idle (calm). The full
+  stream runs (poses too).
 
-and, over the songs themselves, the share of music frames the gate wrongly took for a
-gap (``false_idle``). ``--plot`` draws the idle weight and a hand's height over time.
+It also prints the gate's own cost per frame (median and 99th percentile, microseconds).
 
-    .venv/bin/python benchmarks/studies/idle_gate.py --checkpoint models/assets/default.pt \\
-        --data ../shared/data/dwm --plot docs/img/idle_gate.png
+``--plot`` draws the idle weight over the between-songs programmes.
+
+    .venv/bin/python benchmarks/idle_gate.py --checkpoint models/assets/default.pt \\
+        --data ../shared/data/dwm --plot docs/img/presence_gate.png
 """
 
 from __future__ import annotations
@@ -27,37 +37,43 @@ from pathlib import Path
 
 import numpy as np
 
-GAPS = ("silence", "applause", "crowd", "room")
-SONGS = ("DANCE_C_2", "DANCE_R_5", "DANCE_W_5", "DANCE_W_22", "DANCE_W_28")
+from models.data.split import VAL_DANCES
+
+#: (label, kind, dBFS) of the gaps; dBFS None: speech at the level of the song before it.
+GAPS: tuple[tuple[str, str, float | None], ...] = (
+    ("silence", "silence", None), ("applause -20", "applause", -20.0), ("applause -35", "applause", -35.0),
+    ("crowd -30", "crowd", -30.0), ("crowd -45", "crowd", -45.0), ("room -45", "room", -45.0),
+    ("room -60", "room", -60.0), ("pink -30", "pink", -30.0))
+SR = 22050
+HOP = 735
 
 
-def gap_audio(kind: str, seconds: float, rng: np.random.Generator) -> np.ndarray:
-    from models.training.dance_vq import synthetic_noise
+def rms_dbfs(x: np.ndarray) -> float:
+    return float(20 * np.log10(np.sqrt(np.mean(np.square(x, dtype=np.float64))) + 1e-12))
+
+
+def gap_audio(kind: str, seconds: float, dbfs: float | None, rng: np.random.Generator, pool: list[np.ndarray]) -> np.ndarray:
+    from models.training import music_gate as mg
 
     if kind == "silence":
-        return np.zeros(int(seconds * 22050), np.float32)
-    return synthetic_noise(kind, seconds, rng)
+        return np.zeros(int(seconds * SR), np.float32)
+    if kind == "applause":
+        return mg.applause(seconds, rng, pool, dbfs)
+    if kind == "crowd":
+        return mg.babble(seconds, rng, pool, dbfs)
+    if kind == "room":
+        return mg.room(seconds, rng, pool, dbfs)
+    return mg.plain_noise(seconds, rng, kind, dbfs)
 
 
-def programme(data: Path, song_s: float, gap_s: float, seed: int) -> tuple[np.ndarray, list[tuple[str, int, int]]]:
-    """Audio (n,) at 22050 Hz and its parts (name, first frame, end frame at 30 fps)."""
+def excerpt(data: Path, name: str, seconds: float) -> np.ndarray:
     from models.data.dwm import load_dance
     from models.features.audio_io import load_audio
 
-    rng = np.random.default_rng(seed)
-    parts, audio, frame = [], [], 0
-    for i, name in enumerate(SONGS):
-        song = load_audio(load_dance(data / name).audio_path, 22050)[0]
-        start = len(song) // 3  # from the middle of the song: full music, no intro
-        pieces = [(name, song[start: start + int(song_s * 22050)])]
-        if i < len(GAPS):
-            pieces.append((GAPS[i], gap_audio(GAPS[i], gap_s, rng)))
-        for label, a in pieces:
-            n = len(a) // 735
-            audio.append(a[: n * 735])
-            parts.append((label, frame, frame + n))
-            frame += n
-    return np.concatenate(audio).astype(np.float32), parts
+    song = load_audio(load_dance(data / name).audio_path, SR)[0]
+    start = len(song) // 3  # from the middle of the song: full music, no intro
+    x = song[start: start + int(seconds * SR)]
+    return x[: len(x) // HOP * HOP]
 
 
 def bone_steps_deg(poses: np.ndarray) -> np.ndarray:
@@ -67,91 +83,132 @@ def bone_steps_deg(poses: np.ndarray) -> np.ndarray:
     return np.degrees(2 * np.arccos(dot)).max(1)
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--checkpoint", default=None, help="a dance_vq checkpoint (default: the packaged one)")
-    p.add_argument("--data", required=True, type=Path, help="the DWM dataset directory")
-    p.add_argument("--song-s", type=float, default=20.0, help="seconds of each song (default 20)")
-    p.add_argument("--gap-s", type=float, default=8.0, help="seconds of each gap (default 8)")
-    p.add_argument("--seed", type=int, default=7, help="noise and dance seed (default 7)")
-    p.add_argument("--plot", type=Path, help="write a PNG of the idle weight and the right hand's height")
-    p.add_argument("--json", type=Path, help="write the results as JSON")
-    args = p.parse_args(argv)
-
-    from models.errors import PerformerError
+def run_gap(lm, a: np.ndarray, gap: np.ndarray, b: np.ndarray, seed: int) -> dict:
+    """Song ``a``, ``gap``, song ``b`` through a fresh stream: the gap's settle, held, back, fade steps."""
     from models.features.spectral import extract_features
-    from models.generate import load_model
     from models.networks.dance_stream import DanceStream
 
-    try:
-        lm = load_model(args.checkpoint)
-        if not getattr(lm.model, "takes_style", False):
-            raise PerformerError(f"{lm.path} is a {lm.name!r} model; the idle gate belongs to dance_vq models")
-        audio, parts = programme(args.data, args.song_s, args.gap_s, args.seed)
-    except (PerformerError, OSError) as e:
-        print(f"idle_gate: {e}", file=sys.stderr)
-        return 2
+    gap = gap[: len(gap) // HOP * HOP]
+    audio = np.concatenate([a, gap, b]).astype(np.float32)
     feats = extract_features(audio, lm.features)
-    stream = DanceStream(lm.model, seed=args.seed)
+    stream = DanceStream(lm.model, seed=seed)
     poses = np.empty((len(feats), lm.model.config.pose_dim), np.float32)
     w = np.empty(len(feats))
     for t in range(len(feats)):
         poses[t] = stream.push(feats[t: t + 1])[0]
         w[t] = stream.idle_weight
+    g0, g1 = len(a) // HOP, (len(a) + len(gap)) // HOP
     steps = bone_steps_deg(poses)
-    dancing = np.concatenate([np.arange(a + 60, b - 1) for name, a, b in parts if name not in GAPS])
-    dance_p99 = float(np.percentile(steps[dancing], 99))
-    dance_max = float(steps[dancing].max())
-    rows = []
-    for i, (name, a, b) in enumerate(parts):
-        if name not in GAPS:
-            continue
-        idle_at = a + int(np.argmax(w[a:b] >= 1.0)) if (w[a:b] >= 1.0).any() else None
-        nxt = parts[i + 1][2] if i + 1 < len(parts) else len(w)
-        back_at = b + int(np.argmax(w[b:nxt] <= 0.0)) if (w[b:nxt] <= 0.0).any() else None
-        fades = np.r_[a:(idle_at or b), b:(back_at or nxt)]
-        fades = fades[(fades > 0) & (fades < len(steps) + 1)] - 1
-        idle = np.arange(idle_at, b - 1) if idle_at else np.array([], int)
-        rows.append({
-            "gap": name,
-            "settle_s": None if idle_at is None else (idle_at - a + 1) / 30.0,
-            "back_s": None if back_at is None else (back_at - b + 1) / 30.0,
+    idle_at = g0 + int(np.argmax(w[g0:g1] >= 1.0)) if (w[g0:g1] >= 1.0).any() else None
+    back_at = g1 + int(np.argmax(w[g1:] <= 0.0)) if idle_at is not None and (w[g1:] <= 0.0).any() else None
+    still = np.flatnonzero((w[:-1] >= 1.0) & (w[1:] >= 1.0))  # steps between two fully idle frames
+    still = still[(still >= g0) & (still < g1)]
+    fades = np.r_[g0:(idle_at or g1), g1:(back_at or len(w))]
+    fades = fades[(fades > 0) & (fades < len(steps) + 1)] - 1
+    dancing = np.r_[60:g0, g1 + 60:len(w) - 1] if back_at else np.r_[60:g0]
+    return {"settle_s": None if idle_at is None else (idle_at - g0 + 1) / 30.0,
+            "held": None if idle_at is None else float((w[idle_at:g1] >= 1.0).mean()),
+            "back_s": None if back_at is None else (back_at - g1 + 1) / 30.0,
             "max_step_deg": float(steps[fades].max()) if len(fades) else 0.0,
-            "idle_sway_deg": float(steps[idle].max()) if len(idle) else None,
-        })
-    music = np.concatenate([np.arange(a + 60, b) for name, a, b in parts if name not in GAPS])
-    false_idle = float((w[music] > 0).mean())
-    print(f"{lm.path}: {len(parts)} parts, {len(feats) / 30:.0f} s; dance frame-to-frame step p99 {dance_p99:.2f}, max {dance_max:.2f} deg; "
-          f"music frames taken for a gap (from 2 s into each song): {false_idle:.3f}")
-    print("| gap | settle (s) ≤ 2 | back (s) ≤ 1 | largest step in the fades (deg) | largest step while idle (deg) |")
-    print("| --- | ---: | ---: | ---: | ---: |")
-    for r in rows:
-        f = lambda v, d=2: "never" if v is None else f"{v:.{d}f}"  # noqa: E731
-        print(f"| {r['gap']} | {f(r['settle_s'])} | {f(r['back_s'])} | {r['max_step_deg']:.2f} | {f(r['idle_sway_deg'])} |")
+            "idle_step_deg": float(steps[still].max()) if len(still) else None,
+            "dance_step_p99_deg": float(np.percentile(steps[dancing[dancing < len(steps)]], 99)),
+            "idle_w": w.tolist(), "gap_frames": [g0, g1]}
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--checkpoint", default=None, help="a dance_vq checkpoint (default: the packaged one)")
+    p.add_argument("--data", required=True, type=Path, help="the DWM dataset directory (validation songs)")
+    p.add_argument("--music", type=Path, default=Path("../shared/data/music"), help="recordings to stay danced on")
+    p.add_argument("--speech", type=Path, default=Path("../shared/data/speech"), help="read speech to idle on")
+    p.add_argument("--song-s", type=float, default=20.0, help="seconds of each song around a gap (default 20)")
+    p.add_argument("--gap-s", type=float, default=10.0, help="seconds of each noise gap (default 10)")
+    p.add_argument("--seed", type=int, default=7, help="noise and dance seed (default 7)")
+    p.add_argument("--plot", type=Path, help="write a PNG of the idle weight over the between-songs programmes")
+    p.add_argument("--json", type=Path, help="write the results as JSON")
+    args = p.parse_args(argv)
+
+    from models.errors import PerformerError
+    from models.features.audio_io import load_audio
+    from models.features.spectral import extract_features
+    from models.generate import load_model
+    from models.networks.dance_stream import DanceStream
+    from models.training import music_gate as mg
+
+    try:
+        lm = load_model(args.checkpoint)
+        if not getattr(lm.model, "takes_style", False):
+            raise PerformerError(f"{lm.path} is a {lm.name!r} model; the idle gate belongs to dance_vq models")
+        recordings = [(f.name, load_audio(f, SR)[0]) for f in sorted(args.music.glob("*.ogg"))]
+        from models.data.dwm import load_dance
+        recordings += [(n, load_audio(load_dance(args.data / n).audio_path, SR)[0]) for n in VAL_DANCES]
+        speech = [(f.name, load_audio(f, SR)[0]) for f in sorted(args.speech.glob("*.ogg"))]
+        songs = [excerpt(args.data, n, args.song_s) for n in VAL_DANCES]
+    except (PerformerError, OSError) as e:
+        print(f"idle_gate: {e}", file=sys.stderr)
+        return 2
+    fitted = bool(lm.model.presence.abs().sum() > 0)
+    print(f"{lm.path}: detector {'presence network (models/networks/music_gate.py)' if fitted else 'logistic (older checkpoint)'}")
+
+    import time
+
+    rec_rows, cost = [], []
+    for name, audio in recordings:
+        feats = extract_features(audio, lm.features)
+        stream = DanceStream(lm.model, seed=args.seed)
+        w = np.empty(len(feats))
+        for t in range(len(feats)):  # one frame at a time, as the engine pushes them
+            t0 = time.perf_counter()
+            w[t] = stream.listen(feats[t: t + 1])[0]
+            cost.append(time.perf_counter() - t0)
+        idle = w[90:] > 0
+        runs = np.diff(np.r_[0, idle.astype(int), 0])
+        longest = int((np.flatnonzero(runs < 0) - np.flatnonzero(runs > 0)).max()) if idle.any() else 0
+        rec_rows.append({"recording": name, "s": len(audio) / SR, "idle": float(idle.mean()), "longest_idle_s": longest / 30})
+    cost_us = np.array(cost) * 1e6
+    print(f"the gate's cost per frame (DanceStream.listen of one frame): median {np.median(cost_us):.1f} us, "
+          f"p99 {np.percentile(cost_us, 99):.1f} us over {len(cost_us)} frames")
+    print("\n| recording | s | idle after 3 s ≤ 0.02 | longest idle (s) |\n| --- | ---: | ---: | ---: |")
+    for r in rec_rows:
+        print(f"| {r['recording']} | {r['s']:.0f} | {r['idle']:.3f} | {r['longest_idle_s']:.1f} |")
+
+    rng = np.random.default_rng(1000 + args.seed)
+    pool = [mg.utterance(rng) for _ in range(24)] if mg.espeak_available() else []
+    cases = [(lab, gap_audio(kind, args.gap_s, lvl, rng, pool)) for lab, kind, lvl in GAPS
+             if pool or kind not in ("crowd",)]
+    gap_rows = []
+    for i, (lab, gap) in enumerate(cases + [(f"speech {n.removesuffix('.ogg')}", s) for n, s in speech]):
+        a, b = songs[i % len(songs)], songs[(i + 1) % len(songs)]
+        if lab.startswith("speech"):
+            gap = gap * 10 ** ((rms_dbfs(a) - rms_dbfs(gap)) / 20)  # at the level of the music
+        row = run_gap(lm, a, gap, b, args.seed)
+        gap_rows.append({"gap": lab, "dbfs": rms_dbfs(gap) if lab != "silence" else None, **row})
+    print(f"\n| between songs | gap dBFS | settle (s) ≤ 2 | held | back (s) ≤ 1 | largest step in the fades (deg) | largest step while idle (deg) | dance p99 (deg) |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    f = lambda v, d=2: "never" if v is None else f"{v:.{d}f}"  # noqa: E731
+    for r in gap_rows:
+        print(f"| {r['gap']} | {f(r['dbfs'], 1) if r['dbfs'] is not None else '-'} | {f(r['settle_s'])} | {f(r['held'])} | "
+              f"{f(r['back_s'])} | {r['max_step_deg']:.1f} | {f(r['idle_step_deg'])} | {r['dance_step_p99_deg']:.1f} |")
     if args.json:
-        args.json.write_text(json.dumps({"rows": rows, "false_idle": false_idle, "dance_step_p99_deg": dance_p99, "dance_step_max_deg": dance_max}, indent=1))
+        args.json.write_text(json.dumps({"gate_us_median": float(np.median(cost_us)),
+                                         "gate_us_p99": float(np.percentile(cost_us, 99)), "recordings": rec_rows, "gaps": [{k: v for k, v in r.items() if k != "idle_w"}
+                                                                             for r in gap_rows]}, indent=1))
     if args.plot:
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        from models.evaluation.evaluate import positions
-        from models.rig.humanoid import BONE_INDEX
-
-        pos = positions(poses)
-        t = np.arange(len(w)) / 30.0
-        fig, ax = plt.subplots(2, 1, figsize=(11, 4.5), sharex=True)
-        for name, a, b in parts:
-            for axis in ax:
-                axis.axvspan(a / 30, b / 30, color="0.9" if name in GAPS else "white", zorder=0)
-            ax[0].text((a + b) / 60, 1.08, name.replace("DANCE_", ""), ha="center", fontsize=8)
-        ax[0].plot(t, w, color="C3")
-        ax[0].set_ylabel("idle weight")
-        ax[0].set_ylim(-0.05, 1.2)
-        ax[1].plot(t, pos[:, BONE_INDEX["RightHand"], 1], color="C0", lw=0.8)
-        ax[1].set_ylabel("right hand height (m)")
-        ax[1].set_xlabel("s (grey: silence, applause, crowd, room noise)")
+        fig, ax = plt.subplots(len(gap_rows), 1, figsize=(9, 0.9 * len(gap_rows) + 0.6), sharex=True)
+        for axis, r in zip(np.atleast_1d(ax), gap_rows):
+            w = np.array(r["idle_w"])
+            g0, g1 = r["gap_frames"]
+            axis.axvspan(g0 / 30, g1 / 30, color="0.88", zorder=0)
+            axis.plot(np.arange(len(w)) / 30, w, color="C3")
+            axis.set_ylim(-0.1, 1.1)
+            axis.set_yticks([0, 1])
+            axis.set_ylabel(r["gap"], rotation=0, ha="right", va="center", fontsize=8)
+        np.atleast_1d(ax)[-1].set_xlabel("s (grey: the gap between two songs); idle weight, 1 = idle")
         fig.tight_layout()
         fig.savefig(args.plot, dpi=90)
         print(f"wrote {args.plot}")

@@ -18,7 +18,9 @@ between frames about :data:`WARP_LAG` frames late, so its speed dips land on the
 must be above a threshold (silence), and a logistic music detector on a 0.5-s running
 mean of the spectral shape (MFCC 1-12) and the beat tracker's pulse clarity must say
 music (applause, crowd, room noise: energy without music). Both are fitted on the
-training songs against synthetic noise (:func:`models.training.dance_vq.fit_music_gate`); after
+training songs against synthetic noise (:func:`models.training.dance_vq.fit_music_gate`). A
+model with a fitted presence detector (:mod:`models.networks.music_gate`: music on every
+genre, not on speech, crowd, applause or room noise) uses that instead of the logistic one; after
 :data:`ABSENT_FRAMES` frames without music the performer fades over
 :data:`FADE_FRAMES` into a calm idle (the dancers' mean pose with a slow sway of hips,
 spine and head, :func:`idle_pose`), and after :data:`PRESENT_FRAMES` frames of music it
@@ -39,6 +41,7 @@ from models.networks.blend import blend_track
 from models.networks.dance_jit import gate_ema, match_exemplar, push_history, renorm_pose, sanitize_rows, warp_pose
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ, style_token
+from models.networks.music_gate import ENERGY_COL, START_FRAMES, MusicGate
 from models.networks.streaming import FEATURE_LIMIT
 from models.networks.tempo import DENSITY_WINDOW, TempoFollower, onset_density
 from models.rig.humanoid import BONE_INDEX
@@ -379,6 +382,9 @@ class DanceStream:
         self._gate_std = self._feat_std[self._gcols].astype(np.float64)
         self._gate_a = float(np.exp(-1.0 / GATE_TAU))
         self._gate_a_return = float(np.exp(-1.0 / GATE_TAU_RETURN))
+        fitted = bool(model.presence.abs().sum() > 0) and self._ecol == ENERGY_COL  # else the logistic detector
+        self._presence = MusicGate(self._feat_mean, self._feat_std, model.presence.numpy(), self._energy_min,
+                                   c.clarity_col) if fitted else None
         self._members = _cached_members(model)  # (K, M, 2 seg, P), shared: never written
         self._counts = model.member_count.numpy()
         self._style_prior = model.style_prior.numpy().astype(np.float32)  # (K, 4)
@@ -441,6 +447,8 @@ class DanceStream:
         self._has_cont = False  # the playing movement has a real continuation to match the next one to
         self._music = False
         self._ema = np.zeros(len(self._gcols))  # the music detector's running mean
+        if self._presence is not None:
+            self._presence.reset()
         self._run = 0  # frames the gate's input has disagreed with its state
         self._w_idle = 1.0  # 1 = idle, 0 = dancing; a stream starts at rest and fades in on music
         self._fade_prev: tuple[np.ndarray, np.ndarray] | None = None  # last faded frame's signed quaternions
@@ -507,7 +515,9 @@ class DanceStream:
     # -- generation ----------------------------------------------------------------------------
     def _gate(self, row: np.ndarray) -> None:
         present = True
-        if self._ecol is not None and row[self._ecol] <= self._energy_min:
+        if self._presence is not None:  # the presence detector (models/networks/music_gate.py)
+            present = self._presence.step(row, self._music)
+        elif self._ecol is not None and row[self._ecol] <= self._energy_min:
             present = False  # silence: the detector's running mean waits for sound
         elif self._gcols:  # noise without music: the logistic detector on the running mean
             a = self._gate_a if self._music else self._gate_a_return
@@ -516,11 +526,23 @@ class DanceStream:
             if float(self._ema @ self._gate_w) + self._gate_b <= (-GATE_MARGIN if self._music else 0.0):
                 present = False
         self._run = self._run + 1 if present != self._music else 0
-        if self._run >= (PRESENT_FRAMES if present else ABSENT_FRAMES):
+        start = PRESENT_FRAMES if self._presence is None else START_FRAMES  # the presence detector's own
+        if self._run >= (start if present else ABSENT_FRAMES):
             self._music, self._run = present, 0
         target = 1.0 if (self.forced_idle or not self._music) else 0.0
         step = 1.0 / FADE_FRAMES
         self._w_idle = min(target, self._w_idle + step) if target > self._w_idle else max(target, self._w_idle - step)
+
+    def listen(self, features: np.ndarray) -> np.ndarray:
+        """Run only the idle gate on feature frames (k, D), no poses: the idle weight after each
+        frame (k,), as :attr:`idle_weight` reads after :meth:`push` of the same frames (the gate
+        reads the features alone). For measuring the gate on long recordings."""
+        x = np.asarray(features, np.float32)
+        out = np.empty(len(x))
+        for i in range(len(x)):
+            self._gate(x[i])
+            out[i] = self._w_idle
+        return out
 
     def _next_code(self) -> None:
         m, pred = self.model, self._predictor

@@ -52,6 +52,7 @@ from torch import nn
 from models.errors import ConfigError
 from models.networks.dance_jit import draw_code
 from models.networks.generator import config_from_dict
+from models.networks.music_gate import N_PARAMS as PRESENCE_PARAMS
 from models.rig.motion import POSE_DIM
 
 #: Style names, index + 1 is the style token (0 = "auto": the music decides).
@@ -289,6 +290,9 @@ class DanceVQ(nn.Module):
         # of GATE_COLUMNS (MFCC 1-12 and the pulse clarity), standardised.
         self.register_buffer("gate", torch.tensor([-1e9, 10.0]))
         self.register_buffer("gate_w", torch.zeros(len(GATE_MFCC) + 1))
+        # music presence detector (models.networks.music_gate, fitted by models.training.music_gate);
+        # all zeros (checkpoints from before it): the stream uses the logistic detector above
+        self.register_buffer("presence", torch.zeros(PRESENCE_PARAMS))
         # choreographic memory (models.training.dance_vq.fit_members): for each code, up to
         # `members` real 2 * seg-frame windows of the dancers' poses whose encoding is nearest the
         # code (the first seg frames are the movement, the rest its natural continuation, float16),
@@ -311,8 +315,9 @@ class DanceVQ(nn.Module):
 
     def _load_from_state_dict(self, state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys,
                               error_msgs) -> None:
-        """Checkpoints saved before the style or tempo memory existed load without them (zeros: unknown)."""
-        for name in ("member_style", "style_prior", "member_period"):
+        """Checkpoints saved before the style or tempo memory or the presence detector existed
+        load without them (zeros: unknown, not fitted)."""
+        for name in ("member_style", "style_prior", "member_period", "presence"):
             state_dict.setdefault(prefix + name, torch.zeros_like(getattr(self, name)))
         super()._load_from_state_dict(state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys,
                                       error_msgs)

@@ -63,6 +63,7 @@ class DanceVQTrainOptions:
     pred_noise: float = 0.1  # probability that a fed-back code is replaced by a random one
     auto_prob: float = 0.4  # probability that a window's style token is "auto" (0)
     grad_clip: float = 1.0
+    presence_minutes: float = 60.0  # synthetic programmes the presence detector learns from (0: none)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "DanceVQTrainOptions":
@@ -478,6 +479,11 @@ def train_dance_vq(cfg, data_root: str | Path, out_dir: str | Path, cache_dir: s
     model: DanceVQ = build_model("dance_vq", model_cfg)  # type: ignore[assignment]
     rng = np.random.default_rng(cfg.seed)
     set_statistics(model, motion_clips, fcfg, rng, progress)
+    if opts.presence_minutes > 0 and fcfg.kind == "mfcc_onset" and fcfg.beat_phase:  # models.training.music_gate
+        from models.training.music_gate import fit_presence, song_audio, training_songs
+
+        fit_presence(model, fcfg, song_audio(data_root, training_songs(data_root)), np.random.default_rng(cfg.seed),
+                     opts.presence_minutes, progress)
     starts = window_starts(motion_clips, opts.vq_segment)
     if len(starts) < cfg.batch_size:
         raise DataError(f"only {len(starts)} valid {opts.vq_segment}-frame windows in the training dances")

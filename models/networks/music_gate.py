@@ -1,0 +1,219 @@
+"""Knowing when music plays: the presence detector of the dancing performer's idle gate.
+
+:class:`MusicGate` reads one feature frame at a time (30 fps, the ``mfcc_onset`` kind with
+context and beat columns: MFCC 0-12, log energy (dB) 13, their backward differences 14-27,
+onset 28, context means 29-57, beat columns c cos, c sin, clarity, log2 period/15 58-61)
+and keeps :data:`N_STATS` causal running statistics (one compiled call a frame,
+:func:`presence_step`), all exponential means with time constant ``tau`` frames:
+
+* 0, 1: the standardised MFCC 1 and 2 (the spectrum's tilt and curvature, not level; the
+  finer shape follows the recording chain more than the source, and is left out);
+* 2: log of the mean squared standardised MFCC 1-12 difference (cepstral flux: speech
+  and applause change shape fast, mixed music slowly);
+* 3: the spread (dB) of the log energy around its running mean;
+* 4: how often the energy lies 10 dB or more below its running mean (pauses);
+* 5, 6: the mean and the log spread of the onset strength;
+* 7: the beat tracker's pulse clarity (its own 6-s window);
+* 8: the running mean of the log energy (dB) / 10 (level: room noise is quiet);
+* 9: the mean absolute log-energy difference (dB a frame);
+* 10: the beat phase's coherence (time constant :data:`TAU_BEAT`), the mean of ``cos(theta[t] - theta[t-1] - 2 pi / P[t])``
+  (a steady pulse advances its phase by one period's share a frame);
+* 11: the beat period's jitter, the log mean of ``|log2 P[t] - log2 P[t-1]|``.
+
+A small network (:data:`N_STATS` -> :data:`HIDDEN` tanh -> 1) turns them into a logit
+(music > 0), its weights and the statistics' standardisation in the model's ``presence``
+buffer (:func:`pack` / :func:`unpack`; all zeros: not fitted, the stream keeps the older
+logistic detector). Fitted by :mod:`models.training.music_gate` on the training songs
+and on synthetic electronic music, espeak-ng speech, crowd babble, applause and room
+noise. While music is playing the statistics run with ``tau =`` :data:`TAU_MUSIC` and
+the performer stops only below ``-``:data:`MARGIN_STOP`; while it is not, with
+:data:`TAU_IDLE` (so they forget the gap quickly) and it starts again above
+:data:`MARGIN_START`. In silence (log energy at most the model's threshold) the
+statistics are frozen and the gate says "no music".
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+#: Statistics the detector reads (see the module docstring).
+N_STATS: int = 12
+#: Hidden units of the detector's network.
+HIDDEN: int = 16
+#: Time constant (frames) of the statistics while the performer dances (0.5 s).
+TAU_MUSIC: float = 15.0
+#: Time constant (frames) while it is idle (0.2 s): the dance comes back within a second.
+TAU_IDLE: float = 6.0
+#: Time constant (frames) of the beat phase's coherence and the period's jitter, whatever
+#: the state (1.5 s: the beat tracker itself reads 6 s).
+TAU_BEAT: float = 45.0
+BEAT_A: float = math.exp(-1.0 / TAU_BEAT)
+#: Time constant (frames) of the running mean of the detector's logit that the margins judge
+#: while the performer dances (while it is idle the logit itself).
+LOGIT_TAU: float = 4.0
+#: Logit below which a dancing performer hears no music.
+MARGIN_STOP: float = 2.0
+#: Logit above which an idle performer hears music again.
+MARGIN_START: float = 1.5
+#: Frames of music an idle performer must hear before it dances again (0.1 s; the fade
+#: after it takes 0.67 s: back within a second).
+START_FRAMES: int = 3
+#: Feature columns read: MFCC 1-2, log energy, MFCC 1-12 differences, energy difference, onset
+#: (and the beat columns: the model's ``clarity_col`` and its neighbours).
+MFCC_COLS: tuple[int, ...] = (1, 2)
+ENERGY_COL: int = 13
+DMFCC_COLS: tuple[int, ...] = tuple(range(15, 27))
+DENERGY_COL: int = 27
+ONSET_COL: int = 28
+#: State numbers: MFCC 1-2 means, flux, energy mean, energy square deviation, low-energy
+#: share, onset mean, onset square deviation, |d energy| mean, frames seen, previous beat
+#: phase and log period, phase coherence, period jitter.
+N_STATE: int = 14
+#: Length of the packed parameters: statistics mean and std, W1, b1, w2, b2.
+N_PARAMS: int = 2 * N_STATS + HIDDEN * N_STATS + HIDDEN + HIDDEN + 1
+
+
+def pack(mean: np.ndarray, std: np.ndarray, w1: np.ndarray, b1: np.ndarray, w2: np.ndarray, b2: float) -> np.ndarray:
+    """The detector's parameters as one float32 vector (:data:`N_PARAMS`,): statistics
+    mean (N_STATS,), std (N_STATS,), W1 (HIDDEN, N_STATS), b1 (HIDDEN,), w2 (HIDDEN,), b2."""
+    return np.concatenate([mean, std, np.ravel(w1), b1, w2, [b2]]).astype(np.float32)
+
+
+def unpack(p: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Inverse of :func:`pack` (float64 arrays)."""
+    p = np.asarray(p, np.float64)
+    if p.shape != (N_PARAMS,):
+        raise ValueError(f"presence parameters must have shape ({N_PARAMS},), got {p.shape}")
+    s, h = N_STATS, HIDDEN
+    i = 2 * s
+    return p[:s], p[s:i], p[i: i + h * s].reshape(h, s), p[i + h * s: i + h * s + h], \
+        p[i + h * s + h: i + h * s + 2 * h], p[-1:]
+
+
+@njit(cache=True, nogil=True)
+def presence_step(row, mfcc_mean, mfcc_std, dmfcc_std, ccol, state, stats, a):  # pragma: no cover - compiled
+    """Advance the statistics by one feature frame ``row`` (D,) with EMA coefficient ``a``
+    (``ccol``: the pulse clarity's column), in place: ``state`` (N_STATE,) float64, ``stats``
+    (N_STATS,) float64 (module docstring). The first frame starts the means at its values."""
+    b = 1.0 - a
+    first = state[9] == 0.0
+    flux = 0.0
+    for k in range(12):
+        d = np.float64(row[15 + k]) / dmfcc_std[k]
+        flux += d * d
+    flux /= 12.0
+    e = np.float64(row[13])
+    o = np.float64(row[28])
+    if first:
+        for k in range(2):
+            state[k] = (np.float64(row[1 + k]) - mfcc_mean[k]) / mfcc_std[k]
+        state[2] = flux
+        state[3] = e
+        state[6] = o
+    else:
+        for k in range(2):
+            state[k] = a * state[k] + b * (np.float64(row[1 + k]) - mfcc_mean[k]) / mfcc_std[k]
+        state[2] = a * state[2] + b * flux
+        state[3] = a * state[3] + b * e
+        state[6] = a * state[6] + b * o
+    dev = e - state[3]
+    state[4] = a * state[4] + b * dev * dev
+    state[5] = a * state[5] + b * (1.0 if dev < -10.0 else 0.0)
+    od = o - state[6]
+    state[7] = a * state[7] + b * od * od
+    state[8] = a * state[8] + b * abs(np.float64(row[27]))
+    clarity = 0.0
+    if ccol >= 2 and ccol + 1 < row.shape[0]:
+        clarity = np.float64(row[ccol])
+        theta = math.atan2(np.float64(row[ccol - 1]), np.float64(row[ccol - 2]))
+        logp = np.float64(row[ccol + 1])
+        if not first:
+            coh = math.cos(theta - state[10] - 2.0 * math.pi / (15.0 * 2.0 ** logp))
+            ab = BEAT_A
+            state[12] = ab * state[12] + (1.0 - ab) * coh
+            state[13] = ab * state[13] + (1.0 - ab) * abs(logp - state[11])
+        state[10] = theta
+        state[11] = logp
+    state[9] += 1.0
+    stats[0] = state[0]
+    stats[1] = state[1]
+    stats[2] = math.log(state[2] + 1e-3)
+    stats[3] = math.sqrt(state[4])
+    stats[4] = state[5]
+    stats[5] = state[6]
+    stats[6] = math.log(state[7] + 1e-4)
+    stats[7] = clarity
+    stats[8] = state[3] / 10.0
+    stats[9] = state[8]
+    stats[10] = state[12]
+    stats[11] = math.log(state[13] + 1e-3)
+
+
+@njit(cache=True, nogil=True)
+def presence_logit(stats, mean, std, w1, b1, w2, b2):  # pragma: no cover - compiled
+    """The detector's logit (music > 0) for the statistics ``stats`` (N_STATS,)."""
+    s = stats.shape[0]
+    out = b2
+    for h in range(w1.shape[0]):
+        acc = b1[h]
+        for i in range(s):
+            acc += w1[h, i] * ((stats[i] - mean[i]) / std[i])
+        out += w2[h] * math.tanh(acc)
+    return out
+
+
+class MusicGate:
+    """Frame-by-frame music presence: :meth:`step` takes one feature row (D,) and the
+    performer's current state (dancing or not) and says whether this frame sounds like
+    music (the caller counts frames before it changes state, :mod:`dance_stream`).
+
+    feat_mean, feat_std: the model's feature standardisation (D,); params: the packed
+    detector (:func:`pack`); energy_min: the silence threshold (log energy, dB); clarity_col:
+    the pulse clarity's column (-1: none).
+    """
+
+    def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
+                 clarity_col: int) -> None:
+        self._ccol = int(clarity_col)
+        self._mfcc_mean = np.asarray(feat_mean, np.float64)[list(MFCC_COLS)]
+        self._mfcc_std = np.asarray(feat_std, np.float64)[list(MFCC_COLS)]
+        self._dmfcc_std = np.asarray(feat_std, np.float64)[list(DMFCC_COLS)]
+        self._mean, self._std, self._w1, self._b1, self._w2, b2 = unpack(params)
+        self._std = np.maximum(self._std, 1e-6)
+        self._b2 = float(b2[0])
+        self.energy_min = float(energy_min)
+        self._a_music = math.exp(-1.0 / TAU_MUSIC)
+        self._a_idle = math.exp(-1.0 / TAU_IDLE)
+        self._a_logit = math.exp(-1.0 / LOGIT_TAU) if LOGIT_TAU > 0 else 0.0
+        self.reset()
+
+    def reset(self) -> None:
+        self._state = np.zeros(N_STATE)
+        self.stats = np.zeros(N_STATS)
+        self.logit = 0.0  # the running mean of the detector's logit
+
+    def step(self, row: np.ndarray, dancing: bool) -> bool:
+        """True when frame ``row`` (D,) sounds like music to a performer that is ``dancing``."""
+        if float(row[ENERGY_COL]) <= self.energy_min:
+            return False  # silence: the statistics wait for sound
+        presence_step(row, self._mfcc_mean, self._mfcc_std, self._dmfcc_std, self._ccol, self._state, self.stats,
+                      self._a_music if dancing else self._a_idle)
+        z = presence_logit(self.stats, self._mean, self._std, self._w1, self._b1, self._w2, self._b2)
+        a = self._a_logit if dancing else 0.0  # idle: the music's return is heard at once
+        self.logit = a * self.logit + (1.0 - a) * z
+        return self.logit > (-MARGIN_STOP if dancing else MARGIN_START)
+
+
+def stats_trace(feats: np.ndarray, feat_mean: np.ndarray, feat_std: np.ndarray, clarity_col: int,
+                tau: float) -> np.ndarray:
+    """The statistics (T, N_STATS) of a feature sequence (T, D) at one time constant
+    ``tau`` (frames), silence frames included (for fitting; the gate freezes on silence)."""
+    g = MusicGate(feat_mean, feat_std, np.zeros(N_PARAMS, np.float32), -np.inf, clarity_col)
+    a = math.exp(-1.0 / tau)
+    out = np.empty((len(feats), N_STATS))
+    for t in range(len(feats)):
+        presence_step(feats[t], g._mfcc_mean, g._mfcc_std, g._dmfcc_std, g._ccol, g._state, out[t], a)
+    return out
