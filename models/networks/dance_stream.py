@@ -103,7 +103,7 @@ RATE_RANGE: tuple[float, float] = (0.55, 1.75)
 #: rate is blended towards 1 (no clear pulse: the movements' own pace).
 RATE_CONFIDENCE: float = 0.15
 #: Quantile of the exemplars' mean joint speeds that no movement's played speed exceeds.
-SPEED_CAP: float = 0.98
+SPEED_CAP: float = 0.9
 #: Classifier-free guidance of a requested style (Ho & Salimans 2021): the logits move from
 #: the music-only ones ("auto") past the style-conditioned ones by this factor. The predictor
 #: was trained with the style token dropped to "auto" 40 % of the time, which is what it needs.
