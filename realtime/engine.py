@@ -868,13 +868,30 @@ class Engine:
                 log.debug("stats() of %s failed: %s", s.name, exc)
         return sinks
 
+    @staticmethod
+    def _sink_notices(lane: _Lane) -> list[str]:
+        """What the lane's sinks with a ``notice()`` say now (e.g. no OSC receiver listening)."""
+        out = []
+        for s in lane.sinks:
+            notice = getattr(s, "notice", None)
+            try:
+                text = notice() if notice is not None else None
+            except Exception as exc:  # noqa: BLE001
+                text = None
+                log.debug("notice() of %s failed: %s", getattr(s, "name", s), exc)
+            if text:
+                out.append(str(text))
+        return out
+
     def stats(self) -> dict:
         """Counters for the status line: frames, idle, the live settings (offset_ms, smoothing),
-        compute/latency p50/p99 (ms), faults, sinks; and per performer under ``performers``
-        (its frames, settings, stagger, compute and latency, faults and sinks)."""
+        compute/latency p50/p99 (ms), faults, sinks, the sinks' notices; and per performer under
+        ``performers`` (its frames, settings, stagger, compute and latency, faults and sinks)."""
         per: dict[str, dict] = {}
         sinks: dict[str, dict] = {}
+        notices: list[str] = []
         for lane in self._lanes:
+            notices += [n for n in self._sink_notices(lane) if n not in notices]
             lane_sinks = self._sink_stats(lane)
             sinks.update(lane_sinks if len(self._lanes) == 1 else
                          {f"{lane.name}/{k}": v for k, v in lane_sinks.items()})
@@ -926,6 +943,7 @@ class Engine:
             "extractors": len(self._groups),
             "source": src,
             "sinks": sinks,
+            "notices": notices,
             "performers": per,
         }
 
