@@ -264,6 +264,9 @@ class EngineConfig:
     stats_size: int = 2048  # frames kept for p50/p99
     fallback_after_s: float = 2.0  # no audio from the source this long -> switch to the fallback source
     idle_fade_s: float = 1.0  # the engine's own idle crossfade, each way (models without set_idle)
+    # Linux, for the benchmark: also keep each hop's run-queue wait (time the worker was ready
+    # but another thread had the CPU, /proc/thread-self/schedstat) in compute_wait_ms
+    runqueue_wait: bool = False
 
 
 #: Input samples beyond +-MAX_SAMPLE (full scale = 1; 12 dB of headroom) are treated like NaN
@@ -352,6 +355,36 @@ def silence_features(extractor_factory: ExtractorFactory) -> np.ndarray | None:
     first frame (:attr:`Performer.phase`). None if the extractor gives no frame for 1 s of it."""
     feats = np.asarray(extractor_factory(SAMPLE_RATE).push(np.zeros(SAMPLE_RATE, dtype=np.float32)))
     return feats[0].astype(np.float32, copy=True) if len(feats) else None
+
+
+class _RunQueueClock:
+    """Seconds the calling thread has spent runnable but waiting for a CPU (Linux:
+    /proc/thread-self/schedstat, second field, ns); 0.0 where it cannot be read. Open it on
+    the thread it measures."""
+
+    def __init__(self) -> None:
+        import os
+
+        self._pread = os.pread
+        try:
+            self._fd: int | None = os.open("/proc/thread-self/schedstat", os.O_RDONLY)
+        except OSError:
+            self._fd = None
+
+    def __call__(self) -> float:
+        if self._fd is None:
+            return 0.0
+        try:
+            return int(self._pread(self._fd, 128, 0).split()[1]) * 1e-9
+        except (OSError, ValueError, IndexError):
+            return 0.0
+
+    def __del__(self) -> None:
+        import os
+
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
 
 
 def stagger_lead(model: PoseModel, extractor_factory: ExtractorFactory, phase: int) -> np.ndarray | None:
@@ -536,6 +569,7 @@ class Engine:
         self.ring = self._state(source).ring
         self.compute_ms = RollingStats(self.config.stats_size)  # the whole hop, every performer
         self.features_ms = RollingStats(self.config.stats_size)  # the input stage's share of it
+        self.compute_wait_ms = RollingStats(self.config.stats_size)  # of the hop: run-queue wait (runqueue_wait)
         self.latency_ms = RollingStats(self.config.stats_size)  # every performer's frames
         self.error: BaseException | None = None
         self.state = "idle"
@@ -1061,6 +1095,8 @@ class Engine:
         cfg = self.config
         acc = 0.0  # compute seconds since the last emitted frame
         acc_in = 0.0  # of which the input stage (mixdown, sanitising, features)
+        acc_wait = 0.0  # of which runnable but not running (runqueue_wait)
+        waited = _RunQueueClock() if cfg.runqueue_wait else None
         while not self._stop.is_set():
             if self._reset_requested.is_set():
                 self._do_reset()
@@ -1104,6 +1140,7 @@ class Engine:
             st.down = False
             self._last_audio = now
             t0 = time.perf_counter()
+            w0 = waited() if waited is not None else 0.0
             block = self._sanitize(self._mixdown(n))
             p0 = self._consumed
             self._consumed += n
@@ -1116,15 +1153,20 @@ class Engine:
             if not ready:
                 acc += t_in
                 acc_in += t_in
+                if waited is not None:
+                    acc_wait += waited() - w0
                 continue
             frames = max(len(feats) for _, feats in ready)
             self._run_lanes(ready, p0)
             per_frame_ms = (acc + time.perf_counter() - t0) * 1000.0 / frames
             in_ms = (acc_in + t_in) * 1000.0 / frames
+            wait_ms = (acc_wait + waited() - w0) * 1000.0 / frames if waited is not None else 0.0
             for _ in range(frames):
                 self.compute_ms.add(per_frame_ms)
                 self.features_ms.add(in_ms)
-            acc = acc_in = 0.0
+                if waited is not None:
+                    self.compute_wait_ms.add(wait_ms)
+            acc = acc_in = acc_wait = 0.0
 
     def _sanitize(self, block: np.ndarray) -> np.ndarray:
         """In place: samples that are NaN, inf or beyond +-MAX_SAMPLE become 0 (a dropout),

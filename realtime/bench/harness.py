@@ -62,6 +62,8 @@ class RunSettings:
     threads: int = 1
     warmup_s: float = 3.0
     model: str = "streaming"  # or "naive" (NaiveWindowGenerator)
+    inject_ms: float = 0.0  # testing hook: extra work in the first performer's lane (realtime/bench/reference.py)
+    inject_every: int = 8  # ... on every this many frames
 
 
 class _Child:
@@ -143,6 +145,8 @@ def run_performers(specs: list[StreamSpec], settings: RunSettings, workdir: Path
         common = {"checkpoint": str(settings.checkpoint), "block_size": settings.block_size,
                   "seconds": settings.seconds, "threads": settings.threads, "warmup_s": settings.warmup_s,
                   "model": settings.model}
+        if settings.inject_ms > 0:
+            common.update(inject_ms=settings.inject_ms, inject_every=settings.inject_every)
         if ensemble:
             wspecs = [{**common, "audio_npy": str(specs[0].audio_npy), "sample_rate": specs[0].sample_rate,
                        "name": specs[0].name, "out": str(workdir / "ensemble.json"),

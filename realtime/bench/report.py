@@ -70,7 +70,8 @@ def _budget_notes(result: dict, budgets: list[Budget] | None) -> dict[str, str]:
     for v in check([result], budgets or []):
         sign = "≤" if v.budget.op == "max" else "≥"
         status = "n/a" if v.not_applicable is not None else "ok" if v.ok else "**over**"
-        notes[v.budget.metric] = f"{sign} {v.budget.limit:g} {status}"
+        limit = f"{v.budget.limit:g} × {v.speed:.2f} = {v.limit:.3g}" if v.scaled else f"{v.limit:g}"
+        notes[v.budget.metric] = f"{sign} {limit} {status}"
     return notes
 
 
@@ -105,6 +106,9 @@ def latency_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
         "|---|---|---|---|---|---|",
         _row("per-hop compute (features + model + blending + encoding + send)", s["per_hop_ms"],
              notes.get("per_hop_ms_p99", "")),
+        _row("per-hop compute, own (less the run-queue wait: another process had the CPU)",
+             s.get("per_hop_own_ms", {"p50": None, "p95": None, "p99": None, "max": None}),
+             notes.get("per_hop_ms_p99_own", "")),
         _row("end-to-end, block release → OSC (VMC) receipt", s["e2e_osc_ms"], notes.get("e2e_osc_ms_p99", "")),
         _row("end-to-end, block release → WebSocket receipt", s["e2e_ws_ms"], notes.get("e2e_ws_ms_p99", "")),
         _row("block release → frame handed to the outputs", s["send_ms"]),
@@ -120,6 +124,9 @@ def latency_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
         f"Frames lost: OSC {s['lost_osc']}, WebSocket {s['lost_ws']}; late audio blocks {s['late_blocks']}, "
         f"ring overruns {s['overruns']}, WebSocket queue drops {s['ws_drops']}. "
         f"Peak RSS of the performer process: {_f(s['peak_rss_mb'], 0)} MB {notes.get('peak_rss_mb', '')}.",
+        "",
+        _reference_line([{"performers": 1, "mode": "streaming run", "reference_ms_p50": s["reference_ms"]["p50"],
+                          "reference_ms_p99": s["reference_ms"]["p99"]}], st),
         "",
         "## Algorithmic latency (by design, ms)",
         "",
@@ -283,15 +290,14 @@ def ensemble_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
         "(the streams sweep's harness)",
         f"* Machine: {machine_line(r)}",
         "",
-        "| performers | mode | per-hop p50 ms | per-hop p99 ms | of which features p50 | CPU ms per frame (all "
+        "| performers | mode | per-hop p50 ms | per-hop p99 ms (own: less the run-queue wait) | of which features p50 | CPU ms per frame (all "
         "performer processes) | worst e2e OSC p99 ms | worst e2e WS p99 ms | lost | peak RSS MB (sum) | "
         "all CPUs busy % |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in r["rows"]:
-        p99 = _f(row["per_hop_ms_p99"])
-        note = notes.get(f"per_hop_ms_p99_{row['performers']}", "") if row["mode"] == "one process" else ""
-        p99 = f"{p99} {note}".rstrip()
+        note = notes.get(f"per_hop_ms_p99_own_{row['performers']}", "") if row["mode"] == "one process" else ""
+        p99 = f"{_f(row['per_hop_ms_p99'])} (own {_f(row.get('per_hop_ms_p99_own'))} {note})".replace(" )", ")")
         lines.append(
             f"| {row['performers']} | {row['mode']} | {_f(row['per_hop_ms_p50'])} | {p99} | "
             f"{_f(row['features_ms_p50'])} | {_f(row['cpu_ms_per_frame'])} | {_f(row['worst_e2e_osc_ms_p99'])} | "
@@ -299,6 +305,7 @@ def ensemble_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
             f"{_f(row['peak_rss_mb'], 0)} | {_f(row['machine_busy_percent'], 0)} |")
     lines += ["", "Separate processes: per-hop p50 is the median of the processes' p50, p99 the worst process's "
               "(each process's hop includes its own features).", ""]
+    lines += [_reference_line(r["rows"], st), ""]
     if r["marginal"]:
         lines += ["## Cost of each added performer", "",
                   "| mode | per-hop p50 ms | per-hop p99 ms | CPU ms per frame | peak RSS MB |",
@@ -432,6 +439,18 @@ def plot_streams(r: dict, out: Path) -> Path:
     ax.legend(fontsize=8, loc="upper left")
     ax.set_title(f"sustained: {r['sustained_streams']} streams", fontsize=10)
     return _save(plt, fig, out / "streams.png")
+
+
+def _reference_line(rows: list[dict], settings: dict) -> str:
+    """The reference workload's p50 / p99 per run (what scaled budgets use), and a planted regression if any."""
+    refs = "; ".join(f"{row['performers']} {row['mode']}: {_f(row.get('reference_ms_p50'))} / "
+                     f"{_f(row.get('reference_ms_p99'))}" for row in rows)
+    text = (f"Reference workload timed between the hops in the same process (p50 / p99 ms; budgets scaled to the "
+            f"machine, docs/latency.md): {refs}.")
+    if settings.get("inject_ms"):
+        text += (f" **Planted regression (testing hook): {settings['inject_ms']:g} ms of busy work every "
+                 f"{settings['inject_every']}th frame in the first performer's lane.**")
+    return text
 
 
 def summary_markdown(results: list[dict]) -> str:
