@@ -264,8 +264,9 @@ class EngineConfig:
     stats_size: int = 2048  # frames kept for p50/p99
     fallback_after_s: float = 2.0  # no audio from the source this long -> switch to the fallback source
     idle_fade_s: float = 1.0  # the engine's own idle crossfade, each way (models without set_idle)
-    # Linux, for the benchmark: also keep each hop's run-queue wait (time the worker was ready
-    # but another thread had the CPU, /proc/thread-self/schedstat) in compute_wait_ms
+    # Linux, for the benchmark: also keep each hop's run-queue wait (the time this process's
+    # threads were ready to run but other processes had the CPUs, /proc/self/task/*/schedstat,
+    # at most the hop less the worker's CPU time) in compute_wait_ms
     runqueue_wait: bool = False
 
 
@@ -358,33 +359,67 @@ def silence_features(extractor_factory: ExtractorFactory) -> np.ndarray | None:
 
 
 class _RunQueueClock:
-    """Seconds the calling thread has spent runnable but waiting for a CPU (Linux:
-    /proc/thread-self/schedstat, second field, ns); 0.0 where it cannot be read. Open it on
-    the thread it measures."""
+    """Run-queue waits of this process (Linux, /proc/self/task/*/schedstat: per thread, ns on
+    a CPU and ns runnable but waiting for one); (0, 0) where they cannot be read. Create it on
+    the thread whose hops it measures (the engine's worker).
+
+    Calling it returns ``(waited, on_cpu)`` in seconds: the waits of every thread of the
+    process added up (the worker's own, and those of a thread that holds the interpreter lock
+    the worker needs while another process has the CPU), and the calling thread's CPU time.
+    """
+
+    _REFRESH_S = 1.0  # how often the thread list is read again
 
     def __init__(self) -> None:
         import os
 
-        self._pread = os.pread
+        self._os = os
+        self._tids: list[str] = []
+        self._listed = -1e9
         try:
-            self._fd: int | None = os.open("/proc/thread-self/schedstat", os.O_RDONLY)
+            self._me: int | None = os.open("/proc/thread-self/schedstat", os.O_RDONLY)
         except OSError:
-            self._fd = None
+            self._me = None
 
-    def __call__(self) -> float:
-        if self._fd is None:
-            return 0.0
+    def _read(self, path: str) -> list[int] | None:
         try:
-            return int(self._pread(self._fd, 128, 0).split()[1]) * 1e-9
+            with open(path, "rb") as f:
+                return [int(x) for x in f.read().split()[:2]]
+        except (OSError, ValueError):
+            return None  # a thread that ended
+
+    def __call__(self) -> tuple[float, float]:
+        if self._me is None:
+            return 0.0, 0.0
+        now = time.monotonic()
+        if now - self._listed > self._REFRESH_S:
+            try:
+                self._tids = self._os.listdir("/proc/self/task")
+            except OSError:
+                self._tids = []
+            self._listed = now
+        waited = 0
+        for tid in self._tids:
+            st = self._read(f"/proc/self/task/{tid}/schedstat")
+            if st is not None and len(st) == 2:
+                waited += st[1]
+        try:
+            on_cpu = int(self._os.pread(self._me, 128, 0).split()[0])
         except (OSError, ValueError, IndexError):
-            return 0.0
+            on_cpu = 0
+        return waited * 1e-9, on_cpu * 1e-9
 
     def __del__(self) -> None:
-        import os
+        if self._me is not None:
+            self._os.close(self._me)
+            self._me = None
 
-        if self._fd is not None:
-            os.close(self._fd)
-            self._fd = None
+
+def _hop_wait(wall: float, waited: float, on_cpu: float) -> float:
+    """The part of a hop's ``wall`` seconds spent waiting for CPUs other processes held: the
+    process's run-queue waits during it, never so much that less than the worker's own CPU
+    time ``on_cpu`` would be left (another thread's wait need not have held the worker up)."""
+    return max(0.0, min(waited, wall - on_cpu))
 
 
 def stagger_lead(model: PoseModel, extractor_factory: ExtractorFactory, phase: int) -> np.ndarray | None:
@@ -1140,7 +1175,7 @@ class Engine:
             st.down = False
             self._last_audio = now
             t0 = time.perf_counter()
-            w0 = waited() if waited is not None else 0.0
+            w0, c0 = waited() if waited is not None else (0.0, 0.0)
             block = self._sanitize(self._mixdown(n))
             p0 = self._consumed
             self._consumed += n
@@ -1154,13 +1189,17 @@ class Engine:
                 acc += t_in
                 acc_in += t_in
                 if waited is not None:
-                    acc_wait += waited() - w0
+                    w1, c1 = waited()
+                    acc_wait += _hop_wait(time.perf_counter() - t0, w1 - w0, c1 - c0)
                 continue
             frames = max(len(feats) for _, feats in ready)
             self._run_lanes(ready, p0)
             per_frame_ms = (acc + time.perf_counter() - t0) * 1000.0 / frames
             in_ms = (acc_in + t_in) * 1000.0 / frames
-            wait_ms = (acc_wait + waited() - w0) * 1000.0 / frames if waited is not None else 0.0
+            wait_ms = 0.0
+            if waited is not None:
+                w1, c1 = waited()
+                wait_ms = (acc_wait + _hop_wait(time.perf_counter() - t0, w1 - w0, c1 - c0)) * 1000.0 / frames
             for _ in range(frames):
                 self.compute_ms.add(per_frame_ms)
                 self.features_ms.add(in_ms)

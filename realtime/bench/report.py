@@ -463,21 +463,23 @@ def summary_markdown(results: list[dict]) -> str:
     lat = [r for r in results if r.get("kind") == "latency"]
     lines = []
     if lat:
-        lines += ["| recording | per-hop p50 | per-hop p99 | e2e OSC p50 | e2e OSC p99 | e2e WS p50 | e2e WS p99 "
+        lines += ["| recording | per-hop p50 | per-hop p99 (own) | e2e OSC p50 | e2e OSC p99 | e2e WS p50 | e2e WS p99 "
                   "| algorithmic max | jitter p99 | lost | peak RSS MB | CPU % | naive/streaming model p50 "
                   "| naive/streaming per hop p50 | offline RTF | stream vs offline max diff |",
                   "|---|" + "---:|" * 15]
         for r in lat:
             m = r["metrics"]
             lines.append(
-                f"| {r['label']} | {_f(m['per_hop_ms_p50'])} | {_f(m['per_hop_ms_p99'])} | {_f(m['e2e_osc_ms_p50'])} "
+                f"| {r['label']} | {_f(m['per_hop_ms_p50'])} | {_f(m['per_hop_ms_p99'])} "
+                f"({_f(m.get('per_hop_ms_p99_own'))}) | {_f(m['e2e_osc_ms_p50'])} "
                 f"| {_f(m['e2e_osc_ms_p99'])} | {_f(m['e2e_ws_ms_p50'])} | {_f(m['e2e_ws_ms_p99'])} "
                 f"| {_f(m['algorithmic_ms_max'])} | {_f(m['jitter_ms_p99'])} | {m['lost_frames']} "
                 f"| {_f(m['peak_rss_mb'], 0)} | {_f(m['cpu_percent'], 1)} "
                 f"| {_f(m.get('model_step_naive_over_streaming'), 1)}× | {_f(m.get('per_hop_naive_over_streaming'), 1)}× "
                 f"| {_f(m.get('rtf_causal'), 4)} | {_g(m.get('stream_offline_max_abs'))} |")
         lines.append("")
-        lines.append("Times in ms; RTF: seconds of compute per second of audio.")
+        lines.append("Times in ms; own: the hop less its run-queue wait (another process had the CPU); RTF: seconds "
+                     "of compute per second of audio.")
         lines.append("")
     for r in (r for r in results if r.get("kind") == "streams"):
         lines.append(f"Concurrent streams sustained (every stream's p99 end-to-end < {FRAME_PERIOD_MS:.1f} ms): "
@@ -485,8 +487,8 @@ def summary_markdown(results: list[dict]) -> str:
         lines.append("")
     for r in (r for r in results if r.get("kind") == "ensemble"):
         m = r["metrics"]
-        hops = ", ".join(f"{row['performers']}: {_f(row['per_hop_ms_p99'])}" for row in r["rows"]
-                         if row["mode"] == "one process")
+        hops = ", ".join(f"{row['performers']}: {_f(row['per_hop_ms_p99'])} (own {_f(row.get('per_hop_ms_p99_own'))})"
+                         for row in r["rows"] if row["mode"] == "one process")
         lines.append(f"Ensemble in one process, per-hop p99 ms by performers ({hops}); each added performer "
                      f"+{_f(m.get('added_performer_hop_ms_p50'))} ms per-hop p50, +{_f(m.get('added_performer_cpu_ms'))} "
                      f"ms CPU per frame (a separate process: +{_f(m.get('added_process_cpu_ms'))}) "
