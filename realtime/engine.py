@@ -605,6 +605,7 @@ class Engine:
         self.compute_ms = RollingStats(self.config.stats_size)  # the whole hop, every performer
         self.features_ms = RollingStats(self.config.stats_size)  # the input stage's share of it
         self.compute_wait_ms = RollingStats(self.config.stats_size)  # of the hop: run-queue wait (runqueue_wait)
+        self.compute_cpu_ms = RollingStats(self.config.stats_size)  # of the hop: the worker's CPU time (runqueue_wait)
         self.latency_ms = RollingStats(self.config.stats_size)  # every performer's frames
         self.error: BaseException | None = None
         self.state = "idle"
@@ -1131,6 +1132,7 @@ class Engine:
         acc = 0.0  # compute seconds since the last emitted frame
         acc_in = 0.0  # of which the input stage (mixdown, sanitising, features)
         acc_wait = 0.0  # of which runnable but not running (runqueue_wait)
+        acc_cpu = 0.0  # the worker's CPU time in it (runqueue_wait)
         waited = _RunQueueClock() if cfg.runqueue_wait else None
         while not self._stop.is_set():
             if self._reset_requested.is_set():
@@ -1191,21 +1193,24 @@ class Engine:
                 if waited is not None:
                     w1, c1 = waited()
                     acc_wait += _hop_wait(time.perf_counter() - t0, w1 - w0, c1 - c0)
+                    acc_cpu += c1 - c0
                 continue
             frames = max(len(feats) for _, feats in ready)
             self._run_lanes(ready, p0)
             per_frame_ms = (acc + time.perf_counter() - t0) * 1000.0 / frames
             in_ms = (acc_in + t_in) * 1000.0 / frames
-            wait_ms = 0.0
+            wait_ms = cpu_ms = 0.0
             if waited is not None:
                 w1, c1 = waited()
                 wait_ms = (acc_wait + _hop_wait(time.perf_counter() - t0, w1 - w0, c1 - c0)) * 1000.0 / frames
+                cpu_ms = (acc_cpu + c1 - c0) * 1000.0 / frames
             for _ in range(frames):
                 self.compute_ms.add(per_frame_ms)
                 self.features_ms.add(in_ms)
                 if waited is not None:
                     self.compute_wait_ms.add(wait_ms)
-            acc = acc_in = acc_wait = 0.0
+                    self.compute_cpu_ms.add(cpu_ms)
+            acc = acc_in = acc_wait = acc_cpu = 0.0
 
     def _sanitize(self, block: np.ndarray) -> np.ndarray:
         """In place: samples that are NaN, inf or beyond +-MAX_SAMPLE become 0 (a dropout),

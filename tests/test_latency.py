@@ -391,21 +391,24 @@ def test_ensemble_bench_runs_performers_in_one_process_and_apart(tmp_path, capsy
 def test_ensemble_budget_passes_clean_and_fails_a_planted_regression(tmp_path, capsys):
     """`make bench`'s ensemble part with benchmarks/budgets.toml, on the shipped model: the
     4-performer hop (its own time, the budget scaled to the machine by the reference workload
-    of the same run) is within budget, and 1 ms of extra work every 8th frame in one
-    performer's lane (the hidden --inject-ms hook) puts it over."""
+    of the same run) is within budget, and 3 ms of extra work every 8th frame in one
+    performer's lane (the hidden --inject-ms hook, on that performer's code-step frames) puts
+    it over. (1 ms moved the own p99 by 0.9 ms, 3.48 -> 4.38, inside the 5 ms budget's
+    headroom: docs/latency.md, "Budgets scaled to the machine".)"""
     from pathlib import Path
 
     budgets = Path(__file__).resolve().parents[1] / "benchmarks" / "budgets.toml"
     verdicts = {}
-    for name, extra in (("clean", []), ("planted", ["--inject-ms", "1", "--inject-every", "8"])):
+    for name, extra in (("clean", []), ("planted", ["--inject-ms", "3", "--inject-every", "8"])):
         out = tmp_path / name
         code = main(["bench", "ensemble", "--counts", "4", "--no-separate", "--unstaggered", "--seconds", "20",
                      "--out", str(out), "--budgets", str(budgets), *extra])
         printed = capsys.readouterr().out
         r = json.loads((out / "ensemble.json").read_text())
-        (v,) = [v for v in bud.check([r], bud.load_budgets(budgets)) if v.budget.metric == "per_hop_ms_p99_own_4"]
+        (v,) = [v for v in bud.check([r], bud.load_budgets(budgets)) if v.budget.metric.startswith("per_hop_ms_p99")]
         verdicts[name] = (code, v, printed)
-        print(f"{name}: own p99 {v.measured:.2f} ms against {v.limit:.2f} (x {v.speed:.2f}); wall p99 "
+        print(f"{name}: {v.budget.metric} {v.measured:.2f} ms against {v.limit:.2f} (x {v.speed:.2f}); cpu p99 "
+              f"{r['metrics']['per_hop_ms_p99_cpu_4']:.2f}; own p99 {r['metrics']['per_hop_ms_p99_own_4']:.2f}; wall p99 "
               f"{r['metrics']['per_hop_ms_p99_4']:.2f}; reference p50 {r['metrics']['reference_ms_4_p50']:.2f}")
     code, v, printed = verdicts["clean"]
     assert v.ok and code == 0, printed

@@ -244,6 +244,7 @@ def run(spec: dict) -> dict:
         "reference_ms": probe.times_ms(),
         # per frame, the whole hop's run-queue wait (ms): other threads held the CPU
         "compute_wait_ms": engine.compute_wait_ms.values()[: lanes[0][1][2].count].tolist(),
+        "compute_cpu_ms": engine.compute_cpu_ms.values()[: lanes[0][1][2].count].tolist(),  # the worker's CPU
         "injected": None if inject is None else {"ms": inject.seconds * 1000.0, "every": inject.every,
                                                  "frames": inject.injected},
     }
