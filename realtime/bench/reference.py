@@ -5,10 +5,10 @@ a mel-like projection and small dense layers, and Python-level packing as the OS
 does: the kinds of work a hop does) once per frame inside the performer process under test,
 half-way between two hops, so it runs on the same CPUs, at the same moments and under the
 same load as the hops it is compared with, and never overlaps one. Its p50 and p99 (ms) go
-into the run's result; budgets marked ``scale = "reference"`` in benchmarks/budgets.toml are
-multiplied by ``reference p99 of the run / nominal reference p99`` (:mod:`realtime.bench.budgets`):
-a machine that is slower today (shared cores, a slow CPU) slows the reference as much as the
-hop, a slower hop on the same machine does not slow the reference.
+into the run's result; a budget with ``scaled_by`` in benchmarks/budgets.toml is multiplied
+by ``max(1, reference p50 of the run / [reference] p50_ms)`` (:mod:`realtime.bench.budgets`):
+a machine that is slower today (a busy sibling core, a slow CPU) slows the reference too, a
+slower hop on the same machine does not.
 
 :class:`InjectedWork` is the hidden testing hook: a sink that spins ``ms`` of CPU every
 ``every``-th frame in one performer's lane (``performer bench ensemble --inject-ms 1
