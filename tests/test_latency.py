@@ -237,8 +237,8 @@ def test_own_hop_time_is_the_wall_time_less_the_run_queue_wait():
 
 def test_run_queue_clock_counts_the_time_another_thread_held_the_cpu():
     """Two busy threads on one CPU: the clock the engine reads around each hop
-    (EngineConfig.runqueue_wait) sees the process wait for the CPU about as long as it ran,
-    and a hop's wait never leaves less than the worker's CPU time (Linux)."""
+    (EngineConfig.runqueue_wait) sees each run about half of the time and the process wait
+    for the CPU, and a hop's wait never leaves less than the worker's CPU time (Linux)."""
     import os
     import threading
 
@@ -249,10 +249,12 @@ def test_run_queue_clock_counts_the_time_another_thread_held_the_cpu():
         pytest.skip("no /proc/thread-self/schedstat here")
     cpu = min(os.sched_getaffinity(0))
     got = {}
+    both = threading.Barrier(2)
 
     def spin(key: str) -> None:
         os.sched_setaffinity(0, {cpu})  # this thread only
         clock = _RunQueueClock()
+        both.wait()
         (w0, c0), t0 = clock(), time.perf_counter()
         while time.perf_counter() - t0 < 0.6:
             pass
@@ -264,8 +266,8 @@ def test_run_queue_clock_counts_the_time_another_thread_held_the_cpu():
         t.start()
     for t in threads:
         t.join()
-    for waited, on_cpu in got.values():  # each thread ran about half the time and waited the rest
-        assert 0 < on_cpu < 0.8 and waited > 0.3, got  # (on a busy machine, other processes take some too)
+    for waited, on_cpu in got.values():  # each thread ran about half the time and waited for the other
+        assert 0 < on_cpu < 0.8 and waited > 0.1, got  # (a wait is booked when the thread gets the CPU back)
 
 
 @pytest.mark.parametrize("text, needle", [
