@@ -270,6 +270,10 @@ class EngineConfig:
     stats_size: int = 2048  # frames kept for p50/p99
     fallback_after_s: float = 2.0  # no audio from the source this long -> switch to the fallback source
     idle_fade_s: float = 1.0  # the engine's own idle crossfade, each way (models without set_idle)
+    # Linux, for the benchmark: also keep each hop's run-queue wait (the time this process's
+    # threads were ready to run but other processes had the CPUs, /proc/self/task/*/schedstat,
+    # at most the hop less the worker's CPU time) in compute_wait_ms
+    runqueue_wait: bool = False
 
 
 #: Input samples beyond +-MAX_SAMPLE (full scale = 1; 12 dB of headroom) are treated like NaN
@@ -358,6 +362,70 @@ def silence_features(extractor_factory: ExtractorFactory) -> np.ndarray | None:
     first frame (:attr:`Performer.phase`). None if the extractor gives no frame for 1 s of it."""
     feats = np.asarray(extractor_factory(SAMPLE_RATE).push(np.zeros(SAMPLE_RATE, dtype=np.float32)))
     return feats[0].astype(np.float32, copy=True) if len(feats) else None
+
+
+class _RunQueueClock:
+    """Run-queue waits of this process (Linux, /proc/self/task/*/schedstat: per thread, ns on
+    a CPU and ns runnable but waiting for one); (0, 0) where they cannot be read. Create it on
+    the thread whose hops it measures (the engine's worker).
+
+    Calling it returns ``(waited, on_cpu)`` in seconds: the waits of every thread of the
+    process added up (the worker's own, and those of a thread that holds the interpreter lock
+    the worker needs while another process has the CPU), and the calling thread's CPU time.
+    """
+
+    _REFRESH_S = 1.0  # how often the thread list is read again
+
+    def __init__(self) -> None:
+        import os
+
+        self._os = os
+        self._tids: list[str] = []
+        self._listed = -1e9
+        try:
+            self._me: int | None = os.open("/proc/thread-self/schedstat", os.O_RDONLY)
+        except OSError:
+            self._me = None
+
+    def _read(self, path: str) -> list[int] | None:
+        try:
+            with open(path, "rb") as f:
+                return [int(x) for x in f.read().split()[:2]]
+        except (OSError, ValueError):
+            return None  # a thread that ended
+
+    def __call__(self) -> tuple[float, float]:
+        if self._me is None:
+            return 0.0, 0.0
+        now = time.monotonic()
+        if now - self._listed > self._REFRESH_S:
+            try:
+                self._tids = self._os.listdir("/proc/self/task")
+            except OSError:
+                self._tids = []
+            self._listed = now
+        waited = 0
+        for tid in self._tids:
+            st = self._read(f"/proc/self/task/{tid}/schedstat")
+            if st is not None and len(st) == 2:
+                waited += st[1]
+        try:
+            on_cpu = int(self._os.pread(self._me, 128, 0).split()[0])
+        except (OSError, ValueError, IndexError):
+            on_cpu = 0
+        return waited * 1e-9, on_cpu * 1e-9
+
+    def __del__(self) -> None:
+        if self._me is not None:
+            self._os.close(self._me)
+            self._me = None
+
+
+def _hop_wait(wall: float, waited: float, on_cpu: float) -> float:
+    """The part of a hop's ``wall`` seconds spent waiting for CPUs other processes held: the
+    process's run-queue waits during it, never so much that less than the worker's own CPU
+    time ``on_cpu`` would be left (another thread's wait need not have held the worker up)."""
+    return max(0.0, min(waited, wall - on_cpu))
 
 
 def stagger_lead(model: PoseModel, extractor_factory: ExtractorFactory, phase: int) -> np.ndarray | None:
@@ -542,6 +610,8 @@ class Engine:
         self.ring = self._state(source).ring
         self.compute_ms = RollingStats(self.config.stats_size)  # the whole hop, every performer
         self.features_ms = RollingStats(self.config.stats_size)  # the input stage's share of it
+        self.compute_wait_ms = RollingStats(self.config.stats_size)  # of the hop: run-queue wait (runqueue_wait)
+        self.compute_cpu_ms = RollingStats(self.config.stats_size)  # of the hop: the worker's CPU time (runqueue_wait)
         self.latency_ms = RollingStats(self.config.stats_size)  # every performer's frames
         self.error: BaseException | None = None
         self.state = "idle"
@@ -874,13 +944,30 @@ class Engine:
                 log.debug("stats() of %s failed: %s", s.name, exc)
         return sinks
 
+    @staticmethod
+    def _sink_notices(lane: _Lane) -> list[str]:
+        """What the lane's sinks with a ``notice()`` say now (e.g. no OSC receiver listening)."""
+        out = []
+        for s in lane.sinks:
+            notice = getattr(s, "notice", None)
+            try:
+                text = notice() if notice is not None else None
+            except Exception as exc:  # noqa: BLE001
+                text = None
+                log.debug("notice() of %s failed: %s", getattr(s, "name", s), exc)
+            if text:
+                out.append(str(text))
+        return out
+
     def stats(self) -> dict:
         """Counters for the status line: frames, idle, the live settings (offset_ms, smoothing),
-        compute/latency p50/p99 (ms), faults, sinks; and per performer under ``performers``
-        (its frames, settings, stagger, compute and latency, faults and sinks)."""
+        compute/latency p50/p99 (ms), faults, sinks, the sinks' notices; and per performer under
+        ``performers`` (its frames, settings, stagger, compute and latency, faults and sinks)."""
         per: dict[str, dict] = {}
         sinks: dict[str, dict] = {}
+        notices: list[str] = []
         for lane in self._lanes:
+            notices += [n for n in self._sink_notices(lane) if n not in notices]
             lane_sinks = self._sink_stats(lane)
             sinks.update(lane_sinks if len(self._lanes) == 1 else
                          {f"{lane.name}/{k}": v for k, v in lane_sinks.items()})
@@ -932,6 +1019,7 @@ class Engine:
             "extractors": len(self._groups),
             "source": src,
             "sinks": sinks,
+            "notices": notices,
             "performers": per,
         }
 
@@ -1066,6 +1154,9 @@ class Engine:
         cfg = self.config
         acc = 0.0  # compute seconds since the last emitted frame
         acc_in = 0.0  # of which the input stage (mixdown, sanitising, features)
+        acc_wait = 0.0  # of which runnable but not running (runqueue_wait)
+        acc_cpu = 0.0  # the worker's CPU time in it (runqueue_wait)
+        waited = _RunQueueClock() if cfg.runqueue_wait else None
         while not self._stop.is_set():
             if self._reset_requested.is_set():
                 self._do_reset()
@@ -1109,6 +1200,7 @@ class Engine:
             st.down = False
             self._last_audio = now
             t0 = time.perf_counter()
+            w0, c0 = waited() if waited is not None else (0.0, 0.0)
             block = self._sanitize(self._mixdown(n))
             p0 = self._consumed
             self._consumed += n
@@ -1121,15 +1213,27 @@ class Engine:
             if not ready:
                 acc += t_in
                 acc_in += t_in
+                if waited is not None:
+                    w1, c1 = waited()
+                    acc_wait += _hop_wait(time.perf_counter() - t0, w1 - w0, c1 - c0)
+                    acc_cpu += c1 - c0
                 continue
             frames = max(len(feats) for _, feats in ready)
             self._run_lanes(ready, p0)
             per_frame_ms = (acc + time.perf_counter() - t0) * 1000.0 / frames
             in_ms = (acc_in + t_in) * 1000.0 / frames
+            wait_ms = cpu_ms = 0.0
+            if waited is not None:
+                w1, c1 = waited()
+                wait_ms = (acc_wait + _hop_wait(time.perf_counter() - t0, w1 - w0, c1 - c0)) * 1000.0 / frames
+                cpu_ms = (acc_cpu + c1 - c0) * 1000.0 / frames
             for _ in range(frames):
                 self.compute_ms.add(per_frame_ms)
                 self.features_ms.add(in_ms)
-            acc = acc_in = 0.0
+                if waited is not None:
+                    self.compute_wait_ms.add(wait_ms)
+                    self.compute_cpu_ms.add(cpu_ms)
+            acc = acc_in = acc_wait = acc_cpu = 0.0
 
     def _sanitize(self, block: np.ndarray) -> np.ndarray:
         """In place: samples that are NaN, inf or beyond +-MAX_SAMPLE become 0 (a dropout),

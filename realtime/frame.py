@@ -45,7 +45,9 @@ class Sink(Protocol):
     Optional: ``begin_hop()`` / ``end_hop()``, called by the engine around each hop's
     performers (:meth:`realtime.engine.Engine._run_lanes`): a sink that hands frames to a
     thread of its own may hold the hand-off until ``end_hop``, so that thread does not
-    take the interpreter lock from the performers still to run.
+    take the interpreter lock from the performers still to run. ``notice()`` returns a
+    short text for the status line while something about the output needs saying (an OSC
+    target with no receiver listening), else None.
     """
 
     name: str

@@ -2,8 +2,11 @@
 
 One :class:`OscSink` is one target (``host:port``); the engine makes one per
 ``--osc HOST:PORT``. Sending never blocks and never raises into the engine: the
-socket is non-blocking, and errors (receiver gone -> ECONNREFUSED, full buffer ->
-EAGAIN, unreachable network) are counted per kind and logged once per kind.
+socket is non-blocking, and errors (full buffer -> EAGAIN, unreachable network) are
+counted per kind and logged once per kind. No receiver listening is not an error: the
+connected socket learns it from the kernel (ICMP port unreachable -> ECONNREFUSED on a
+later send), counts the refused datagrams apart (``refused``) and says so in
+:meth:`OscSink.notice` until frames go out unrefused again.
 
 Plain mode (for custom receivers, TouchDesigner, Max/MSP; see docs/protocol.md),
 one bundle sequence per frame, project frame (right-handed, Y up, faces +Z)::
@@ -74,6 +77,17 @@ class PlainOscEncoder:
         return self.layout.pack(tails)
 
 
+#: Frames sent whole, with no refusal, after which a target that refused is taken to
+#: have a receiver again (10 frames = 0.33 s at 30 fps). Without one, on loopback every
+#: frame of two datagrams (VMC) and every second frame of one (plain) is refused.
+RECEIVER_BACK_FRAMES = 10
+
+
+def format_target(host: str, port: int) -> str:
+    """``HOST:PORT``, with an IPv6 host in brackets."""
+    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+
+
 class OscSink:
     """Streams pose frames to one OSC receiver over UDP (a :class:`realtime.frame.Sink`).
 
@@ -126,6 +140,10 @@ class OscSink:
         self._closed = False
         self._frames = self._datagrams = self._bytes = self._skipped = 0
         self._errors: dict[str, int] = {}
+        self._refused = 0  # datagrams the kernel refused: no receiver listening
+        self._no_receiver = False  # set by a refusal, cleared after RECEIVER_BACK_FRAMES clean frames
+        self._clean_frames = 0  # frames sent whole since the last refusal
+        self._refusal_logged = False
 
     def send(self, frame: PoseFrame) -> None:
         """Encode and send one frame; never blocks, never raises on network errors."""
@@ -135,13 +153,42 @@ class OscSink:
             self._count_error("nonfinite", "pose has non-finite values; frame skipped")
             return
         self._frames += 1
+        refused = False
         for datagram in self._encode(frame):
             try:
                 self._bytes += self._sock.send(datagram)
                 self._datagrams += 1
+            except ConnectionRefusedError:
+                self._refused += 1
+                refused = True
             except OSError as exc:
                 kind = errno.errorcode.get(exc.errno or 0, type(exc).__name__)
                 self._count_error(kind, str(exc))
+        self._track_receiver(refused)
+
+    def _track_receiver(self, refused: bool) -> None:
+        """Follow whether a receiver listens: one refusal says none does; RECEIVER_BACK_FRAMES
+        frames in a row without one say one does again. Each change is logged."""
+        where = format_target(*self.target)
+        if refused:
+            self._clean_frames = 0
+            if not self._no_receiver:
+                self._no_receiver = True
+                level = logging.INFO if self._refusal_logged else logging.WARNING
+                log.log(level, "OSC: no receiver at %s (connection refused); frames keep going out and are "
+                        "counted as refused, not as drops", where)
+                self._refusal_logged = True
+        elif self._no_receiver:
+            self._clean_frames += 1
+            if self._clean_frames >= RECEIVER_BACK_FRAMES:
+                self._no_receiver = False
+                log.info("OSC: a receiver listens at %s again", where)
+
+    def notice(self) -> str | None:
+        """``"no receiver at HOST:PORT (connection refused)"`` while none listens, else None."""
+        if self._no_receiver:
+            return f"no receiver at {format_target(*self.target)} (connection refused)"
+        return None
 
     def _count_error(self, kind: str, detail: str) -> None:
         n = self._errors.get(kind, 0)
@@ -153,12 +200,15 @@ class OscSink:
             )
 
     def stats(self) -> dict[str, float]:
-        """frames, datagrams, bytes sent; errors (total) and ``errors.<KIND>`` per kind."""
+        """frames, datagrams, bytes sent; errors (total) and ``errors.<KIND>`` per kind; refused
+        (datagrams refused for want of a receiver, not errors) and no_receiver (1 while none listens)."""
         out: dict[str, float] = {
             "frames": self._frames,
             "sent": self._datagrams,
             "bytes": self._bytes,
             "errors": sum(self._errors.values()),
+            "refused": self._refused,
+            "no_receiver": float(self._no_receiver),
         }
         out.update({f"errors.{k}": v for k, v in self._errors.items()})
         return out

@@ -17,7 +17,9 @@ performer holds its idle pose), *offset* (ms) and *smoothing* when not 0, and wi
 *refused* (senders outside ``--control-allow``) and *rate-limited* when not 0. An
 ensemble adds *N performers* after the frame count (hop: the whole hop, every performer;
 drops, nan: summed over the performers; *idle k/N* when only some are idle; offset and
-smoothing when every performer has the same).
+smoothing when every performer has the same). Last, what an output says of itself
+(:meth:`realtime.osc_out.OscSink.notice`), e.g. *no receiver at 127.0.0.1:39539
+(connection refused)* while no OSC receiver listens: those frames are not drops.
 """
 
 from __future__ import annotations
@@ -76,6 +78,7 @@ def format_status(stats: dict, fps: float | None = None) -> str:
         if control.get("rate_limited"):
             text += f" {int(control['rate_limited'])} rate-limited"
         parts.append(text)
+    parts += list(stats.get("notices", ()))
     return " | ".join(parts)
 
 

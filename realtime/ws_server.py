@@ -28,6 +28,7 @@ import logging
 import mimetypes
 import os
 import socket
+import sysconfig
 import threading
 import time
 from collections import deque
@@ -86,9 +87,13 @@ _CONTENT_TYPES = {
 
 
 def default_static_dir() -> Path:
-    """The built web client (``clients/web/dist``) if present, else ``clients/web``."""
+    """The built web client: ``clients/web/dist`` in a checkout; in a pip-installed package,
+    ``<prefix>/share/live-performer/web`` (pyproject.toml's data-files); else ``clients/web``."""
     dist = _REPO / "clients" / "web" / "dist"
-    return dist if dist.is_dir() else _REPO / "clients" / "web"
+    if dist.is_dir():
+        return dist
+    installed = Path(sysconfig.get_path("data")) / "share" / "live-performer" / "web"
+    return installed if installed.is_dir() else _REPO / "clients" / "web"
 
 
 def content_type(path: Path) -> str:

@@ -685,3 +685,39 @@ def test_file_to_real_udp_and_websocket_receivers():
     for f in received:
         assert f.audio_time == pytest.approx((f.index + 1) * HOP / SAMPLE_RATE)
         np.testing.assert_allclose(f.pose, sink.frames[f.index].pose, atol=1e-6)
+
+
+def test_no_osc_receiver_is_a_status_notice_while_real_drops_still_count():
+    """No receiver on the OSC port: the status line says so and counts no drops for it; a
+    WebSocket client that never reads still loses frames from its full queue: real drops."""
+    from test_osc_out import closed_udp_port
+    from test_ws_server import _stalled_client
+
+    from realtime.osc_out import OscSink
+    from realtime.status import format_status
+    from realtime.ws_server import WebSocketSink
+
+    port = closed_udp_port()
+    notice = f"no receiver at 127.0.0.1:{port} (connection refused)"
+
+    eng, _ = run_engine(FileSource(noise(1.0), SAMPLE_RATE, realtime=False), sinks=[OscSink("127.0.0.1", port)])
+    st = eng.stats()
+    assert st["frames"] == 30 and st["notices"] == [notice]
+    line = format_status(st)
+    assert "drops 0" in line and line.endswith(notice), line
+
+    ws = WebSocketSink("127.0.0.1", 0, offsets=np.tile([0.0, 0.1, 0.0], (NUM_BONES, 1)), queue_frames=4)
+    stalled = _stalled_client(ws.port)
+    try:
+        deadline = time.monotonic() + 5
+        while ws.stats()["clients"] < 1 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        eng, _ = run_engine(FileSource(noise(14.0), SAMPLE_RATE, realtime=False),
+                            sinks=[OscSink("127.0.0.1", port), ws])
+        st = eng.stats()
+    finally:
+        stalled.close()
+    drops = st["sinks"][ws.name]["drops"]
+    assert drops > 0 and st["notices"] == [notice]
+    line = format_status(st)
+    assert f"drops {int(drops)}" in line and notice in line, line

@@ -81,21 +81,64 @@ def test_plain_mode_sends_every_bone_by_default():
     assert all(size <= 1400 for size in msgs.datagram_sizes)
 
 
-def test_closed_port_is_counted_logged_once_and_never_raises(caplog):
+def closed_udp_port() -> int:
+    """A loopback UDP port nothing listens on: the kernel answers ICMP port unreachable."""
     probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     probe.bind(("127.0.0.1", 0))
     port = probe.getsockname()[1]
-    probe.close()  # nothing listens there now: the kernel answers ICMP port unreachable
-    caplog.set_level(logging.WARNING, logger="realtime.osc_out")
+    probe.close()
+    return port
+
+
+def test_no_receiver_is_refused_not_an_error_logged_once_and_never_raises(caplog):
+    port = closed_udp_port()
+    caplog.set_level(logging.INFO, logger="realtime.osc_out")
     with OscSink("127.0.0.1", port, "plain") as sink:
+        assert sink.notice() is None  # nothing known before the first send
         for i in range(30):
             sink.send(_frame(i))
         stats = sink.stats()
+        notice = sink.notice()
     assert stats["frames"] == 30
-    assert stats["errors.ECONNREFUSED"] > 0
-    assert stats["sent"] + stats["errors"] == 30  # one datagram per plain frame
-    refused = [r for r in caplog.records if "ECONNREFUSED" in r.getMessage()]
-    assert len(refused) == 1 and str(port) in refused[0].getMessage()
+    assert stats["errors"] == 0 and stats["refused"] > 0 and stats["no_receiver"] == 1
+    assert stats["sent"] + stats["refused"] == 30  # one datagram per plain frame
+    assert notice == f"no receiver at 127.0.0.1:{port} (connection refused)"
+    said = [r.getMessage() for r in caplog.records]
+    assert len(said) == 1 and f"no receiver at 127.0.0.1:{port}" in said[0], said
+
+
+def test_a_receiver_that_appears_gets_frames_and_clears_the_notice(caplog):
+    from realtime.osc_out import RECEIVER_BACK_FRAMES
+
+    port = closed_udp_port()
+    caplog.set_level(logging.INFO, logger="realtime.osc_out")
+    with OscSink("127.0.0.1", port, "vmc", offsets=tpose_offsets()) as sink:
+        for i in range(10):
+            sink.send(_frame(i))
+        assert sink.notice() is not None and sink.stats()["errors"] == 0
+        refused = sink.stats()["refused"]
+        listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        listener.bind(("127.0.0.1", port))
+        listener.settimeout(2)
+        try:
+            got = []
+            for i in range(10, 10 + RECEIVER_BACK_FRAMES):
+                assert sink.notice() is not None  # until RECEIVER_BACK_FRAMES clean frames went out
+                sink.send(_frame(i))
+                got += [listener.recv(65536), listener.recv(65536)]  # VMC: two datagrams a frame
+        finally:
+            listener.close()
+        stats = sink.stats()
+        assert sink.notice() is None and stats["no_receiver"] == 0
+    assert len(got) == 2 * RECEIVER_BACK_FRAMES and all(g.startswith(b"#bundle") for g in got)
+    assert stats["refused"] == refused and stats["errors"] == 0
+    assert any(f"receiver listens at 127.0.0.1:{port}" in r.getMessage() for r in caplog.records)
+
+
+def test_ipv6_target_is_named_in_brackets():
+    from realtime.osc_out import format_target
+
+    assert format_target("::1", 39539) == "[::1]:39539" and format_target("127.0.0.1", 9) == "127.0.0.1:9"
 
 
 def test_non_finite_pose_is_skipped_and_counted(receiver):

@@ -25,6 +25,7 @@ from realtime.frame import PoseFrame
 from realtime.recorder import Recorder, record_paths
 from realtime.status import StatusLine, format_status
 from test_engine import osc_messages
+from test_osc_out import closed_udp_port
 from _proc import default_sigint
 
 REPO = Path(__file__).resolve().parents[1]
@@ -117,6 +118,17 @@ def test_run_fast_clip_records_npz_with_right_frames(tmp_path, capsys, clip, tin
         assert int(z["fps"]) == 30 and int(z["input_sample_rate"]) == SAMPLE_RATE
     vmc_times = [p[0] for a, p in osc_messages(drain(recv)) if a == "/VMC/Ext/T"]  # default mode: VMC
     assert len(vmc_times) == 90
+
+
+def test_run_with_no_osc_receiver_says_so_instead_of_counting_drops(capsys, clip, tiny_checkpoint):
+    """`make demo` with nothing on the VMC port: the status line names the missing receiver
+    and counts no drops (before, every frame was a drop)."""
+    port = closed_udp_port()
+    code, err = run_main(capsys, "run", "--audio", clip, "--fast", "--duration", 2, "--checkpoint", tiny_checkpoint,
+                         "--osc", f"127.0.0.1:{port}", "--no-ws")
+    assert code == 0, err
+    final = [line for line in err.splitlines() if " frames" in line and "60 frames" in line][-1]
+    assert "drops 0" in final and final.endswith(f"no receiver at 127.0.0.1:{port} (connection refused)"), err
 
 
 def test_run_in_process_to_udp_and_config_file(tmp_path, capsys, clip, tiny_checkpoint):

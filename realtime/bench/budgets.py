@@ -9,7 +9,16 @@ for the sweep), each ``{ max = X }`` (measured must be <= X) or ``{ min = X }``:
     [streams]
     sustained_streams = { min = 8 }
     [ensemble]
-    per_hop_ms_p99_4 = { max = 5.0 }
+    per_hop_ms_p99_own_4 = { max = 5.0, scaled_by = "reference_ms_4" }
+
+Budgets scaled to the machine: an entry with ``scaled_by = "NAME"`` is checked against
+``max * speed``, ``speed = max(1, NAME_p50 / p50_ms)``: the result's ``NAME_p50`` is the
+reference workload timed in the same process during the same run
+(:mod:`realtime.bench.reference`), ``p50_ms`` the ``[reference]`` table's figure for the
+same workload on the reference machine with nothing else running. A machine that is slower
+today slows the workload as much as the hop; on the reference machine the budget is ``max``.
+Time the hop spent waiting for a CPU that another process held is not the hop's: the
+scaled figures are ``per_hop_ms_*_own`` (the hop minus its run-queue wait, docs/latency.md).
 """
 
 from __future__ import annotations
@@ -32,6 +41,21 @@ class Budget:
     metric: str
     op: str
     limit: float
+    scaled_by: str | None = None  # reference figure of the result that scales a "max" limit
+
+
+@dataclass(frozen=True)
+class Reference:
+    """The reference workload on the reference machine, nothing else running (``[reference]``), ms."""
+
+    p50_ms: float
+
+    def speed(self, p50: float | None) -> float:
+        """How much slower than the reference machine a run whose reference took ``p50`` ms was
+        (at least 1; 1 when unknown)."""
+        if p50 is None or not math.isfinite(p50) or p50 <= 0:
+            return 1.0
+        return max(1.0, p50 / self.p50_ms)
 
 
 @dataclass(frozen=True)
@@ -42,6 +66,16 @@ class Verdict:
     budget: Budget
     measured: float | None  # None: the result does not have this metric
     not_applicable: str | None = None  # why the metric does not apply to this result's model (then ok)
+    speed: float = 1.0  # scaled budgets: how much slower than the reference machine this run was
+
+    @property
+    def limit(self) -> float:
+        """The limit applied: the budget's, or for a scaled budget ``max * speed``."""
+        return self.budget.limit * self.speed
+
+    @property
+    def scaled(self) -> bool:
+        return self.budget.scaled_by is not None
 
     @property
     def ok(self) -> bool:
@@ -50,18 +84,28 @@ class Verdict:
         m = self.measured
         if m is None or not math.isfinite(m):
             return False
-        return m <= self.budget.limit if self.budget.op == "max" else m >= self.budget.limit
+        return m <= self.limit if self.budget.op == "max" else m >= self.limit
 
     @property
     def over(self) -> float:
-        """How far past the limit (positive = exceeded), in the metric's unit."""
+        """How far past the limit applied (positive = exceeded), in the metric's unit."""
         if self.measured is None or not math.isfinite(self.measured):
             return math.inf
-        d = self.measured - self.budget.limit
+        d = self.measured - self.limit
         return d if self.budget.op == "max" else -d
 
 
-def load_budgets(path: str | Path) -> list[Budget]:
+def _number(x: object) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+class BudgetList(list):
+    """The budgets of a file (a list of :class:`Budget`), with its ``[reference]`` (or None)."""
+
+    reference: Reference | None = None
+
+
+def load_budgets(path: str | Path) -> BudgetList:
     """Parse a budgets file; ConfigError naming the file and the entry when malformed."""
     path = Path(path)
     try:
@@ -70,18 +114,34 @@ def load_budgets(path: str | Path) -> list[Budget]:
         raise ConfigError("budgets file not found", source=path) from None
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"cannot read budgets: {exc}", source=path) from None
-    out = []
+    out = BudgetList()
+    ref = data.pop("reference", None)
+    if ref is not None:
+        if not (isinstance(ref, dict) and set(ref) == {"p50_ms"} and _number(ref["p50_ms"]) and ref["p50_ms"] > 0):
+            raise ConfigError(f"[reference]: expected a positive p50_ms only, got {ref!r}", source=path)
+        out.reference = Reference(float(ref["p50_ms"]))
     for kind, table in data.items():
         if kind not in KINDS or not isinstance(table, dict):
-            raise ConfigError(f"unknown budget table [{kind}]; use {', '.join(f'[{k}]' for k in KINDS)}", source=path)
+            raise ConfigError(f"unknown budget table [{kind}]; use [reference], "
+                              f"{', '.join(f'[{k}]' for k in KINDS)}", source=path)
         for metric, spec in table.items():
-            if not (isinstance(spec, dict) and len(spec) == 1 and next(iter(spec)) in ("max", "min")):
-                raise ConfigError(f"[{kind}] {metric}: expected {{ max = X }} or {{ min = X }}, got {spec!r}",
-                                  source=path)
-            op, limit = next(iter(spec.items()))
-            if isinstance(limit, bool) or not isinstance(limit, (int, float)):
+            keys = set(spec) if isinstance(spec, dict) else set()
+            ops = keys & {"max", "min"}
+            if len(ops) != 1 or keys - ops - {"scaled_by"}:
+                raise ConfigError(f"[{kind}] {metric}: expected {{ max = X }} or {{ min = X }} "
+                                  f"(max may have scaled_by = \"NAME\"), got {spec!r}", source=path)
+            op = ops.pop()
+            limit, scaled_by = spec[op], spec.get("scaled_by")
+            if not _number(limit):
                 raise ConfigError(f"[{kind}] {metric}: {op} must be a number, got {limit!r}", source=path)
-            out.append(Budget(kind, metric, op, float(limit)))
+            if scaled_by is not None:
+                if op != "max" or not isinstance(scaled_by, str) or not scaled_by:
+                    raise ConfigError(f"[{kind}] {metric}: scaled_by needs a max and a reference name, "
+                                      f"got {spec!r}", source=path)
+                if out.reference is None:
+                    raise ConfigError(f"[{kind}] {metric}: scaled_by needs a [reference] table "
+                                      "(p50_ms) before it", source=path)
+            out.append(Budget(kind, metric, op, float(limit), scaled_by))
     return out
 
 
@@ -90,18 +150,34 @@ def check(results: list[dict], budgets: list[Budget]) -> list[Verdict]:
 
     A metric the result lacks fails its budget ("not measured"), unless the result names
     it under ``not_applicable`` with the reason (a figure its model does not have, e.g. the
-    naive-recompute ratio of a dance_vq model): that verdict is "n/a" and passes.
+    naive-recompute ratio of a dance_vq model): that verdict is "n/a", neither a pass nor a
+    failure. A scaled budget takes its speed from the result's reference figure (module
+    docstring); a result without one is checked against the budget's own limit.
     """
+    reference = getattr(budgets, "reference", None)
     verdicts = []
     for r in results:
         na = r.get("not_applicable") or {}
+        metrics = r.get("metrics", {})
         for b in budgets:
             if b.kind == r.get("kind"):
-                v = r.get("metrics", {}).get(b.metric)
+                v = metrics.get(b.metric)
                 reason = na.get(b.metric) if v is None else None
+                speed = 1.0
+                if b.scaled_by is not None and reference is not None:
+                    speed = reference.speed(metrics.get(f"{b.scaled_by}_p50"))
                 verdicts.append(Verdict(r.get("label", "?"), b, None if v is None else float(v),
-                                        None if reason is None else str(reason)))
+                                        None if reason is None else str(reason), speed))
     return verdicts
+
+
+def tally(verdicts: list[Verdict]) -> str:
+    """``"N of M budget checks within budget, K n/a, J over budget"``: n/a counted apart from passes."""
+    na = sum(v.not_applicable is not None for v in verdicts)
+    over = sum(not v.ok for v in verdicts)
+    applied = len(verdicts) - na
+    return (f"{applied - over} of {applied} budget checks within budget, {over} over budget"
+            + (f"; {na} not applicable (not counted)" if na else ""))
 
 
 def _fmt(x: float | None) -> str:
@@ -120,17 +196,22 @@ def format_verdicts(verdicts: list[Verdict], only_failures: bool = False) -> str
         if v.not_applicable is not None:
             rows.append((v.label, v.budget.metric, f"{sign} {v.budget.limit:g}", "n/a", "-", "n/a"))
             continue
+        if v.scaled:
+            sign = f"{sign} {v.budget.limit:g} x {v.speed:.2f} ="
         if v.ok:
             over = "-"
         elif v.measured is None or not math.isfinite(v.measured):
             over = "n/a"
         else:
-            pct = f" ({100 * v.over / abs(v.budget.limit):+.0f}%)" if v.budget.limit else ""
+            pct = f" ({100 * v.over / abs(v.limit):+.0f}%)" if v.limit else ""
             over = f"{v.over:.3g}{pct}"
-        rows.append((v.label, v.budget.metric, f"{sign} {v.budget.limit:g}", _fmt(v.measured), over,
+        rows.append((v.label, v.budget.metric, f"{sign} {v.limit:.3g}", _fmt(v.measured), over,
                      "ok" if v.ok else "OVER BUDGET"))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     table = "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows)
     reasons = [] if only_failures else sorted({(v.budget.metric, v.not_applicable) for v in verdicts
                                                if v.not_applicable is not None})
-    return table + "".join(f"\nn/a {metric}: {why}" for metric, why in reasons)
+    scaled = "" if only_failures or not any(v.scaled for v in verdicts) else (
+        "\nscaled budgets: max x speed, the speed from the reference workload timed in the same run "
+        "(benchmarks/budgets.toml [reference]; docs/latency.md, Budgets scaled to the machine)")
+    return table + scaled + "".join(f"\nn/a {metric}: {why}" for metric, why in reasons)

@@ -63,6 +63,8 @@ class RunSettings:
     warmup_s: float = 3.0
     model: str = "streaming"  # or "naive" (NaiveWindowGenerator)
     lead_ms: float = 0.0  # the single performer's lead (`performer run --lead`)
+    inject_ms: float = 0.0  # testing hook: extra work in the first performer's lane (realtime/bench/reference.py)
+    inject_every: int = 8  # ... on every this many frames
 
 
 class _Child:
@@ -144,6 +146,8 @@ def run_performers(specs: list[StreamSpec], settings: RunSettings, workdir: Path
         common = {"checkpoint": str(settings.checkpoint), "block_size": settings.block_size,
                   "seconds": settings.seconds, "threads": settings.threads, "warmup_s": settings.warmup_s,
                   "model": settings.model, "lead_ms": settings.lead_ms}
+        if settings.inject_ms > 0:
+            common.update(inject_ms=settings.inject_ms, inject_every=settings.inject_every)
         if ensemble:
             wspecs = [{**common, "audio_npy": str(specs[0].audio_npy), "sample_rate": specs[0].sample_rate,
                        "name": specs[0].name, "out": str(workdir / "ensemble.json"),

@@ -70,7 +70,8 @@ def _budget_notes(result: dict, budgets: list[Budget] | None) -> dict[str, str]:
     for v in check([result], budgets or []):
         sign = "≤" if v.budget.op == "max" else "≥"
         status = "n/a" if v.not_applicable is not None else "ok" if v.ok else "**over**"
-        notes[v.budget.metric] = f"{sign} {v.budget.limit:g} {status}"
+        limit = f"{v.budget.limit:g} × {v.speed:.2f} = {v.limit:.3g}" if v.scaled else f"{v.limit:g}"
+        notes[v.budget.metric] = f"{sign} {limit} {status}"
     return notes
 
 
@@ -105,6 +106,9 @@ def latency_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
         "|---|---|---|---|---|---|",
         _row("per-hop compute (features + model + blending + encoding + send)", s["per_hop_ms"],
              notes.get("per_hop_ms_p99", "")),
+        _row("per-hop compute, own (less the run-queue wait: another process had the CPU)",
+             s.get("per_hop_own_ms", {"p50": None, "p95": None, "p99": None, "max": None}),
+             notes.get("per_hop_ms_p99_own", "")),
         _row("end-to-end, block release → OSC (VMC) receipt", s["e2e_osc_ms"], notes.get("e2e_osc_ms_p99", "")),
         _row("end-to-end, block release → WebSocket receipt", s["e2e_ws_ms"], notes.get("e2e_ws_ms_p99", "")),
         _row("block release → frame handed to the outputs", s["send_ms"]),
@@ -120,6 +124,9 @@ def latency_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
         f"Frames lost: OSC {s['lost_osc']}, WebSocket {s['lost_ws']}; late audio blocks {s['late_blocks']}, "
         f"ring overruns {s['overruns']}, WebSocket queue drops {s['ws_drops']}. "
         f"Peak RSS of the performer process: {_f(s['peak_rss_mb'], 0)} MB {notes.get('peak_rss_mb', '')}.",
+        "",
+        _reference_line([{"performers": 1, "mode": "streaming run", "reference_ms_p50": s["reference_ms"]["p50"],
+                          "reference_ms_p99": s["reference_ms"]["p99"]}], st),
         "",
         "## Algorithmic latency (by design, ms)",
         "",
@@ -283,15 +290,14 @@ def ensemble_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
         "(the streams sweep's harness)",
         f"* Machine: {machine_line(r)}",
         "",
-        "| performers | mode | per-hop p50 ms | per-hop p99 ms | of which features p50 | CPU ms per frame (all "
+        "| performers | mode | per-hop p50 ms | per-hop p99 ms (own: less the run-queue wait) | of which features p50 | CPU ms per frame (all "
         "performer processes) | worst e2e OSC p99 ms | worst e2e WS p99 ms | lost | peak RSS MB (sum) | "
         "all CPUs busy % |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in r["rows"]:
-        p99 = _f(row["per_hop_ms_p99"])
-        note = notes.get(f"per_hop_ms_p99_{row['performers']}", "") if row["mode"] == "one process" else ""
-        p99 = f"{p99} {note}".rstrip()
+        note = notes.get(f"per_hop_ms_p99_own_{row['performers']}", "") if row["mode"] == "one process" else ""
+        p99 = f"{_f(row['per_hop_ms_p99'])} (own {_f(row.get('per_hop_ms_p99_own'))} {note})".replace(" )", ")")
         lines.append(
             f"| {row['performers']} | {row['mode']} | {_f(row['per_hop_ms_p50'])} | {p99} | "
             f"{_f(row['features_ms_p50'])} | {_f(row['cpu_ms_per_frame'])} | {_f(row['worst_e2e_osc_ms_p99'])} | "
@@ -299,6 +305,7 @@ def ensemble_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
             f"{_f(row['peak_rss_mb'], 0)} | {_f(row['machine_busy_percent'], 0)} |")
     lines += ["", "Separate processes: per-hop p50 is the median of the processes' p50, p99 the worst process's "
               "(each process's hop includes its own features).", ""]
+    lines += [_reference_line(r["rows"], st), ""]
     if r["marginal"]:
         lines += ["## Cost of each added performer", "",
                   "| mode | per-hop p50 ms | per-hop p99 ms | CPU ms per frame | peak RSS MB |",
@@ -434,6 +441,18 @@ def plot_streams(r: dict, out: Path) -> Path:
     return _save(plt, fig, out / "streams.png")
 
 
+def _reference_line(rows: list[dict], settings: dict) -> str:
+    """The reference workload's p50 / p99 per run (what scaled budgets use), and a planted regression if any."""
+    refs = "; ".join(f"{row['performers']} {row['mode']}: {_f(row.get('reference_ms_p50'))} / "
+                     f"{_f(row.get('reference_ms_p99'))}" for row in rows)
+    text = (f"Reference workload timed between the hops in the same process (p50 / p99 ms; budgets scaled to the "
+            f"machine, docs/latency.md): {refs}.")
+    if settings.get("inject_ms"):
+        text += (f" **Planted regression (testing hook): {settings['inject_ms']:g} ms of busy work every "
+                 f"{settings['inject_every']}th frame in the first performer's lane.**")
+    return text
+
+
 def summary_markdown(results: list[dict]) -> str:
     """One headline table over several results (``performer bench check --summary``).
 
@@ -444,21 +463,23 @@ def summary_markdown(results: list[dict]) -> str:
     lat = [r for r in results if r.get("kind") == "latency"]
     lines = []
     if lat:
-        lines += ["| recording | per-hop p50 | per-hop p99 | e2e OSC p50 | e2e OSC p99 | e2e WS p50 | e2e WS p99 "
+        lines += ["| recording | per-hop p50 | per-hop p99 (own) | e2e OSC p50 | e2e OSC p99 | e2e WS p50 | e2e WS p99 "
                   "| algorithmic max | jitter p99 | lost | peak RSS MB | CPU % | naive/streaming model p50 "
                   "| naive/streaming per hop p50 | offline RTF | stream vs offline max diff |",
                   "|---|" + "---:|" * 15]
         for r in lat:
             m = r["metrics"]
             lines.append(
-                f"| {r['label']} | {_f(m['per_hop_ms_p50'])} | {_f(m['per_hop_ms_p99'])} | {_f(m['e2e_osc_ms_p50'])} "
+                f"| {r['label']} | {_f(m['per_hop_ms_p50'])} | {_f(m['per_hop_ms_p99'])} "
+                f"({_f(m.get('per_hop_ms_p99_own'))}) | {_f(m['e2e_osc_ms_p50'])} "
                 f"| {_f(m['e2e_osc_ms_p99'])} | {_f(m['e2e_ws_ms_p50'])} | {_f(m['e2e_ws_ms_p99'])} "
                 f"| {_f(m['algorithmic_ms_max'])} | {_f(m['jitter_ms_p99'])} | {m['lost_frames']} "
                 f"| {_f(m['peak_rss_mb'], 0)} | {_f(m['cpu_percent'], 1)} "
                 f"| {_f(m.get('model_step_naive_over_streaming'), 1)}× | {_f(m.get('per_hop_naive_over_streaming'), 1)}× "
                 f"| {_f(m.get('rtf_causal'), 4)} | {_g(m.get('stream_offline_max_abs'))} |")
         lines.append("")
-        lines.append("Times in ms; RTF: seconds of compute per second of audio.")
+        lines.append("Times in ms; own: the hop less its run-queue wait (another process had the CPU); RTF: seconds "
+                     "of compute per second of audio.")
         lines.append("")
     for r in (r for r in results if r.get("kind") == "streams"):
         lines.append(f"Concurrent streams sustained (every stream's p99 end-to-end < {FRAME_PERIOD_MS:.1f} ms): "
@@ -466,8 +487,8 @@ def summary_markdown(results: list[dict]) -> str:
         lines.append("")
     for r in (r for r in results if r.get("kind") == "ensemble"):
         m = r["metrics"]
-        hops = ", ".join(f"{row['performers']}: {_f(row['per_hop_ms_p99'])}" for row in r["rows"]
-                         if row["mode"] == "one process")
+        hops = ", ".join(f"{row['performers']}: {_f(row['per_hop_ms_p99'])} (own {_f(row.get('per_hop_ms_p99_own'))})"
+                         for row in r["rows"] if row["mode"] == "one process")
         lines.append(f"Ensemble in one process, per-hop p99 ms by performers ({hops}); each added performer "
                      f"+{_f(m.get('added_performer_hop_ms_p50'))} ms per-hop p50, +{_f(m.get('added_performer_cpu_ms'))} "
                      f"ms CPU per frame (a separate process: +{_f(m.get('added_process_cpu_ms'))}) "

@@ -42,6 +42,8 @@ class BenchConfig:
     warmup_s: float = 3.0  # engine warm-up (as `performer run`)
     cores: tuple[int, ...] | None = None  # CPU affinity of every process (None: leave as is)
     lead_ms: float = 0.0  # the performer's lead (`performer run --lead`; latency only)
+    inject_ms: float = 0.0  # testing hook: ms of extra work in the first performer's lane ...
+    inject_every: int = 8  # ... every this many frames (realtime/bench/reference.py)
     notes: list[str] = field(default_factory=list)
 
 
@@ -153,6 +155,8 @@ def stream_metrics(rec: dict, skip_frames: int = 0) -> dict:
     return {
         "frames": int(len(a["index"])),
         "per_hop_ms": summarize(a["compute_ms"]),
+        "per_hop_own_ms": summarize(own_hop_ms(rec["compute_ms"], rec.get("compute_wait_ms"))[keep]),
+        "per_hop_cpu_ms": summarize(_cpu_ms(rec, len(keep))[keep]),
         "send_ms": summarize((a["sent"] - a["released"]) * 1000.0),
         "e2e_osc_ms": summarize(osc_ms),
         "e2e_ws_ms": summarize(ws_ms),
@@ -175,7 +179,23 @@ def stream_metrics(rec: dict, skip_frames: int = 0) -> dict:
         "ws_drops": rec["ws_drops"],
         "osc_errors": rec["osc_errors"],
         "nan_frames": rec["nan_frames"],
+        "reference_ms": summarize(np.asarray(rec.get("reference_ms", []), dtype=np.float64)),
     }
+
+
+def own_hop_ms(compute_ms, wait_ms) -> np.ndarray:
+    """The hop's own time per frame: its wall time less the time it waited for a CPU that
+    another thread held (the engine's ``compute_wait_ms``); NaN where the wait is unknown."""
+    hop = np.asarray(compute_ms, dtype=np.float64)
+    wait = np.full(len(hop), np.nan) if wait_ms is None else np.asarray(wait_ms, dtype=np.float64)
+    wait = np.concatenate([wait[: len(hop)], np.full(max(0, len(hop) - len(wait)), np.nan)])
+    return hop - wait
+
+
+def _cpu_ms(rec: dict, n: int) -> np.ndarray:
+    """The worker thread's CPU time of each of ``n`` hops, ms (NaN where not recorded)."""
+    cpu = np.asarray(rec.get("compute_cpu_ms", []), dtype=np.float64)[:n]
+    return np.concatenate([cpu, np.full(n - len(cpu), np.nan)])
 
 
 def frame_series(rec: dict) -> dict[str, np.ndarray]:
@@ -452,7 +472,8 @@ def _sweep(cfg: BenchConfig):
 
 
 def _settings(cfg: BenchConfig, checkpoint: Path, seconds: float, model: str = "streaming") -> RunSettings:
-    return RunSettings(checkpoint, seconds, cfg.block_size, cfg.threads, cfg.warmup_s, model, cfg.lead_ms)
+    return RunSettings(checkpoint, seconds, cfg.block_size, cfg.threads, cfg.warmup_s, model,
+                       lead_ms=cfg.lead_ms, inject_ms=cfg.inject_ms, inject_every=cfg.inject_every)
 
 
 def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seconds: float = 10.0,
@@ -533,6 +554,8 @@ def latency_metrics(r: dict) -> dict[str, float]:
     m = {
         "per_hop_ms_p50": s["per_hop_ms"]["p50"],
         "per_hop_ms_p99": s["per_hop_ms"]["p99"],
+        "per_hop_ms_p99_own": s["per_hop_own_ms"]["p99"],  # less the run-queue wait (scaled budget)
+        "per_hop_ms_p99_cpu": s["per_hop_cpu_ms"]["p99"],  # the worker thread's CPU time
         "e2e_osc_ms_p50": s["e2e_osc_ms"]["p50"],
         "e2e_osc_ms_p99": s["e2e_osc_ms"]["p99"],
         "e2e_ws_ms_p50": s["e2e_ws_ms"]["p50"],
@@ -545,6 +568,8 @@ def latency_metrics(r: dict) -> dict[str, float]:
         "cpu_percent": s["cpu_percent"],
         "peak_rss_mb": s["peak_rss_mb"],
         "stream_offline_max_abs": r["stream_vs_offline"]["max_abs"],
+        "reference_ms_p50": s["reference_ms"]["p50"],  # the machine's speed during the run (scaled budgets)
+        "reference_ms_p99": s["reference_ms"]["p99"],
     }
     if r["model_step"].get("ratio_p50") is not None:
         m["model_step_naive_over_streaming"] = r["model_step"]["ratio_p50"]
@@ -706,20 +731,34 @@ def _ensemble_row(n: int, mode: str, run: dict) -> dict:
         proc = run["process"]
         hop = summarize(np.asarray(proc["compute_ms"]))
         hop_p50, hop_p99 = hop["p50"], hop["p99"]
+        own = summarize(own_hop_ms(proc["compute_ms"], proc.get("compute_wait_ms")))
+        cpu = summarize(_cpu_ms(proc, len(proc["compute_ms"])))
+        own_p99, cpu_p99, own_p95, cpu_p95 = own["p99"], cpu["p99"], own["p95"], cpu["p95"]
         features_p50 = summarize(np.asarray(proc["features_ms"]))["p50"]
         cpu_s, rss = proc["cpu_s"], proc["peak_rss_mb"]
         extractors = proc["extractors"]
+        reference = summarize(np.asarray(proc.get("reference_ms", []), dtype=np.float64))
     else:  # separate processes: each its own hop (features included); CPU and memory summed
         hop_p50 = float(np.median([m["per_hop_ms"]["p50"] for m in per]))
         hop_p99 = max(m["per_hop_ms"]["p99"] for m in per)
+        own_p99 = max(m["per_hop_own_ms"]["p99"] for m in per)
+        cpu_p99 = max(m["per_hop_cpu_ms"]["p99"] for m in per)
+        own_p95 = max(m["per_hop_own_ms"]["p95"] for m in per)
+        cpu_p95 = max(m["per_hop_cpu_ms"]["p95"] for m in per)
         features_p50 = None
         cpu_s, rss = sum(r["cpu_s"] for r in run["streams"]), sum(m["peak_rss_mb"] for m in per)
         extractors = n
+        reference = summarize(np.concatenate([np.asarray(r.get("reference_ms", []), dtype=np.float64)
+                                              for r in run["streams"]]))
     return {
         "performers": n,
         "mode": mode,
         "per_hop_ms_p50": hop_p50,
         "per_hop_ms_p99": hop_p99,
+        "per_hop_ms_p99_own": own_p99,  # less the run-queue wait (docs/latency.md)
+        "per_hop_ms_p99_cpu": cpu_p99,  # the worker thread's CPU time
+        "per_hop_ms_p95_own": own_p95,
+        "per_hop_ms_p95_cpu": cpu_p95,
         "features_ms_p50": features_p50,
         "performer_part_ms_p50": [m["per_hop_ms"]["p50"] for m in per] if "process" in run else None,
         "phases": [r.get("phase", 0) for r in run["streams"]],
@@ -733,6 +772,8 @@ def _ensemble_row(n: int, mode: str, run: dict) -> dict:
         "overruns": sum(m["overruns"] for m in per) if "process" not in run else per[0]["overruns"],
         "machine_busy_percent": run["machine_busy_percent"],
         "receiver_cpu_percent": 100.0 * run["receiver_cpu_s"] / max(run["wall_s"], 1e-9),
+        "reference_ms_p50": reference["p50"],
+        "reference_ms_p99": reference["p99"],
     }
 
 
@@ -766,6 +807,12 @@ def ensemble_metrics(r: dict) -> dict[str, float]:
         if row["mode"] == "one process":
             m[f"per_hop_ms_p99_{row['performers']}"] = row["per_hop_ms_p99"]
             m[f"per_hop_ms_p50_{row['performers']}"] = row["per_hop_ms_p50"]
+            m[f"per_hop_ms_p99_own_{row['performers']}"] = row["per_hop_ms_p99_own"]
+            m[f"per_hop_ms_p99_cpu_{row['performers']}"] = row["per_hop_ms_p99_cpu"]
+            m[f"per_hop_ms_p95_own_{row['performers']}"] = row["per_hop_ms_p95_own"]
+            m[f"per_hop_ms_p95_cpu_{row['performers']}"] = row["per_hop_ms_p95_cpu"]
+            m[f"reference_ms_{row['performers']}_p50"] = row["reference_ms_p50"]
+            m[f"reference_ms_{row['performers']}_p99"] = row["reference_ms_p99"]
     one = r["marginal"].get("one process")
     if one is not None:
         m["added_performer_hop_ms_p50"] = one["per_hop_ms_p50"]["slope"]

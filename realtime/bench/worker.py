@@ -16,7 +16,11 @@
    time; and the process's CPU time and peak RSS. Prints ``{"done": out}``.
 
 SPEC keys: checkpoint, audio_npy, sample_rate, block_size, seconds, threads, warmup_s,
-model ("streaming" or "naive"), osc_port, out, name, lead_ms (the performer's lead, default 0).
+model ("streaming" or "naive"), osc_port, out, name, lead_ms (the performer's lead, default 0);
+optional inject_ms and inject_every
+(:class:`~realtime.bench.reference.InjectedWork` in the first performer's lane: a planted
+regression). Every run also times the reference workload once per hop
+(:class:`~realtime.bench.reference.ReferenceProbe`): ``reference_ms`` in ``out``.
 
 An ensemble (``performer bench ensemble``): SPEC has ``performers``, a list of
 ``{"name", "osc_port", "seed", "phase"}`` (phase null: the engine's stagger), instead of
@@ -171,6 +175,8 @@ def run(spec: dict) -> dict:
     from realtime.pipeline import build_pipeline
     from realtime.ws_server import WebSocketSink
 
+    from realtime.bench.reference import InjectedWork, ReferenceProbe
+
     threads = int(spec.get("threads", 1))
     torch.set_num_threads(threads)
     samples = np.load(spec["audio_npy"])
@@ -180,23 +186,31 @@ def run(spec: dict) -> dict:
     ensemble = spec.get("performers")
     server = WebSocketSink("127.0.0.1", 0)
     cfg = EngineConfig(threads=threads, warmup_s=float(spec.get("warmup_s", 3.0)), duration_s=seconds,
-                       stats_size=frames_max)
+                       stats_size=frames_max, runqueue_wait=True)
+    inject = (InjectedWork(float(spec["inject_ms"]), int(spec.get("inject_every", 8)))
+              if spec.get("inject_ms") else None)
+    probe = ReferenceProbe()
     if ensemble is None:
         pipeline = build_pipeline(spec["checkpoint"], lead=float(spec.get("lead_ms", 0.0)))
         model = _model(pipeline, spec.get("model", "streaming"), spec["checkpoint"])
         lanes = [(spec.get("name", "audio"), [OscSink("127.0.0.1", int(spec["osc_port"]), mode="vmc"), server,
                                                TimingSink(frames_max)])]
+        sinks = ([inject] if inject else []) + lanes[0][1] + [probe]
         _say({"ready": True, "ws_port": server.port, "pid": os.getpid()})
     else:
         loaded: dict = {}
         performers = []
+        lanes = []
         for k, p in enumerate(ensemble):
             pipe = build_pipeline(spec["checkpoint"], seed=int(p.get("seed", 0)), loaded=loaded)
-            sinks = [OscSink("127.0.0.1", int(p["osc_port"]), mode="vmc"),
-                     server.route(f"/ws/{p['name']}", p["name"], default=k == 0), TimingSink(frames_max)]
-            performers.append(Performer(p["name"], pipe.model, pipe.extractor_factory, sinks,
+            mine = [OscSink("127.0.0.1", int(p["osc_port"]), mode="vmc"),
+                    server.route(f"/ws/{p['name']}", p["name"], default=k == 0), TimingSink(frames_max)]
+            lanes.append((p["name"], mine))
+            extra_first = [inject] if inject and k == 0 else []
+            extra_last = [probe] if k == len(ensemble) - 1 else []
+            performers.append(Performer(p["name"], pipe.model, pipe.extractor_factory,
+                                        extra_first + mine + extra_last,
                                         feature_key=pipe.feature_key, phase=p.get("phase")))
-        lanes = [(p.name, p.sinks) for p in performers]
         _say({"ready": True, "ws_port": server.port, "ws_paths": [f"/ws/{p['name']}" for p in ensemble],
               "pid": os.getpid()})
 
@@ -204,7 +218,7 @@ def run(spec: dict) -> dict:
     source = ScheduledSource(FileSource(samples, sr, name=spec.get("name", "audio"), block_size=block),
                              lambda: (_say({"warmed": True}), _hear("start_at")["start_at"])[1])
     if ensemble is None:
-        engine = Engine(source, pipeline.extractor_factory, model, lanes[0][1], cfg)
+        engine = Engine(source, pipeline.extractor_factory, model, sinks, cfg)
     else:
         engine = Engine(source, config=cfg, performers=performers)
     engine.start()
@@ -216,6 +230,7 @@ def run(spec: dict) -> dict:
         stats = engine.stats()
         engine.close()
         server.close()
+        probe.close()
     process = {
         "sample_rate": sr,
         "block_size": block,
@@ -227,6 +242,12 @@ def run(spec: dict) -> dict:
         "peak_rss_mb": peak_rss_mb(),
         "late_blocks": int(source.inner.late_blocks),
         "overruns": int(stats["overruns"]),
+        "reference_ms": probe.times_ms(),
+        # per frame, the whole hop's run-queue wait (ms): other threads held the CPU
+        "compute_wait_ms": engine.compute_wait_ms.values()[: lanes[0][1][2].count].tolist(),
+        "compute_cpu_ms": engine.compute_cpu_ms.values()[: lanes[0][1][2].count].tolist(),  # the worker's CPU
+        "injected": None if inject is None else {"ms": inject.seconds * 1000.0, "every": inject.every,
+                                                 "frames": inject.injected},
     }
     records = []
     for name, (osc, ws, timing) in lanes:

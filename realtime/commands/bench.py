@@ -108,6 +108,10 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--block-size", type=int, default=512, metavar="N", help="samples per audio block (default 512)")
     p.add_argument("--warmup", type=float, default=3.0, metavar="S", help="engine warm-up seconds (default 3)")
     p.add_argument("--budgets", metavar="TOML", help="check the result against this budgets file (exit 1 if over)")
+    # Testing hook (hidden): a planted regression, MS of busy work every EVERY-th frame in the first
+    # performer's lane, to show that the budgets catch one (tests/test_bench_budgets.py).
+    p.add_argument("--inject-ms", type=float, default=0.0, help=argparse.SUPPRESS)
+    p.add_argument("--inject-every", type=int, default=8, help=argparse.SUPPRESS)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -176,9 +180,13 @@ def _config(args):
             raise ConfigError(f"--{name.replace('_', '-')} must be at least 1, got {getattr(args, name)}")
     if args.seconds <= 0:
         raise ConfigError(f"--seconds must be positive, got {args.seconds}")
+    if args.inject_ms < 0 or args.inject_every < 1:
+        raise ConfigError(f"--inject-ms must be >= 0 and --inject-every >= 1, got {args.inject_ms} and "
+                          f"{args.inject_every}")
     return BenchConfig(checkpoint=None if args.checkpoint is None else Path(args.checkpoint),
                        sample_rate=args.sample_rate, block_size=args.block_size, threads=args.threads,
-                       warmup_s=args.warmup, cores=args.cores, lead_ms=getattr(args, "lead", 0.0))
+                       warmup_s=args.warmup, cores=args.cores, lead_ms=getattr(args, "lead", 0.0),
+                       inject_ms=args.inject_ms, inject_every=args.inject_every)
 
 
 def _audio(path: str | None) -> Path:
@@ -205,7 +213,7 @@ def _command() -> str:
 
 
 def _finish(result: dict, out: Path, budgets) -> int:
-    from realtime.bench.budgets import check as apply, format_verdicts
+    from realtime.bench.budgets import check as apply, format_verdicts, tally
     from realtime.bench.report import write_result
 
     for path in write_result(result, out, budgets):
@@ -214,6 +222,7 @@ def _finish(result: dict, out: Path, budgets) -> int:
     if budgets:
         verdicts = apply([result], budgets)
         print(format_verdicts(verdicts))
+        print(tally(verdicts))
         return 0 if all(v.ok for v in verdicts) else 1
     return 0
 
@@ -259,7 +268,7 @@ def check(args: argparse.Namespace) -> int:
     import json
 
     from models.errors import ConfigError
-    from realtime.bench.budgets import check as apply, format_verdicts, load_budgets
+    from realtime.bench.budgets import check as apply, format_verdicts, load_budgets, tally
 
     budgets = load_budgets(args.budgets)
     files: list[Path] = []
@@ -288,8 +297,7 @@ def check(args: argparse.Namespace) -> int:
     print(format_verdicts(verdicts))
     failed = [v for v in verdicts if not v.ok]
     if failed:
-        print(f"\n{len(failed)} of {len(verdicts)} budget checks over budget:\n"
-              f"{format_verdicts(failed)}", file=sys.stderr)
+        print(f"\n{tally(verdicts)}:\n{format_verdicts(failed)}", file=sys.stderr)
         return 1
-    print(f"\nall {len(verdicts)} budget checks within budget")
+    print(f"\n{tally(verdicts)}")
     return 0
