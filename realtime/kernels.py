@@ -77,7 +77,18 @@ def compile_live_kernels(checkpoint: str | Path | None = None, sample_rate: int 
         engine.wait()  # re-raises what failed on the worker
     finally:
         engine.close()
+    _legacy_gate()
     return time.perf_counter() - t0
+
+
+def _legacy_gate() -> None:
+    """Compile the logistic music gate's kernel that checkpoints without a presence detector
+    run on every frame of sound (the shipped default's detector does not call it), with the
+    argument types ``DanceStream._gate`` passes, so such a checkpoint's first run loads it too."""
+    from models.networks.dance_jit import gate_ema
+
+    cols = np.arange(3, dtype=np.int64)
+    gate_ema(np.zeros(8, np.float32), cols, np.zeros(3), np.ones(3), np.zeros(3), 0.9)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
