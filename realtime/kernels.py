@@ -77,14 +77,15 @@ def compile_live_kernels(checkpoint: str | Path | None = None, sample_rate: int 
         engine.wait()  # re-raises what failed on the worker
     finally:
         engine.close()
-    _legacy_gate()
+    compile_unreached_kernels()
     return time.perf_counter() - t0
 
 
-def _legacy_gate() -> None:
-    """Compile the logistic music gate's kernel that checkpoints without a presence detector
-    run on every frame of sound (the shipped default's detector does not call it), with the
-    argument types ``DanceStream._gate`` passes, so such a checkpoint's first run loads it too."""
+def compile_unreached_kernels() -> None:
+    """Compile the kernels a live path may use that a warm-up of the shipped default does not
+    reach: the logistic music gate's, which checkpoints without a presence detector run on
+    every frame of sound (the default's detector does not call it), with the argument types
+    ``DanceStream._gate`` passes. Milliseconds when numba's cache holds it."""
     from models.networks.dance_jit import gate_ema
 
     cols = np.arange(3, dtype=np.int64)

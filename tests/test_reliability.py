@@ -341,11 +341,11 @@ def test_osc_receiver_disappears_and_comes_back(caplog):
     after = drain(second)
     assert len(sink.frames) == 60 and eng.stats()["sink_errors"] == 0
     st = osc.stats()
-    assert st["frames"] == 60 and st.get("errors.ECONNREFUSED", 0) >= 1
+    assert st["frames"] == 60 and st["refused"] >= 1 and st["errors"] == 0  # no receiver is not an error
     # The engine hands each frame to `sink` before `osc`, so when `sink` holds 30 frames the
     # 30th may not have gone out yet: the restarted receiver gets at most frames 29..59 (31).
     assert 10 <= len(before) and 10 <= len(after) <= 31
-    assert warnings_with(caplog, "ECONNREFUSED") == 1
+    assert warnings_with(caplog, "no receiver at") == 1  # said once, as a notice, not per frame
 
 
 def _hop_p99_ratio(clients: int, max_clients: int) -> tuple[dict, float]:

@@ -24,7 +24,7 @@ It also prints the gate's own cost per frame (median and 99th percentile, micros
 
 ``--plot`` draws the idle weight over the between-songs programmes.
 
-    .venv/bin/python benchmarks/idle_gate.py --checkpoint models/assets/default.pt \\
+    .venv/bin/python benchmarks/studies/idle_gate.py --checkpoint models/assets/default.pt \\
         --data ../shared/data/dwm --plot docs/img/presence_gate.png
 """
 

@@ -271,7 +271,7 @@ def _describe(sinks, source, pipeline, control=None) -> str:
 def run(args: argparse.Namespace) -> int:
     from realtime.config import resolve_run_config
     from realtime.engine import Engine, EngineConfig
-    from realtime.kernels import uncached_kernels
+    from realtime.kernels import compile_unreached_kernels, uncached_kernels
     from realtime.pipeline import build_pipeline
     from realtime.status import StatusLine
 
@@ -319,6 +319,7 @@ def run(args: argparse.Namespace) -> int:
     if compiling:  # a first run (empty numba cache): the warm-up compiles them, seconds to a minute
         print(f"performer run: compiling the live path's {len(compiling)} numba kernels (first run only: "
               f"they are cached for the next)...", file=sys.stderr)
+        compile_unreached_kernels()  # the ones the warm-up's audio does not reach, before it starts
     try:
         engine.start()
     except BaseException:
