@@ -5,22 +5,26 @@ poses (k, POSE_DIM)``, one pose per feature frame at once, 30 fps, no look-ahead
 
 Every ``seg`` frames (frame ``t = seg * k``) the stream appends audio token ``k`` to its
 window of the last ``window_codes`` tokens (128 frames), asks the code predictor for the
-next code, draws it from the stream's own seeded generator, and decodes that code's
-``seg`` poses from the last ``decoder_context`` codes; the frames in between read them
-out. :func:`generate` pushes a whole song through a fresh stream, so offline and
+next code, draws it from the stream's own seeded generator, and plays one of that code's
+real exemplars (the choreographic memory), matched to the motion so far; the frames in
+between read it out. (A code without exemplars would have its ``seg`` poses decoded from
+the last ``decoder_context`` codes; the shipped memory has exemplars for every code.)
+
+**At the music's tempo.** A movement's exemplar is read at ``r`` of its frames a frame,
+``r`` the music's tempo (:class:`models.networks.tempo.TempoFollower`) over the memory's
+mean tempo (:data:`FOLLOW_TEMPO`). :func:`generate` pushes a whole song through a fresh stream, so offline and
 live give the same poses for the same seed and style, however the frames are chunked.
 
 **On the beat.** The decided movement is played back through a beat warp: slower into
 every beat the causal beat tracker expects, faster between them (:data:`BEAT_WARP`), read
 between frames about :data:`WARP_LAG` frames late, so its speed dips land on the beats.
 
-**Idle between songs.** A gate decides whether music is playing: the log frame energy
-must be above a threshold (silence), and a logistic music detector on a 0.5-s running
+**Idle between songs.** A gate decides whether music is playing. A model with a fitted
+presence detector (:mod:`models.networks.music_gate`, the shipped one) asks it; an older
+one: the log frame energy must be above a threshold (silence), and a logistic music detector on a 0.5-s running
 mean of the spectral shape (MFCC 1-12) and the beat tracker's pulse clarity must say
 music (applause, crowd, room noise: energy without music). Both are fitted on the
-training songs against synthetic noise (:func:`models.training.dance_vq.fit_music_gate`). A
-model with a fitted presence detector (:mod:`models.networks.music_gate`: music on every
-genre, not on speech, crowd, applause or room noise) uses that instead of the logistic one; after
+training songs against synthetic noise (:func:`models.training.dance_vq.fit_music_gate`). After
 :data:`ABSENT_FRAMES` frames without music the performer fades over
 :data:`FADE_FRAMES` into a calm idle (the dancers' mean pose with a slow sway of hips,
 spine and head, :func:`idle_pose`), and after :data:`PRESENT_FRAMES` frames of music it
