@@ -16,6 +16,7 @@ import torch
 
 from models.evaluation.beats import beat_hit_rate, kinematic_beats
 from models.evaluation.evaluate import positions
+from models.evaluation.listening import bone_steps_deg
 from models.evaluation.metrics import velocity_spread
 from models.features.audio_io import bundled_clip_path, load_audio
 from models.features.spectral import extract_features
@@ -58,13 +59,6 @@ def stream(lm, feats: np.ndarray, seed: int = 0) -> tuple[np.ndarray, np.ndarray
         poses.append(s.push(row[None])[0])
         weights.append(s.idle_weight)
     return np.array(poses), np.array(weights)
-
-
-def bone_steps_deg(poses: np.ndarray) -> np.ndarray:
-    """Largest bone rotation (deg) from each frame to the next: (T - 1,)."""
-    q = poses[:, 3:].reshape(len(poses), -1, 4).astype(np.float64)
-    dot = np.clip(np.abs((q[1:] * q[:-1]).sum(-1)), 0.0, 1.0)
-    return np.degrees(2 * np.arccos(dot)).max(1)
 
 
 @pytest.mark.slow

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from models.data.split import VAL_DANCES
+from models.evaluation.listening import bone_steps_deg
 
 #: (label, kind, dBFS) of the gaps; dBFS None: speech at the level of the song before it.
 GAPS: tuple[tuple[str, str, float | None], ...] = (
@@ -74,13 +75,6 @@ def excerpt(data: Path, name: str, seconds: float) -> np.ndarray:
     start = len(song) // 3  # from the middle of the song: full music, no intro
     x = song[start: start + int(seconds * SR)]
     return x[: len(x) // HOP * HOP]
-
-
-def bone_steps_deg(poses: np.ndarray) -> np.ndarray:
-    """(T - 1,) largest bone rotation (degrees) between consecutive poses (T, P)."""
-    q = poses[:, 3:].reshape(len(poses), -1, 4)
-    dot = np.clip(np.abs((q[1:] * q[:-1]).sum(-1)), 0, 1)
-    return np.degrees(2 * np.arccos(dot)).max(1)
 
 
 def run_gap(lm, a: np.ndarray, gap: np.ndarray, b: np.ndarray, seed: int) -> dict:

@@ -12,7 +12,9 @@ the last ``decoder_context`` codes; the shipped memory has exemplars for every c
 
 **At the music's tempo.** A movement's exemplar is read at ``r`` of its frames a frame,
 ``r`` the music's tempo (:class:`models.networks.tempo.TempoFollower`) over the memory's
-mean tempo (:data:`FOLLOW_TEMPO`). :func:`generate` pushes a whole song through a fresh stream, so offline and
+mean tempo (:data:`FOLLOW_TEMPO`).
+
+:func:`generate` pushes a whole song through a fresh stream, so offline and
 live give the same poses for the same seed and style, however the frames are chunked.
 
 **On the beat.** The decided movement is played back through a beat warp: slower into
@@ -92,8 +94,8 @@ WARP_PULL: float = 0.05
 #: T_ref the memory's mean tempo (the geometric mean over its exemplars of the tempo of the
 #: song each was danced to, ``DanceVQ.member_period``: 93 bpm for the shipped model),
 #: blended towards 1 as the pulse fades (the follower's confidence), within
-#: :data:`RATE_RANGE` and never faster than the fastest exemplars of the memory move
-#: (:data:`SPEED_CAP`); the rate moves from the last movement's to the new one's over the
+#: :data:`RATE_RANGE`, and no movement is sped up past the memory's 90th-percentile speed
+#: (:data:`SPEED_CAP`; one faster on its own plays at its own pace); the rate moves from the last movement's to the new one's over the
 #: movement, so a change of tempo never jerks. Each exemplar's own song tempo as the
 #: reference (``T / T_src``) was measured too (docs/listening.md): the rate then jumps
 #: between exemplars of different styles at every handover (jerk 2.1x the dancers',
@@ -106,7 +108,8 @@ RATE_RANGE: tuple[float, float] = (0.55, 1.75)
 #: Follower confidence (:attr:`~models.networks.tempo.TempoFollower.confidence`) below which the
 #: rate is blended towards 1 (no clear pulse: the movements' own pace).
 RATE_CONFIDENCE: float = 0.15
-#: Quantile of the exemplars' mean joint speeds that no movement's played speed exceeds.
+#: Quantile of the exemplars' mean joint speeds that no movement is sped up past (a movement
+#: already faster plays at rate 1 at most).
 SPEED_CAP: float = 0.9
 #: Classifier-free guidance of a requested style (Ho & Salimans 2021): the logits move from
 #: the music-only ones ("auto") past the style-conditioned ones by this factor. The predictor
@@ -396,12 +399,12 @@ class DanceStream:
         self._dips = _cached_dips(model, self._members, self.seg)  # (K, M, seg)
         self._code_energy, speed = _cached_energy(model, self._members, self.seg)  # (K,) z-scores, (K, M) m/frame
         real = np.arange(speed.shape[1])[None, :] < self._counts[:, None]
-        # the fastest a movement may play (m/frame), and each exemplar's source tempo (frames per beat)
+        # how fast a movement may be sped up to (m/frame), and the memory's mean tempo (frames per beat)
         self._speed_cap = float(np.quantile(speed[real], SPEED_CAP)) if real.any() else np.inf
         self._member_speed = speed
-        self._member_period = model.member_period.numpy().astype(np.float64)  # (K, M); 0 unknown
-        known = self._member_period[real & (self._member_period > 0)]
-        self._ref_period = float(np.exp(np.log(known).mean())) if len(known) else 0.0  # the memory's mean tempo
+        period = model.member_period.numpy().astype(np.float64)  # (K, M) each exemplar's song; 0 unknown
+        known = period[real & (period > 0)]
+        self._ref_period = float(np.exp(np.log(known).mean())) if len(known) else 0.0
         self.energy = 1.0
         self._energy_bias: np.ndarray | None = None  # ENERGY_GAIN * (energy - 1) * z; None at 1
         self.set_energy(energy)
