@@ -159,6 +159,8 @@ def test_perform_is_generate_and_reads_the_idle_weight(shipped):
     assert np.allclose(poses, ref, atol=1e-5)
     assert w[0] > 0.9 and w[int(3.5 * FPS)] == 0.0 and w[-1] == 1.0  # starts at rest, dances, settles on silence
     assert L.settle_back(w, 6 * FPS, len(w), len(w))["settle_s"] <= 2.0
+    # the recording sounds up to the end of the music (a frame's window reaches 2048 samples back)
+    assert 6 * FPS <= L.sounding_frames(shipped, extract_features(y, shipped.features)) <= 6 * FPS + 3
 
 
 def test_run_on_a_tiny_synthetic_set(tmp_path, shipped):
@@ -182,10 +184,12 @@ def test_run_on_a_tiny_synthetic_set(tmp_path, shipped):
     assert set(row["rates"]) == {"0.8", "1", "1.25"} and row["amp_rel"]["1"] == pytest.approx(1.0)
     assert 110 <= row["bpm"] <= 130
     assert [x["recording"] for x in m["presence"]["music"]] == ["clip", "quiet"]
+    quiet = m["presence"]["music"][1]
+    assert quiet["silent_tail_s"] == pytest.approx(8.0) and quiet["idle"] == 1.0 and quiet["idle_sounding"] == 0.0
     assert len(m["presence"]["speech"]) == 1
     assert len(list((tmp_path / "cache").glob("clip-*-x1.25-*.npy"))) == 1  # the stretch is cached
     s = m["summary"]
-    assert {"speed_ratio", "centroid_ratio", "hit_min", "idle_max", "speech_held"} <= set(s)
+    assert {"speed_ratio", "centroid_ratio", "hit_min", "idle_max", "idle_sounding_max", "speech_held"} <= set(s)
     text = L.markdown(res, "cmd")
     assert "| mean joint speed 1.25x / 0.8x (>= 1.4) |" in text and "clip" in text
     assert any(line.startswith(("PASS", "FAIL")) for line in L.verdict_lines(res))

@@ -16,7 +16,8 @@ run them.
    and back (:func:`vary_rate`, a phase vocoder with a time step per frame); the performer's
    joint speed against the real tempo, both smoothed over :data:`SMOOTH_S`.
 3. **Presence**: the idle fraction of whole music recordings after their first
-   :data:`SETTLE_S`, and a song interrupted by read speech at the music's RMS level.
+   :data:`SETTLE_S` (also only up to the recording's last sound, :func:`sounding_frames`),
+   and a song interrupted by read speech at the music's RMS level.
 
 Times are counted in motion frames at :data:`FPS` (30); pose ``t`` ends at audio sample
 ``(t + 1) * HOP`` of the signal the performer hears.
@@ -71,6 +72,7 @@ TARGETS: tuple[tuple[str, str, str, float], ...] = (
     ("ramp_lag_s", "ramp: lag of best correlation (s)", "<=", 2.0),
     ("ramp_max_step_deg", "ramp: largest bone rotation per frame (deg)", "<=", 50.0),
     ("idle_max", "music: largest idle fraction of a recording", "<=", 0.02),
+    ("idle_sounding_max", "music: largest idle fraction up to a recording's last sound", "<=", 0.02),
     ("speech_settle_s", "speech: seconds to idle, worst case", "<=", 2.0),
     ("speech_held", "speech: idle fraction held after settling, worst case", ">=", 0.95),
     ("speech_back_s", "speech: seconds to dance again, worst case", "<=", 1.0),
@@ -319,6 +321,15 @@ def perform(lm, audio: np.ndarray, seed: int = 0) -> tuple[np.ndarray, np.ndarra
     return poses, w
 
 
+def sounding_frames(lm, feats: np.ndarray) -> int:
+    """Frames of features ``feats`` (T, D) up to and with the last one louder than the model's
+    silence threshold (log energy above ``model.gate[0]``, dB): a recording's trailing silence
+    (many end with 1-6 s of it) is the music stopped, where the performer is to idle."""
+    col = lm.model.config.energy_col
+    loud = np.flatnonzero(feats[:, col] > float(lm.model.gate[0]))
+    return int(loud[-1]) + 1 if loud.size else 0
+
+
 def positions(poses: np.ndarray) -> np.ndarray:
     from models.evaluation.evaluate import positions as fk_positions
 
@@ -511,9 +522,12 @@ def settle_back(w: np.ndarray, start: int, end: int, nxt: int) -> dict[str, floa
 
 def presence(lm, cache: AudioCache, speech_song: Path | None, opts: Options) -> dict:
     """``music``: per recording of ``opts.music``, the idle fraction (w > :data:`IDLE_THRESHOLD`)
-    after :data:`SETTLE_S`; ``speech``: per recording of ``opts.speech``, ``speech_song`` for
+    after :data:`SETTLE_S`, also only up to its last sound (``idle_sounding``, :func:`sounding_frames`;
+    ``silent_tail_s``: the seconds after it); ``speech``: per recording of ``opts.speech``, ``speech_song`` for
     ``opts.speech_song_s``, the speech scaled to the song's RMS, the song's next
     ``opts.speech_song_s``, scored by :func:`settle_back`."""
+    from models.features.spectral import extract_features
+
     out: dict[str, list] = {"music": [], "speech": []}
     files = music_files(opts.music) if opts.music is not None else []
     for p in _bar(files, f"presence {lm.path.name}", opts):
@@ -522,8 +536,12 @@ def presence(lm, cache: AudioCache, speech_song: Path | None, opts: Options) -> 
             a = a[: int(opts.presence_max_s * SAMPLE_RATE)]
         _, w = perform(lm, a, opts.seed)
         s = w[int(SETTLE_S * FPS):]
+        end = sounding_frames(lm, extract_features(a, lm.features))
         out["music"].append({"recording": p.stem, "seconds": len(a) / SAMPLE_RATE,
-                             "idle": float(np.mean(s > IDLE_THRESHOLD))})
+                             "idle": float(np.mean(s > IDLE_THRESHOLD)),
+                             "idle_sounding": float(np.mean(w[int(SETTLE_S * FPS): end] > IDLE_THRESHOLD))
+                             if end > int(SETTLE_S * FPS) else 0.0,  # nothing sounds after the first 3 s
+                             "silent_tail_s": (len(w) - end) / FPS})
     if opts.speech is None or speech_song is None:
         return out
     song = cache.audio(speech_song)
@@ -570,6 +588,8 @@ def summary(result: dict) -> dict[str, float | None]:
     pres = result.get("presence") or {}
     if pres.get("music"):
         s["idle_max"] = max(m["idle"] for m in pres["music"])
+        if all("idle_sounding" in m for m in pres["music"]):
+            s["idle_sounding_max"] = max(m["idle_sounding"] for m in pres["music"])
     if pres.get("speech"):
         sp = pres["speech"]
         worst = lambda key: None if any(x[key] is None for x in sp) else max(x[key] for x in sp)  # noqa: E731
@@ -695,8 +715,11 @@ def markdown(result: dict, command: str | None = None) -> str:
                       f"{100 * r['audio_tempo_err']:.1f} %."]
         pres = m.get("presence") or {}
         if pres.get("music"):
-            lines += ["", "| recording | s | idle after 3 s |", "| --- | ---: | ---: |"]
-            lines += [f"| {x['recording']} | {x['seconds']:.0f} | {100 * x['idle']:.1f} % |" for x in pres["music"]]
+            lines += ["", "| recording | s | idle after 3 s | silent end (s) | idle after 3 s, to the last sound |",
+                      "| --- | ---: | ---: | ---: | ---: |"]
+            lines += [f"| {x['recording']} | {x['seconds']:.0f} | {100 * x['idle']:.1f} % | "
+                      f"{x.get('silent_tail_s', math.nan):.1f} | {100 * x.get('idle_sounding', math.nan):.1f} % |"
+                      for x in pres["music"]]
         if pres.get("speech"):
             lines += ["", "| speech between songs | settle (s) | idle held | back (s) |", "| --- | ---: | ---: | ---: |"]
             lines += [f"| {x['recording']} ({x['speech_s']:.0f} s) in {x['song']} | {_fmt(x['settle_s'])} | "
