@@ -628,15 +628,16 @@ def run(checkpoints: Sequence[str | Path | None], opts: Options, log=print, only
     if not loaded:
         return {"options": {}, "models": {}}
     cache = AudioCache(opts.cache_dir)
-    songs = stretch_songs(cache, opts) if ("stretch" in opts.sets or "ramp" in opts.sets) else []
+    songs = stretch_songs(cache, opts) if {"stretch", "ramp", "presence"} & set(opts.sets) else []
     if "stretch" in opts.sets:
         if not songs:
             raise DataError(f"no recording between {TEMPO_RANGE[0]:g} and {TEMPO_RANGE[1]:g} bpm", source="stretch set")
         log(f"stretch set: {len(songs)} songs in {TEMPO_RANGE[0]:g}-{TEMPO_RANGE[1]:g} bpm: "
             + ", ".join(f"{song_name(p)} ({b:.0f})" for p, b in songs))
-    rsong = ramp_song(cache, songs, opts) if "ramp" in opts.sets else None
+    rsong = ramp_song(cache, songs, opts) if {"ramp", "presence"} & set(opts.sets) else None
     if "ramp" in opts.sets and rsong is None:
         log("ramp: no song of the stretch set is long enough; the ramp is left out")
+    # the speech plays inside the ramp's song, whichever sets run (the same figures alone or with the others)
     speech_song = rsong[0] if rsong else (songs[0][0] if songs else None)
     if speech_song is None and "presence" in opts.sets and opts.music is not None:
         speech_song = music_files(opts.music)[0]
@@ -652,7 +653,7 @@ def run(checkpoints: Sequence[str | Path | None], opts: Options, log=print, only
         res: dict = {"checkpoint": str(lm.path)}
         if "stretch" in opts.sets:
             res["stretch"] = stretch_set(lm, cache, songs, opts)
-        if rsong is not None:
+        if "ramp" in opts.sets and rsong is not None:
             res["ramp"] = ramp(lm, cache, rsong, opts)
         if "presence" in opts.sets:
             res["presence"] = presence(lm, cache, speech_song, opts)
