@@ -195,6 +195,27 @@ def test_run_on_a_tiny_synthetic_set(tmp_path, shipped):
     assert any(line.startswith(("PASS", "FAIL")) for line in L.verdict_lines(res))
 
 
+def test_the_presence_set_alone_plays_the_speech_in_the_same_song(tmp_path, shipped):
+    """With only the presence set the speech still plays inside the stretch set's song, not in
+    the first music file (here a quiet one, no tempo): the same figures alone as in a full run."""
+    import soundfile as sf
+
+    from models.features.audio_io import bundled_clip_path, load_audio
+
+    music, speech = tmp_path / "music", tmp_path / "speech"
+    music.mkdir()
+    speech.mkdir()
+    song, _ = load_audio(bundled_clip_path(), SAMPLE_RATE)
+    sf.write(music / "a_quiet.wav", np.zeros(6 * SAMPLE_RATE, np.float32), SAMPLE_RATE)
+    sf.write(music / "clip.wav", song[: 14 * SAMPLE_RATE], SAMPLE_RATE)
+    sf.write(speech / "noise.wav", 0.05 * np.random.default_rng(0).normal(size=2 * SAMPLE_RATE), SAMPLE_RATE)
+    opts = L.Options(music=music, speech=speech, cache_dir=tmp_path / "cache", speech_song_s=4.0,
+                     excerpt_start_s=0.0, sets=("presence",), progress=False)
+    (m,) = L.run([shipped.path], opts, log=lambda *_: None)["models"].values()
+    assert [x["song"] for x in m["presence"]["speech"]] == ["clip"]
+    assert "ramp" not in m and "stretch" not in m
+
+
 def test_help_and_bad_data(capsys, tmp_path):
     with pytest.raises(SystemExit) as exc:
         script.main(["--help"])
