@@ -13,6 +13,11 @@ Per recording: ``speech``, the share of chunks with speech probability above 0.5
 of the chunks are speech, the scale at which a gate would act. It also prints the model's
 cost per chunk (median and 99th percentile, microseconds, one torch thread).
 
+Between songs, as ``benchmarks/listening.py`` plays it: 20 s of DANCE_C_2 from 10 s in, each
+speech recording at the song's RMS level, the song's next 20 s, through one stream; the
+speech share of each part, and of the song's second part heard alone from a fresh state
+(the model carries a state: what it heard before changes what it says).
+
     .venv/bin/python benchmarks/studies/speech_vad.py --data ../shared/data/dwm
 
 Exit status 2 when silero-vad is not installed (``pip install silero-vad==6.2.3``, in the
@@ -93,6 +98,20 @@ def main(argv: list[str] | None = None) -> int:
             prob, c = speech_probability(model, load_audio(path, SR)[0])
             cost.append(c)
             rows.append({"kind": kind, "recording": name, "s": len(prob) * CHUNK / SR, **shares(prob)})
+        song = load_audio(load_dance(a.data / "DANCE_C_2").audio_path, SR)[0]
+        n = 20 * SR
+        first, second = song[10 * SR: 10 * SR + n], song[10 * SR + n: 10 * SR + 2 * n]
+        level = np.sqrt(np.mean(np.concatenate([first, second]).astype(np.float64) ** 2))
+        alone = shares(speech_probability(model, second)[0])["speech"]
+        gaps = []
+        for _, name, path in (i for i in items if i[0] == "speech"):
+            sp = load_audio(path, SR)[0]
+            sp = sp * (level / max(np.sqrt(np.mean(sp.astype(np.float64) ** 2)), 1e-9))
+            prob = speech_probability(model, np.concatenate([first, sp, second]))[0]
+            k0, k1 = len(first) // CHUNK, (len(first) + len(sp)) // CHUNK
+            gaps.append({"speech": name, "song_before": shares(prob[:k0])["speech"],
+                         "during": shares(prob[k0:k1])["speech"], "song_after": shares(prob[k1:])["speech"],
+                         "song_after_alone": alone})
     except (PerformerError, OSError) as e:
         print(f"speech_vad: {e}", file=sys.stderr)
         return 2
@@ -102,9 +121,14 @@ def main(argv: list[str] | None = None) -> int:
     print("\n| recording | kind | s | chunks of speech | 1-s windows of speech |\n| --- | --- | ---: | ---: | ---: |")
     for r in rows:
         print(f"| {r['recording']} | {r['kind']} | {r['s']:.0f} | {r['speech']:.3f} | {r['windows']:.3f} |")
+    print("\n| DANCE_C_2, speech, DANCE_C_2 | song before | speech | song after | song after, heard alone |\n"
+          "| --- | ---: | ---: | ---: | ---: |")
+    for g in gaps:
+        print(f"| {g['speech']} | {g['song_before']:.3f} | {g['during']:.3f} | {g['song_after']:.3f} | "
+              f"{g['song_after_alone']:.3f} |")
     if a.json:
         a.json.write_text(json.dumps({"chunk_us_median": float(np.median(us)), "chunk_us_p99": float(np.percentile(us, 99)),
-                                      "recordings": rows}, indent=1))
+                                      "recordings": rows, "between_songs": gaps}, indent=1))
     return 0
 
 
