@@ -244,3 +244,28 @@ def test_the_ramps_audio_plays_at_the_intended_tempo():
     assert len(y) / SAMPLE_RATE > L.RAMP_HOLD_S + 2 * L.RAMP_S
     check = L.ramp_audio_check(y[: int((L.RAMP_HOLD_S + 2 * L.RAMP_S) * SAMPLE_RATE)], 120.0)
     assert check["audio_tempo_corr"] > 0.9 and check["audio_tempo_err"] < 0.05, check
+
+
+def test_stretched_beats_are_the_recordings_beats_where_the_stretched_music_has_them():
+    """The stretch set's reference: the whole recording's beats moved by the known rate land
+    where librosa finds the beats of the stretched excerpt (on a click track, which has one
+    metrical level), pose t ending at sample (t + 1) * HOP as heard_beats places them; their
+    tempo is the recording's times the rate at every rate."""
+    import librosa
+
+    y = click_track(30.0, 100)
+    _, whole = librosa.beat.beat_track(y=y, sr=SAMPLE_RATE, hop_length=HOP, units="time")
+    start = 5.0
+    for rate in (0.8, 1.0, 1.25):
+        x = y[int(start * SAMPLE_RATE): int(25.0 * SAMPLE_RATE)]
+        z = x if rate == 1.0 else librosa.effects.time_stretch(x, rate=rate)
+        frames = len(z) // HOP
+        ref = L.stretched_beats(whole, start, rate, frames)
+        heard = L.heard_beats(z)
+        assert 60.0 * FPS / np.median(np.diff(ref)) == pytest.approx(100 * rate, rel=0.03)
+        inner = ref[(ref > heard[0] + 3) & (ref < heard[-1] - 3)]
+        gap = np.abs(inner[:, None] - heard[None, :]).min(1)
+        assert len(inner) > 10 and np.mean(gap <= 1) > 0.9
+    # at 2x from 5 s: a beat before the excerpt and one past its 30 frames are dropped; 5.6 s of
+    # the recording sounds 0.3 s in (the end of pose 8), 6.0 s at 0.5 s (pose 14)
+    assert list(L.stretched_beats(np.array([4.0, 5.6, 6.0, 7.2]), 5.0, 2.0, 30)) == [8, 14]

@@ -49,7 +49,7 @@ from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_bl
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ, style_token
 from models.networks.music_gate import ENERGY_COL, START_FRAMES, MusicGate
 from models.networks.streaming import FEATURE_LIMIT
-from models.networks.tempo import DENSITY_WINDOW, TempoFollower, onset_density
+from models.networks.tempo import DENSITY_WINDOW, TempoFollower, octave_cue
 from models.rig.humanoid import BONE_INDEX
 from models.timebase import FPS
 
@@ -449,7 +449,7 @@ class DanceStream:
         self._rate_from = 1.0  # ... and at its start
         self._tempo = TempoFollower()
         self._onsets = np.zeros(DENSITY_WINDOW, np.float64)  # the last DENSITY_WINDOW onset strengths, a ring
-        self._density = 0.0  # their onset density (per s), taken at each code step
+        self._density = None  # their octave cue (tempo.OctaveCue), taken at each code step
         self._lag = WARP_LAG  # exemplar frames the beat warp plays behind the movement
         self._has_cont = False  # the playing movement has a real continuation to match the next one to
         self._music = False
@@ -719,8 +719,8 @@ class DanceStream:
                     self._onsets[t % DENSITY_WINDOW] = x[i, self._onset_col]
                     if t % self.seg == 0:  # the window up to t, in time order
                         n = (t + 1) % DENSITY_WINDOW
-                        self._density = onset_density(self._onsets[:n] if t < DENSITY_WINDOW else
-                                                      np.concatenate((self._onsets[n:], self._onsets[:n])))
+                        self._density = octave_cue(self._onsets[:n] if t < DENSITY_WINDOW else
+                                                    np.concatenate((self._onsets[n:], self._onsets[:n])))
                 self._tempo.update(float(x[i, self._beat_cols[3]]), float(x[i, self._beat_cols[2]]), self._density)
             if t % self.seg == 0:
                 self._next_code()

@@ -33,16 +33,29 @@ TEMPO_TAU: float = 15.0
 MIN_CLARITY: float = 0.05
 #: Pulse clarity at which a frame counts fully in the mean (a clean click track gives about 0.5).
 FULL_CLARITY: float = 0.3
-#: The octave of the beat: the one with about this many onsets per beat (:func:`onset_density`),
-#: a count that stretching the music does not change, so the same song faster or slower is
-#: danced at the same metrical level (the tracker's own choice moves with its tempo prior).
-ONSETS_PER_BEAT: float = 1.5
-#: Onset-strength frames :func:`onset_density` reads (8 s).
+#: Onset-strength frames :func:`octave_cue` reads (8 s).
 DENSITY_WINDOW: int = 240
-#: Largest step of the follower's log period towards a frame an octave or more away, per
-#: frame at full weight, in octaves over TEMPO_TAU: a sustained change of metrical level is
-#: followed in about 2 s, a one-frame octave slip of the tracker is not.
-OCTAVE_STEP: float = 0.25
+#: Largest step of the follower's log period towards a frame's estimate, per frame at full
+#: weight, in octaves over TEMPO_TAU (0.1 octave a second): the running value settles on the
+#: period most frames give (a median), not on a mean pulled by the frames where the tracker
+#: reads a level 3:2 or an octave away; a change of tempo is followed at up to 7 % a second.
+#: For the first :data:`SETTLE_FRAMES` clear frames the step is :data:`SETTLE_STEP`, so a
+#: first reading at another level does not hold for long.
+OCTAVE_STEP: float = 0.05
+SETTLE_STEP: float = 0.25
+SETTLE_FRAMES: int = 90
+#: The octave: where two octaves of the tempo lie in :data:`TEMPO_RANGE` (a tempo T in
+#: 60-85 bpm and 2T), the faster is danced when its beat is subdivided, at least this many
+#: onsets a beat (:func:`onset_density` times its period) ...
+SUBDIVIDED: float = 1.2
+#: ... or when its pulse is about as strong as the slower one's: the onset strength's
+#: autocorrelation at its period at least this share of that at twice the period.
+PULSE_SHARE: float = 0.9
+#: Running mean (updates, one per code step of 8 frames: about 2 s) of the octave score, and
+#: the margin it must cross to switch octave once one is chosen (a steady choice on a
+#: borderline song instead of a flip every few seconds).
+OCTAVE_MEAN: float = 8.0
+OCTAVE_MARGIN: float = 0.15
 
 
 def onset_density(onset: np.ndarray) -> float:
@@ -55,6 +68,44 @@ def onset_density(onset: np.ndarray) -> float:
     c = w[2:-2]
     peaks = (c >= thr) & (c >= w[1:-3]) & (c >= w[:-4]) & (c >= w[3:-1]) & (c >= w[4:])
     return float(peaks.sum()) * FPS / len(w)
+
+
+class OctaveCue:
+    """What an onset-strength window (n,) at 30 fps says about the metrical level:
+    ``density`` (:func:`onset_density`, onsets per second; 0: under 2 s, unknown) and
+    ``pulse(period)``, the autocorrelation of the mean-removed window at a lag of ``period``
+    frames (the largest within +-6 %, linear between lags) over its value at lag 0.
+    Stretching the music leaves both, per beat, as they are."""
+
+    __slots__ = ("density", "_acf")
+
+    def __init__(self, onset: np.ndarray) -> None:
+        w = np.asarray(onset, np.float64)
+        self.density = onset_density(w)
+        self._acf = np.zeros(0)
+        if self.density > 0.0:
+            x = w - w.mean()
+            n = len(x)
+            f = np.fft.rfft(x, 2 * n)
+            a = np.fft.irfft(f * np.conj(f))[: n // 2]
+            self._acf = a / np.maximum(n - np.arange(len(a)), 1) / max(a[0] / n, 1e-12)
+
+    def pulse(self, period: float) -> float:
+        a = self._acf
+        lags = period * np.linspace(0.94, 1.06, 7)
+        lags = lags[lags < len(a) - 1]
+        return float(np.interp(lags, np.arange(len(a)), a).max()) if len(lags) else 0.0
+
+    def faster(self, period: float) -> float:
+        """Score (> 0: yes) that the beat is at ``period`` frames rather than twice it:
+        subdivided at ``period`` (:data:`SUBDIVIDED`) or its pulse as strong (:data:`PULSE_SHARE`)."""
+        opb = self.density * period / FPS
+        return max(math.log2(max(opb, 1e-3) / SUBDIVIDED), self.pulse(period) - PULSE_SHARE * self.pulse(2 * period))
+
+
+def octave_cue(onset: np.ndarray) -> OctaveCue:
+    """The :class:`OctaveCue` of the last :data:`DENSITY_WINDOW` onset strengths (n,)."""
+    return OctaveCue(onset)
 
 
 def fold_period(period: float) -> float:
@@ -71,13 +122,13 @@ def fold_period(period: float) -> float:
 class TempoFollower:
     """An octave-steady running beat period from the beat tracker's columns (module docstring).
 
-    ``update(logp, clarity, density)`` per frame (``logp = log2(P / 15)``, ``density`` the
-    :func:`onset_density` of the last seconds, 0: unknown); ``period`` (frames per beat,
-    folded into :data:`TEMPO_RANGE`, or 0 before any clear pulse); ``confidence`` in [0, 1]
-    (the running mean of the clarity over :data:`FULL_CLARITY`).
+    ``update(logp, clarity, cue)`` per frame (``logp = log2(P / 15)``, ``cue`` the
+    :class:`OctaveCue` of the last seconds, new at each code step, or None: unknown);
+    ``period`` (frames per beat, in :data:`TEMPO_RANGE`, or 0 before any clear pulse);
+    ``confidence`` in [0, 1] (the running mean of the clarity over :data:`FULL_CLARITY`).
     """
 
-    __slots__ = ("log_p", "conf", "_a")
+    __slots__ = ("log_p", "conf", "score", "slow", "heard", "_a", "_cue")
 
     def __init__(self) -> None:
         self._a = 1.0 / TEMPO_TAU
@@ -86,27 +137,43 @@ class TempoFollower:
     def reset(self) -> None:
         self.log_p = math.nan  # unwrapped log2(P / 15); NaN until the first clear pulse
         self.conf = 0.0
+        self.score = math.nan  # running octave score (OctaveCue.faster), NaN until the first cue
+        self.slow = False  # where two octaves are in range: the slower one is danced
+        self.heard = 0  # frames with a clear pulse
+        self._cue = None
 
-    def update(self, logp: float, clarity: float, density: float = 0.0) -> None:
+    def update(self, logp: float, clarity: float, cue: OctaveCue | None = None) -> None:
         w = min(1.0, max(clarity, 0.0) / FULL_CLARITY)
         self.conf += self._a * (w - self.conf)
         if clarity < MIN_CLARITY or not math.isfinite(logp):
             return
-        if density > 0.0:  # the octave with ONSETS_PER_BEAT onsets a beat
-            logp += math.floor(math.log2(ONSETS_PER_BEAT * FPS / (density * 15.0)) - logp + 0.5)
         if self.log_p != self.log_p:  # NaN: the first clear pulse
             self.log_p = logp
-            return
-        d = logp - self.log_p
-        if density <= 0.0:  # no octave cue: the nearest octave of the new estimate to the running one
+        else:  # the nearest octave of the new estimate to the running one
+            d = logp - self.log_p
             d -= math.floor(d + 0.5)
-        self.log_p += self._a * w * min(max(d, -OCTAVE_STEP), OCTAVE_STEP)
+            step = SETTLE_STEP if self.heard < SETTLE_FRAMES else OCTAVE_STEP
+            self.log_p += self._a * w * min(max(d, -step), step)
+        self.heard += 1
+        if cue is not None and cue is not self._cue and cue.density > 0.0:
+            self._cue = cue
+            s = cue.faster(self._fast())
+            first = self.score != self.score
+            self.score = s if first else self.score + (s - self.score) / OCTAVE_MEAN
+            if first or abs(self.score) > OCTAVE_MARGIN:
+                self.slow = self.score < 0.0
+
+    def _fast(self) -> float:
+        """The fastest octave of the running period in :data:`TEMPO_RANGE` (frames)."""
+        p = fold_period(15.0 * 2.0 ** self.log_p)
+        return 0.5 * p if 0.5 * p >= 60.0 * FPS / TEMPO_RANGE[1] else p
 
     @property
     def period(self) -> float:
         if self.log_p != self.log_p:
             return 0.0
-        return fold_period(15.0 * 2.0 ** self.log_p)
+        p = self._fast()
+        return 2.0 * p if self.slow and 2.0 * p <= 60.0 * FPS / TEMPO_RANGE[0] else p
 
     @property
     def confidence(self) -> float:
@@ -120,11 +187,11 @@ def track_periods(logp: np.ndarray, clarity: np.ndarray, onset: np.ndarray | Non
     every ``every`` frames as the live stream does: the offline form of the same arithmetic."""
     f = TempoFollower()
     out = np.zeros(len(logp))
-    dens = 0.0
+    cue = None
     for t, (lp, c) in enumerate(zip(np.asarray(logp, np.float64), np.asarray(clarity, np.float64))):
         if onset is not None and t % every == 0:
-            dens = onset_density(onset[max(0, t + 1 - DENSITY_WINDOW): t + 1])
-        f.update(float(lp), float(c), dens)
+            cue = octave_cue(onset[max(0, t + 1 - DENSITY_WINDOW): t + 1])
+        f.update(float(lp), float(c), cue)
         out[t] = f.period
     return out
 
