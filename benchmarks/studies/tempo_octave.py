@@ -43,9 +43,8 @@ import sys, json, numpy as np
 from madmom.features.beats import RNNBeatProcessor, DBNBeatTrackingProcessor
 out = {}
 for wav in sys.argv[1:]:
-    act = RNNBeatProcessor(online=True)(wav)
-    dbn = DBNBeatTrackingProcessor(fps=100, online=True)
-    beats = dbn.process_online(act, reset=True)
+    act = RNNBeatProcessor(online=True)(wav)  # causal networks
+    beats = DBNBeatTrackingProcessor(fps=100, online=True)(act)  # forward filtering, frame by frame
     out[wav] = [float(b) for b in np.atleast_1d(beats)]
 print(json.dumps(out))
 """
@@ -126,14 +125,15 @@ def main(argv: list[str] | None = None) -> int:
             readings.setdefault("follower", {}).setdefault(name, {})[k] = \
                 follower_bpm(feats, cfg.clarity_col, cfg.onset_col) / r
             readings.setdefault("tracker", {}).setdefault(name, {})[k] = tracker_bpm(feats, cfg.clarity_col) / r
-            if a.madmom:
+            if a.madmom:  # madmom reads 44.1-kHz files without ffmpeg
+                import librosa
                 import soundfile
 
                 w = tmp / f"{name}-{k}.wav"
-                soundfile.write(w, y, SAMPLE_RATE)
+                soundfile.write(w, librosa.resample(y, orig_sr=SAMPLE_RATE, target_sr=44100), 44100, subtype="PCM_16")
                 wavs[(name, k)] = str(w)
     if a.madmom:
-        out = subprocess.run([a.madmom, "-c", MADMOM_SCRIPT, *wavs.values()], capture_output=True, text=True,
+        out = subprocess.run([a.madmom, "-W", "ignore", "-c", MADMOM_SCRIPT, *wavs.values()], capture_output=True, text=True,
                              check=True)
         beats = json.loads(out.stdout)
         for (name, k), w in wavs.items():

@@ -439,6 +439,13 @@ def score_motion(poses: np.ndarray, beats: np.ndarray) -> dict[str, float]:
             "amp_m": dance_amplitude(pos), "hit": hit, "hit_half": half}
 
 
+def reference_beats(cache: AudioCache, path: Path, start_s: float, rate: float, frames: int) -> np.ndarray:
+    """The music's beat frames (sorted int, < ``frames``) in the excerpt of ``path`` from
+    ``start_s`` played at ``rate``: the whole recording's (:meth:`AudioCache.beats`) moved
+    by the stretch (:func:`stretched_beats`), the same musical beats at every rate."""
+    return stretched_beats(cache.beats(path), start_s, rate, frames)
+
+
 def stretch_set(lm, cache: AudioCache, songs: list[tuple[Path, float]], opts: Options) -> list[dict]:
     """Per song: its bpm, excerpt, and :func:`score_motion` at every rate of :data:`STRETCH_RATES`,
     against the recording's beats moved by the stretch (:func:`stretched_beats`): ``librosa``
@@ -454,7 +461,7 @@ def stretch_set(lm, cache: AudioCache, songs: list[tuple[Path, float]], opts: Op
         poses, _ = perform(lm, y, opts.seed)
         row = by_song.setdefault(p, {"song": song_name(p), "bpm": bpm, "start_s": start, "seconds": seconds,
                                      "rates": {}})
-        row["rates"][f"{r:g}"] = score_motion(poses, stretched_beats(cache.beats(p), start, r, len(poses)))
+        row["rates"][f"{r:g}"] = score_motion(poses, reference_beats(cache, p, start, r, len(poses)))
     for p, _ in songs:
         row = by_song[p]
         lo, mid, hi = (row["rates"][f"{r:g}"] for r in STRETCH_RATES)

@@ -33,28 +33,29 @@ TEMPO_TAU: float = 15.0
 MIN_CLARITY: float = 0.05
 #: Pulse clarity at which a frame counts fully in the mean (a clean click track gives about 0.5).
 FULL_CLARITY: float = 0.3
-#: Onset-strength frames :func:`octave_cue` reads (8 s).
+#: Onset-strength frames :func:`onset_density` reads (8 s).
 DENSITY_WINDOW: int = 240
 #: Largest step of the follower's log period towards a frame's estimate, per frame at full
-#: weight, in octaves over TEMPO_TAU (0.1 octave a second): the running value settles on the
-#: period most frames give (a median), not on a mean pulled by the frames where the tracker
-#: reads a level 3:2 or an octave away; a change of tempo is followed at up to 7 % a second.
-#: For the first :data:`SETTLE_FRAMES` clear frames the step is :data:`SETTLE_STEP`, so a
-#: first reading at another level does not hold for long.
-OCTAVE_STEP: float = 0.05
-SETTLE_STEP: float = 0.25
+#: weight, in octaves over TEMPO_TAU: a one-frame slip of the tracker does not move it.
+OCTAVE_STEP: float = 0.25
+#: A frame whose estimate lies more than this (octaves, after moving it by whole octaves to
+#: the nearest of the running one) from the running one reads another metrical level (3:2 or
+#: 4:3 are 0.42 octave away) and is not listened to, after the first :data:`SETTLE_FRAMES`
+#: clear frames, unless such frames outweigh the others by :data:`AWAY_FRAMES` (frames at
+#: full clarity, 8 s): then the follower takes the new level. A tempo that changes by a few
+#: per cent a second is followed as before; a tracker that reads a 3:2 level for seconds at
+#: a time (DANCE_R_5, fishin_karissahobbs) does not pull the tempo between the two.
+LEVEL_JUMP: float = 0.3
 SETTLE_FRAMES: int = 90
+AWAY_FRAMES: float = 240.0
 #: The octave: where two octaves of the tempo lie in :data:`TEMPO_RANGE` (a tempo T in
 #: 60-85 bpm and 2T), the faster is danced when its beat is subdivided, at least this many
-#: onsets a beat (:func:`onset_density` times its period) ...
+#: onsets a beat (:func:`onset_density` times its period), else the slower.
 SUBDIVIDED: float = 1.2
-#: ... or when its pulse is about as strong as the slower one's: the onset strength's
-#: autocorrelation at its period at least this share of that at twice the period.
-PULSE_SHARE: float = 0.9
-#: Running mean (updates, one per code step of 8 frames: about 2 s) of the octave score, and
-#: the margin it must cross to switch octave once one is chosen (a steady choice on a
-#: borderline song instead of a flip every few seconds).
-OCTAVE_MEAN: float = 8.0
+#: Running mean (frames: about 2 s) of the octave score, log2 of the onsets a beat at the
+#: faster octave over :data:`SUBDIVIDED`, and the margin it must cross to switch octave once
+#: one is chosen (a steady choice on a borderline song instead of a flip every few seconds).
+OCTAVE_MEAN: float = 64.0
 OCTAVE_MARGIN: float = 0.15
 
 
@@ -68,44 +69,6 @@ def onset_density(onset: np.ndarray) -> float:
     c = w[2:-2]
     peaks = (c >= thr) & (c >= w[1:-3]) & (c >= w[:-4]) & (c >= w[3:-1]) & (c >= w[4:])
     return float(peaks.sum()) * FPS / len(w)
-
-
-class OctaveCue:
-    """What an onset-strength window (n,) at 30 fps says about the metrical level:
-    ``density`` (:func:`onset_density`, onsets per second; 0: under 2 s, unknown) and
-    ``pulse(period)``, the autocorrelation of the mean-removed window at a lag of ``period``
-    frames (the largest within +-6 %, linear between lags) over its value at lag 0.
-    Stretching the music leaves both, per beat, as they are."""
-
-    __slots__ = ("density", "_acf")
-
-    def __init__(self, onset: np.ndarray) -> None:
-        w = np.asarray(onset, np.float64)
-        self.density = onset_density(w)
-        self._acf = np.zeros(0)
-        if self.density > 0.0:
-            x = w - w.mean()
-            n = len(x)
-            f = np.fft.rfft(x, 2 * n)
-            a = np.fft.irfft(f * np.conj(f))[: n // 2]
-            self._acf = a / np.maximum(n - np.arange(len(a)), 1) / max(a[0] / n, 1e-12)
-
-    def pulse(self, period: float) -> float:
-        a = self._acf
-        lags = period * np.linspace(0.94, 1.06, 7)
-        lags = lags[lags < len(a) - 1]
-        return float(np.interp(lags, np.arange(len(a)), a).max()) if len(lags) else 0.0
-
-    def faster(self, period: float) -> float:
-        """Score (> 0: yes) that the beat is at ``period`` frames rather than twice it:
-        subdivided at ``period`` (:data:`SUBDIVIDED`) or its pulse as strong (:data:`PULSE_SHARE`)."""
-        opb = self.density * period / FPS
-        return max(math.log2(max(opb, 1e-3) / SUBDIVIDED), self.pulse(period) - PULSE_SHARE * self.pulse(2 * period))
-
-
-def octave_cue(onset: np.ndarray) -> OctaveCue:
-    """The :class:`OctaveCue` of the last :data:`DENSITY_WINDOW` onset strengths (n,)."""
-    return OctaveCue(onset)
 
 
 def fold_period(period: float) -> float:
@@ -122,13 +85,13 @@ def fold_period(period: float) -> float:
 class TempoFollower:
     """An octave-steady running beat period from the beat tracker's columns (module docstring).
 
-    ``update(logp, clarity, cue)`` per frame (``logp = log2(P / 15)``, ``cue`` the
-    :class:`OctaveCue` of the last seconds, new at each code step, or None: unknown);
+    ``update(logp, clarity, density)`` per frame (``logp = log2(P / 15)``, ``density`` the
+    :func:`onset_density` of the last seconds, 0: unknown);
     ``period`` (frames per beat, in :data:`TEMPO_RANGE`, or 0 before any clear pulse);
     ``confidence`` in [0, 1] (the running mean of the clarity over :data:`FULL_CLARITY`).
     """
 
-    __slots__ = ("log_p", "conf", "score", "slow", "heard", "_a", "_cue")
+    __slots__ = ("log_p", "conf", "score", "slow", "heard", "away", "_a")
 
     def __init__(self) -> None:
         self._a = 1.0 / TEMPO_TAU
@@ -137,12 +100,12 @@ class TempoFollower:
     def reset(self) -> None:
         self.log_p = math.nan  # unwrapped log2(P / 15); NaN until the first clear pulse
         self.conf = 0.0
-        self.score = math.nan  # running octave score (OctaveCue.faster), NaN until the first cue
+        self.score = math.nan  # running octave score (OCTAVE_MEAN), NaN until the first density
         self.slow = False  # where two octaves are in range: the slower one is danced
         self.heard = 0  # frames with a clear pulse
-        self._cue = None
+        self.away = 0.0  # weight of frames at another level, less that of frames at this one
 
-    def update(self, logp: float, clarity: float, cue: OctaveCue | None = None) -> None:
+    def update(self, logp: float, clarity: float, density: float = 0.0) -> None:
         w = min(1.0, max(clarity, 0.0) / FULL_CLARITY)
         self.conf += self._a * (w - self.conf)
         if clarity < MIN_CLARITY or not math.isfinite(logp):
@@ -152,14 +115,19 @@ class TempoFollower:
         else:  # the nearest octave of the new estimate to the running one
             d = logp - self.log_p
             d -= math.floor(d + 0.5)
-            step = SETTLE_STEP if self.heard < SETTLE_FRAMES else OCTAVE_STEP
-            self.log_p += self._a * w * min(max(d, -step), step)
+            if abs(d) <= LEVEL_JUMP or self.heard < SETTLE_FRAMES:
+                self.away = max(0.0, self.away - w)
+                self.log_p += self._a * w * min(max(d, -OCTAVE_STEP), OCTAVE_STEP)
+            else:
+                self.away += w
+                if self.away >= AWAY_FRAMES:  # another level, held: take it
+                    self.log_p += d
+                    self.away = 0.0
         self.heard += 1
-        if cue is not None and cue is not self._cue and cue.density > 0.0:
-            self._cue = cue
-            s = cue.faster(self._fast())
+        if density > 0.0:  # the octave: subdivided beats at the faster one, or the slower
+            x = math.log2(max(density * self._fast() / FPS, 1e-3) / SUBDIVIDED)
             first = self.score != self.score
-            self.score = s if first else self.score + (s - self.score) / OCTAVE_MEAN
+            self.score = x if first else self.score + (x - self.score) / OCTAVE_MEAN
             if first or abs(self.score) > OCTAVE_MARGIN:
                 self.slow = self.score < 0.0
 
@@ -180,6 +148,23 @@ class TempoFollower:
         return min(1.0, self.conf)
 
 
+def danced_beat(theta: float, period: float, danced: float) -> tuple[float, float]:
+    """(phase, period) of the beats the performer dances to, from the beat tracker's phase
+    ``theta`` (radians, 0 on a beat) and ``period`` (frames): where the danced period
+    ``danced`` (:attr:`TempoFollower.period`) is an octave or more shorter (2 ** k times,
+    within 0.15 octave; vibeace_kevinmacleod: the tracker at 65 bpm, the dance at 129), the
+    beats between the tracker's count too: ``theta * 2 ** k`` (mod 2 pi) and ``period / 2 ** k``.
+    Elsewhere (the same level, a slower or a 3:2 level, no tempo yet) they are the tracker's."""
+    if danced <= 0.0 or period <= 0.0:
+        return theta, period
+    x = math.log2(period / danced)
+    k = round(x)
+    if k < 1 or abs(x - k) > 0.15:
+        return theta, period
+    m = float(2 ** k)
+    return (theta * m) % (2.0 * math.pi), period / m
+
+
 def track_periods(logp: np.ndarray, clarity: np.ndarray, onset: np.ndarray | None = None,
                   every: int = 8) -> np.ndarray:
     """Frame by frame :attr:`TempoFollower.period` (T,) float64 over a whole stream's beat columns
@@ -187,11 +172,11 @@ def track_periods(logp: np.ndarray, clarity: np.ndarray, onset: np.ndarray | Non
     every ``every`` frames as the live stream does: the offline form of the same arithmetic."""
     f = TempoFollower()
     out = np.zeros(len(logp))
-    cue = None
+    dens = 0.0
     for t, (lp, c) in enumerate(zip(np.asarray(logp, np.float64), np.asarray(clarity, np.float64))):
         if onset is not None and t % every == 0:
-            cue = octave_cue(onset[max(0, t + 1 - DENSITY_WINDOW): t + 1])
-        f.update(float(lp), float(c), cue)
+            dens = onset_density(onset[max(0, t + 1 - DENSITY_WINDOW): t + 1])
+        f.update(float(lp), float(c), dens)
         out[t] = f.period
     return out
 
