@@ -11,8 +11,17 @@ the rate, which stretching makes exact) at some octave (x 2 ** k).
 
 Trackers: ``follower`` (:func:`models.networks.tempo.song_period`, the shipped rule),
 ``tracker`` (the feature extractor's causal beat tracker, its own octave, folded like the
-follower), and any of ``--madmom PYTHON`` (madmom's online RNN + DBN beat tracker run by
-another Python with madmom installed; its beats' median interval)::
+follower) and, with ``--madmom PYTHON``, madmom's online RNN + DBN beat tracker (the median
+interval of its beats, folded the same way), run by another Python that has madmom.
+
+madmom 0.16.1 (the PyPI release) does not install into the project's venv: its setup.py
+imports Cython before any build requirement is declared (``ModuleNotFoundError: No module
+named 'Cython'``), its shipped C files include ``longintrepr.h``, gone in Python 3.11, and it
+uses aliases NumPy 2 removed. It was measured from a separate venv: Python 3.11, numpy
+1.23.5, Cython < 3, scipy 1.10.1, the sdist's .c files deleted so Cython regenerates them,
+``pip install --no-build-isolation .``, and ``from collections import MutableSequence`` in
+madmom/processors.py changed to ``collections.abc``. BeatNet 1.1.3 requires madmom and pins
+numba 0.54.1 (the project runs numba 0.68), so it was not tried::
 
     nice -n 5 .venv/bin/python benchmarks/studies/tempo_octave.py --cache .cache/listening
 """
