@@ -3,18 +3,24 @@
 The feature extractor's causal beat tracker (models/features/context.py) gives, every
 frame, a beat period ``P = 15 * 2 ** logp`` frames (30 fps; 45-180 beats per minute) and a
 pulse clarity ``c`` in [0, 1]. Frame by frame its period may jump by an octave (the
-autocorrelation at the beat and at the bar or the eighth note are close); a dancer does not
-switch between double and half time every second. :class:`TempoFollower` smooths the log
-period with an exponential mean (time constant :data:`TEMPO_TAU` frames, weighted by the
-clarity) after moving each new estimate by whole octaves to the nearest of the running one,
-so a change of tempo is followed within about a second and an octave jump of the tracker is
-not. :func:`fold_period` then brings it into the range the performer dances at,
-:data:`TEMPO_RANGE`: faster music is danced at half time, slower at double time.
+autocorrelation at the beat and at the bar or the eighth note are close), and on swung or
+compound rhythms to a level 3:2 or 4:3 away; a dancer does not switch metrical level every
+second. :class:`TempoFollower` smooths the log period with an exponential mean (time
+constant :data:`TEMPO_TAU` frames, weighted by the clarity) after moving each new estimate
+by whole octaves to the nearest of the running one; an estimate still another level away
+(:data:`LEVEL_JUMP`) is moved by 4:3 onto the running level or left out, until such
+estimates hold for seconds (:data:`AWAY_FRAMES`). So a change of tempo is followed within
+about a second and a level jump of the tracker is not. The danced period is the octave of it
+in :data:`TEMPO_RANGE` (faster music is danced at half time, slower at double time); where
+two octaves are in the range, the faster when its beat is subdivided (:data:`SUBDIVIDED`
+onsets a beat, :func:`onset_density`, a count stretching does not change), else the slower.
+:func:`danced_beat` gives the beat warp the phase of the danced beats.
 
 ``DanceStream`` plays each movement of its choreographic memory at the ratio of this tempo
 to the tempo of the song the movement was danced to (``DanceVQ.member_period``, measured on
-the training songs with :func:`track_periods`, the same arithmetic), so the same song faster
-gives the same dance, faster.
+the training songs with :func:`track_periods` when the memory is fitted; the shipped
+checkpoint's with the octave rule before the level rule), so the same song faster gives
+the same dance, faster.
 """
 
 from __future__ import annotations
@@ -46,6 +52,10 @@ OCTAVE_STEP: float = 0.25
 #: per cent a second is followed as before; a tracker that reads a 3:2 level for seconds at
 #: a time (DANCE_R_5, fishin_karissahobbs) does not pull the tempo between the two.
 LEVEL_JUMP: float = 0.3
+#: A reading at a level 4:3 (or 3:2, an octave off) from the running one, within
+#: THIRD_TOLERANCE octave, is moved to the running level and followed like one there.
+THIRD: float = math.log2(4.0 / 3.0)
+THIRD_TOLERANCE: float = 0.1
 SETTLE_FRAMES: int = 90
 AWAY_FRAMES: float = 240.0
 #: The octave: where two octaves of the tempo lie in :data:`TEMPO_RANGE` (a tempo T in
@@ -123,6 +133,10 @@ class TempoFollower:
                 if self.away >= AWAY_FRAMES:  # another level, held: take it
                     self.log_p += d
                     self.away = 0.0
+                else:  # a level 3:2 or 4:3 away still says how the tempo moves
+                    r = d - math.copysign(THIRD, d)
+                    if abs(r) <= THIRD_TOLERANCE:
+                        self.log_p += self._a * w * min(max(r, -OCTAVE_STEP), OCTAVE_STEP)
         self.heard += 1
         if density > 0.0:  # the octave: subdivided beats at the faster one, or the slower
             x = math.log2(max(density * self._fast() / FPS, 1e-3) / SUBDIVIDED)
