@@ -87,6 +87,20 @@ def test_a_tracker_reading_a_level_3_to_2_away_now_and_then_does_not_pull_the_te
         assert song_period(logp, c, onset) == pytest.approx(20.0 / rate, rel=0.02)
 
 
+def test_a_tempo_change_is_followed_through_readings_at_another_level():
+    """The music speeds up 25 % over 30 s while the tracker reads a 3:2 level a third of the
+    time, in 3-s runs: those readings, moved by 4:3 onto the followed level, keep the
+    tempo moving (within 1.5 %; left out, the follower stood still through each run,
+    2.5 % behind at its end)."""
+    n = 900
+    period = 20.0 - 4.0 * np.arange(n) / n
+    logp = np.log2(period / 15.0)
+    other = (np.arange(n) % 270) >= 180
+    logp[other] += math.log2(2.0 / 3.0)
+    p = track_periods(logp, np.full(n, 0.5), None)
+    assert np.max(np.abs(p[300:] / period[300:] - 1.0)) < 0.015
+
+
 def test_a_borderline_song_keeps_one_octave():
     """Onsets a beat that straddle the octave threshold from one code step to the next (a
     song on the edge, 1.32 and 1.08 onsets a beat at the faster octave): one octave is
