@@ -269,3 +269,60 @@ def test_the_ramps_audio_plays_at_the_intended_tempo():
     assert len(y) / SAMPLE_RATE > L.RAMP_HOLD_S + 2 * L.RAMP_S
     check = L.ramp_audio_check(y[: int((L.RAMP_HOLD_S + 2 * L.RAMP_S) * SAMPLE_RATE)], 120.0)
     assert check["audio_tempo_corr"] > 0.9 and check["audio_tempo_err"] < 0.05, check
+
+
+def drum_track(seconds: float, bpm: float) -> np.ndarray:
+    """Noise bursts (15-ms decay) on every beat from 0.25 s: one metrical level, found by librosa."""
+    n = int(0.08 * SAMPLE_RATE)
+    hit = np.random.default_rng(0).standard_normal(n) * np.exp(-np.arange(n) / (0.015 * SAMPLE_RATE)) * 0.5
+    y = np.zeros(int(seconds * SAMPLE_RATE), np.float32)
+    for s in np.arange(0.25, seconds - 0.1, 60.0 / bpm):
+        i = int(s * SAMPLE_RATE)
+        y[i: i + n] += hit.astype(np.float32)
+    return y
+
+
+def test_stretched_beats_are_the_recordings_beats_where_the_stretched_music_has_them():
+    """The stretch set's reference: the whole recording's beats moved by the known rate land
+    where librosa finds the beats of the stretched excerpt, within the hit tolerance (the
+    phase vocoder smears each attack, so librosa hears the stretched ones up to 2 frames
+    early), pose t ending at sample (t + 1) * HOP as heard_beats places them; their tempo
+    is the recording's times the rate."""
+    import librosa
+
+    y = drum_track(30.0, 100)
+    _, whole = librosa.beat.beat_track(y=y, sr=SAMPLE_RATE, hop_length=HOP, units="time")
+    start = 5.0
+    for rate in (0.8, 1.0, 1.25):
+        x = y[int(start * SAMPLE_RATE): int(25.0 * SAMPLE_RATE)]
+        z = x if rate == 1.0 else librosa.effects.time_stretch(x, rate=rate)
+        ref = L.stretched_beats(whole, start, rate, len(z) // HOP)
+        heard = L.heard_beats(z)
+        assert 60.0 * FPS * (len(ref) - 1) / (ref[-1] - ref[0]) == pytest.approx(100 * rate, rel=0.02)
+        inner = ref[(ref > heard[0] + 3) & (ref < heard[-1] - 3)]
+        gap = np.abs(inner[:, None] - heard[None, :]).min(1)
+        assert len(inner) > 10 and np.mean(gap <= L.BEAT_TOLERANCE) > 0.9
+    # at 2x from 5 s: a beat before the excerpt and one past its 30 frames are dropped; 5.6 s of
+    # the recording sounds 0.3 s in (the end of pose 8), 6.0 s at 0.5 s (pose 14)
+    assert list(L.stretched_beats(np.array([4.0, 5.6, 6.0, 7.2]), 5.0, 2.0, 30)) == [8, 14]
+
+
+@pytest.mark.slow
+def test_the_reference_beats_are_at_one_metrical_level_at_every_rate(tmp_path):
+    """DANCE_R_5 (a validation rumba, 106 bpm): librosa on each stretched excerpt reads
+    levels that are not the same beats (129 bpm at 0.8x, 82 at 1.0x: 161 and 82 as
+    recorded); the stretch set's reference, the recording's beats moved by the stretch,
+    is 106 bpm times the rate at every rate."""
+    song = REPO.parent / "shared" / "data" / "dwm" / "DANCE_R_5" / "audio.mp3"
+    if not song.is_file():
+        pytest.skip(f"{song} not found (the DWM dataset lives at ../shared/data/dwm)")
+    cache = L.AudioCache(tmp_path)
+    heard, ref = {}, {}
+    for rate in (0.8, 1.0):
+        y = cache.excerpt(song, 10.0, 45.0, rate)
+        frames = len(y) // HOP
+        heard[rate] = 60.0 * FPS / np.median(np.diff(L.heard_beats(y))) / rate
+        b = L.reference_beats(cache, song, 10.0, rate, frames)
+        ref[rate] = 60.0 * FPS * (len(b) - 1) / (b[-1] - b[0]) / rate
+    assert heard[0.8] / heard[1.0] > 1.5  # the artefact the reference removes
+    assert ref[0.8] == pytest.approx(ref[1.0], rel=0.02) and ref[1.0] == pytest.approx(cache.tempo(song), rel=0.03)

@@ -11,7 +11,9 @@ run them.
    :data:`TEMPO_RANGE`, an excerpt of each time-stretched to :data:`STRETCH_RATES` with pitch
    kept (``librosa.effects.time_stretch``; rate > 1 is faster). Per song and rate: mean joint
    speed, frequency centroid, kinematic beats per minute, dance-scale band amplitude, beat
-   hit rate against the stretched music's beats and against the beats shifted by half a beat.
+   hit rate against the music's beats and against the beats shifted by half a beat. The
+   music's beats are the whole recording's (:meth:`AudioCache.beats`) moved by the known
+   stretch (:func:`stretched_beats`), the same musical beats at every rate.
 2. **Ramp**: one song played at a rate that rises linearly from :data:`RAMP_RATES` [0] to [1]
    and back (:func:`vary_rate`, a phase vocoder with a time step per frame); the performer's
    joint speed against the real tempo, both smoothed over :data:`SMOOTH_S`.
@@ -191,6 +193,16 @@ def heard_beats(audio: np.ndarray) -> np.ndarray:
     return music_beats(np.asarray(audio, np.float32)[HOP:], SAMPLE_RATE, FPS)
 
 
+def stretched_beats(times: np.ndarray, start_s: float, rate: float, frames: int) -> np.ndarray:
+    """Beat frames (sorted int, ``0 <= f < frames``) in an excerpt from ``start_s`` played at
+    ``rate``, of the beats at ``times`` (s) of the whole recording: a beat at recording time
+    ``s`` sounds at ``(s - start_s) / rate`` s of the excerpt, the end of pose
+    ``(s - start_s) / rate * FPS - 1`` (as :func:`heard_beats` places them)."""
+    t = (np.asarray(times, np.float64) - start_s) / rate
+    f = np.unique(np.rint(t[t >= 0] * FPS - 1).astype(np.int64))
+    return f[(f >= 0) & (f < frames)]
+
+
 def vary_rate(audio: np.ndarray, rate: Callable[[np.ndarray], np.ndarray], n_fft: int = 2048) -> np.ndarray:
     """``audio`` (n,) at 22050 Hz played at a time-varying rate with pitch kept.
 
@@ -269,6 +281,18 @@ class AudioCache:
         if f is not None:
             f.write_text(json.dumps({"file": str(path), "bpm": bpm}))
         return bpm
+
+    def beats(self, path: Path) -> np.ndarray:
+        """Beat times (s) of the whole recording, ``librosa.beat.beat_track`` (hop :data:`HOP`)."""
+        import librosa
+
+        f = self._file(_key(Path(path), "beats") + ".json")
+        if f is not None and f.is_file():
+            return np.asarray(json.loads(f.read_text())["beats"], np.float64)
+        _, t = librosa.beat.beat_track(y=self.audio(path), sr=SAMPLE_RATE, hop_length=HOP, units="time")
+        if f is not None:
+            f.write_text(json.dumps({"file": str(path), "beats": [float(x) for x in t]}))
+        return np.asarray(t, np.float64)
 
     def excerpt(self, path: Path, start_s: float, seconds: float, rate: float) -> np.ndarray:
         """``seconds`` of ``path`` from ``start_s``, time-stretched by ``rate`` (1: as recorded)."""
@@ -426,8 +450,19 @@ def score_motion(poses: np.ndarray, beats: np.ndarray) -> dict[str, float]:
             "amp_m": dance_amplitude(pos), "hit": hit, "hit_half": half}
 
 
+def reference_beats(cache: AudioCache, path: Path, start_s: float, rate: float, frames: int) -> np.ndarray:
+    """The music's beat frames (sorted int, < ``frames``) in the excerpt of ``path`` from
+    ``start_s`` played at ``rate``: the whole recording's (:meth:`AudioCache.beats`) moved
+    by the stretch (:func:`stretched_beats`), the same musical beats at every rate."""
+    return stretched_beats(cache.beats(path), start_s, rate, frames)
+
+
 def stretch_set(lm, cache: AudioCache, songs: list[tuple[Path, float]], opts: Options) -> list[dict]:
-    """Per song: its bpm, excerpt, and :func:`score_motion` at every rate of :data:`STRETCH_RATES`."""
+    """Per song: its bpm, excerpt, and :func:`score_motion` at every rate of :data:`STRETCH_RATES`,
+    against the recording's beats moved by the stretch (:func:`stretched_beats`): ``librosa``
+    on each stretched excerpt picks its own metrical level (on the validation rumba DANCE_R_5
+    82 bpm at 1.0x and 129 at 0.8x, a 106-bpm song), and the hit rate, a share of the motion's
+    speed dips, rises and falls with the reference's beats per minute."""
     rows = []
     jobs = [(p, bpm, r) for p, bpm in songs for r in STRETCH_RATES]
     by_song: dict[Path, dict] = {}
@@ -437,7 +472,7 @@ def stretch_set(lm, cache: AudioCache, songs: list[tuple[Path, float]], opts: Op
         poses, _ = perform(lm, y, opts.seed)
         row = by_song.setdefault(p, {"song": song_name(p), "bpm": bpm, "start_s": start, "seconds": seconds,
                                      "rates": {}})
-        row["rates"][f"{r:g}"] = score_motion(poses, heard_beats(y))
+        row["rates"][f"{r:g}"] = score_motion(poses, reference_beats(cache, p, start, r, len(poses)))
     for p, _ in songs:
         row = by_song[p]
         lo, mid, hi = (row["rates"][f"{r:g}"] for r in STRETCH_RATES)

@@ -49,7 +49,7 @@ from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_bl
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ, style_token
 from models.networks.music_gate import ENERGY_COL, START_FRAMES, MusicGate
 from models.networks.streaming import FEATURE_LIMIT
-from models.networks.tempo import DENSITY_WINDOW, TempoFollower, onset_density
+from models.networks.tempo import DENSITY_WINDOW, TempoFollower, danced_beat, onset_density
 from models.rig.humanoid import BONE_INDEX
 from models.timebase import FPS
 
@@ -653,8 +653,7 @@ class DanceStream:
         ccos, csin, clarity, logp = (float(self._raw[j]) for j in self._beat_cols)
         if clarity <= 0.0:
             return None
-        period = 15.0 * 2.0 ** logp
-        theta = np.arctan2(csin, ccos) % (2 * np.pi)  # 0 on a beat, rising 2 pi / period a frame
+        theta, period = danced_beat(math.atan2(csin, ccos) % (2 * math.pi), 15.0 * 2.0 ** logp, self._tempo.period)
         ahead = int(round(rate * (period * (1 - theta / (2 * np.pi)) % max(period, 1.0))))
         return (ahead, clarity) if ahead < self.seg else None
 
@@ -666,9 +665,10 @@ class DanceStream:
         x = self.seg + self._advance(j)
         if self._beat_cols is None or BEAT_WARP <= 0.0:  # no beat tracker, or no warp: the movement as it is
             return warp_pose(self._played, x)
-        ccos, clarity = float(self._raw[self._beat_cols[0]]), float(self._raw[self._beat_cols[2]])
+        ccos, csin, clarity, logp = (float(self._raw[c]) for c in self._beat_cols)
         depth = BEAT_WARP * min(1.0, max(clarity, 0.0) / WARP_CLARITY)
-        cos = ccos / clarity if clarity > 1e-9 else 0.0
+        theta, _ = danced_beat(math.atan2(csin, ccos), 15.0 * 2.0 ** logp, self._tempo.period)  # 0 on a danced beat
+        cos = math.cos(theta) if clarity > 1e-9 else 0.0
         rate = self._advance(j + 1) - self._advance(j)  # exemplar frames this frame plays
         lag = self._lag + rate * depth * cos - WARP_PULL * (self._lag - WARP_LAG)
         self._lag = min(max(lag, 0.0), 2.0 * WARP_LAG)

@@ -3,18 +3,24 @@
 The feature extractor's causal beat tracker (models/features/context.py) gives, every
 frame, a beat period ``P = 15 * 2 ** logp`` frames (30 fps; 45-180 beats per minute) and a
 pulse clarity ``c`` in [0, 1]. Frame by frame its period may jump by an octave (the
-autocorrelation at the beat and at the bar or the eighth note are close); a dancer does not
-switch between double and half time every second. :class:`TempoFollower` smooths the log
-period with an exponential mean (time constant :data:`TEMPO_TAU` frames, weighted by the
-clarity) after moving each new estimate by whole octaves to the nearest of the running one,
-so a change of tempo is followed within about a second and an octave jump of the tracker is
-not. :func:`fold_period` then brings it into the range the performer dances at,
-:data:`TEMPO_RANGE`: faster music is danced at half time, slower at double time.
+autocorrelation at the beat and at the bar or the eighth note are close), and on swung or
+compound rhythms to a level 3:2 or 4:3 away; a dancer does not switch metrical level every
+second. :class:`TempoFollower` smooths the log period with an exponential mean (time
+constant :data:`TEMPO_TAU` frames, weighted by the clarity) after moving each new estimate
+by whole octaves to the nearest of the running one; an estimate still another level away
+(:data:`LEVEL_JUMP`) is moved by 4:3 onto the running level or left out, until such
+estimates hold for seconds (:data:`AWAY_FRAMES`). So a change of tempo is followed within
+about a second and a level jump of the tracker is not. The danced period is the octave of it
+in :data:`TEMPO_RANGE` (faster music is danced at half time, slower at double time); where
+two octaves are in the range, the faster when its beat is subdivided (:data:`SUBDIVIDED`
+onsets a beat, :func:`onset_density`, a count stretching does not change), else the slower.
+:func:`danced_beat` gives the beat warp the phase of the danced beats.
 
 ``DanceStream`` plays each movement of its choreographic memory at the ratio of this tempo
 to the tempo of the song the movement was danced to (``DanceVQ.member_period``, measured on
-the training songs with :func:`track_periods`, the same arithmetic), so the same song faster
-gives the same dance, faster.
+the training songs with :func:`track_periods` when the memory is fitted; the shipped
+checkpoint's with the octave rule before the level rule), so the same song faster gives
+the same dance, faster.
 """
 
 from __future__ import annotations
@@ -33,16 +39,34 @@ TEMPO_TAU: float = 15.0
 MIN_CLARITY: float = 0.05
 #: Pulse clarity at which a frame counts fully in the mean (a clean click track gives about 0.5).
 FULL_CLARITY: float = 0.3
-#: The octave of the beat: the one with about this many onsets per beat (:func:`onset_density`),
-#: a count that stretching the music does not change, so the same song faster or slower is
-#: danced at the same metrical level (the tracker's own choice moves with its tempo prior).
-ONSETS_PER_BEAT: float = 1.5
 #: Onset-strength frames :func:`onset_density` reads (8 s).
 DENSITY_WINDOW: int = 240
-#: Largest step of the follower's log period towards a frame an octave or more away, per
-#: frame at full weight, in octaves over TEMPO_TAU: a sustained change of metrical level is
-#: followed in about 2 s, a one-frame octave slip of the tracker is not.
+#: Largest step of the follower's log period towards a frame's estimate, per frame at full
+#: weight, in octaves over TEMPO_TAU: a one-frame slip of the tracker does not move it.
 OCTAVE_STEP: float = 0.25
+#: A frame whose estimate lies more than this (octaves, after moving it by whole octaves to
+#: the nearest of the running one) from the running one reads another metrical level (3:2 or
+#: 4:3 are 0.42 octave away) and is not listened to, after the first :data:`SETTLE_FRAMES`
+#: clear frames, unless such frames outweigh the others by :data:`AWAY_FRAMES` (frames at
+#: full clarity, 8 s): then the follower takes the new level. A tempo that changes by a few
+#: per cent a second is followed as before; a tracker that reads a 3:2 level for seconds at
+#: a time (DANCE_R_5, fishin_karissahobbs) does not pull the tempo between the two.
+LEVEL_JUMP: float = 0.3
+#: A reading at a level 4:3 (or 3:2, an octave off) from the running one, within
+#: THIRD_TOLERANCE octave, is moved to the running level and followed like one there.
+THIRD: float = math.log2(4.0 / 3.0)
+THIRD_TOLERANCE: float = 0.1
+SETTLE_FRAMES: int = 90
+AWAY_FRAMES: float = 240.0
+#: The octave: where two octaves of the tempo lie in :data:`TEMPO_RANGE` (a tempo T in
+#: 60-85 bpm and 2T), the faster is danced when its beat is subdivided, at least this many
+#: onsets a beat (:func:`onset_density` times its period), else the slower.
+SUBDIVIDED: float = 1.2
+#: Running mean (frames: about 2 s) of the octave score, log2 of the onsets a beat at the
+#: faster octave over :data:`SUBDIVIDED`, and the margin it must cross to switch octave once
+#: one is chosen (a steady choice on a borderline song instead of a flip every few seconds).
+OCTAVE_MEAN: float = 64.0
+OCTAVE_MARGIN: float = 0.15
 
 
 def onset_density(onset: np.ndarray) -> float:
@@ -72,12 +96,12 @@ class TempoFollower:
     """An octave-steady running beat period from the beat tracker's columns (module docstring).
 
     ``update(logp, clarity, density)`` per frame (``logp = log2(P / 15)``, ``density`` the
-    :func:`onset_density` of the last seconds, 0: unknown); ``period`` (frames per beat,
-    folded into :data:`TEMPO_RANGE`, or 0 before any clear pulse); ``confidence`` in [0, 1]
-    (the running mean of the clarity over :data:`FULL_CLARITY`).
+    :func:`onset_density` of the last seconds, 0: unknown);
+    ``period`` (frames per beat, in :data:`TEMPO_RANGE`, or 0 before any clear pulse);
+    ``confidence`` in [0, 1] (the running mean of the clarity over :data:`FULL_CLARITY`).
     """
 
-    __slots__ = ("log_p", "conf", "_a")
+    __slots__ = ("log_p", "conf", "score", "slow", "heard", "away", "_a")
 
     def __init__(self) -> None:
         self._a = 1.0 / TEMPO_TAU
@@ -86,31 +110,73 @@ class TempoFollower:
     def reset(self) -> None:
         self.log_p = math.nan  # unwrapped log2(P / 15); NaN until the first clear pulse
         self.conf = 0.0
+        self.score = math.nan  # running octave score (OCTAVE_MEAN), NaN until the first density
+        self.slow = False  # where two octaves are in range: the slower one is danced
+        self.heard = 0  # frames with a clear pulse
+        self.away = 0.0  # weight of frames at another level, less that of frames at this one
 
     def update(self, logp: float, clarity: float, density: float = 0.0) -> None:
         w = min(1.0, max(clarity, 0.0) / FULL_CLARITY)
         self.conf += self._a * (w - self.conf)
         if clarity < MIN_CLARITY or not math.isfinite(logp):
             return
-        if density > 0.0:  # the octave with ONSETS_PER_BEAT onsets a beat
-            logp += math.floor(math.log2(ONSETS_PER_BEAT * FPS / (density * 15.0)) - logp + 0.5)
         if self.log_p != self.log_p:  # NaN: the first clear pulse
             self.log_p = logp
-            return
-        d = logp - self.log_p
-        if density <= 0.0:  # no octave cue: the nearest octave of the new estimate to the running one
+        else:  # the nearest octave of the new estimate to the running one
+            d = logp - self.log_p
             d -= math.floor(d + 0.5)
-        self.log_p += self._a * w * min(max(d, -OCTAVE_STEP), OCTAVE_STEP)
+            if abs(d) <= LEVEL_JUMP or self.heard < SETTLE_FRAMES:
+                self.away = max(0.0, self.away - w)
+                self.log_p += self._a * w * min(max(d, -OCTAVE_STEP), OCTAVE_STEP)
+            else:
+                self.away += w
+                if self.away >= AWAY_FRAMES:  # another level, held: take it
+                    self.log_p += d
+                    self.away = 0.0
+                else:  # a level 3:2 or 4:3 away still says how the tempo moves
+                    r = d - math.copysign(THIRD, d)
+                    if abs(r) <= THIRD_TOLERANCE:
+                        self.log_p += self._a * w * min(max(r, -OCTAVE_STEP), OCTAVE_STEP)
+        self.heard += 1
+        if density > 0.0:  # the octave: subdivided beats at the faster one, or the slower
+            x = math.log2(max(density * self._fast() / FPS, 1e-3) / SUBDIVIDED)
+            first = self.score != self.score
+            self.score = x if first else self.score + (x - self.score) / OCTAVE_MEAN
+            if first or abs(self.score) > OCTAVE_MARGIN:
+                self.slow = self.score < 0.0
+
+    def _fast(self) -> float:
+        """The fastest octave of the running period in :data:`TEMPO_RANGE` (frames)."""
+        p = fold_period(15.0 * 2.0 ** self.log_p)
+        return 0.5 * p if 0.5 * p >= 60.0 * FPS / TEMPO_RANGE[1] else p
 
     @property
     def period(self) -> float:
         if self.log_p != self.log_p:
             return 0.0
-        return fold_period(15.0 * 2.0 ** self.log_p)
+        p = self._fast()
+        return 2.0 * p if self.slow and 2.0 * p <= 60.0 * FPS / TEMPO_RANGE[0] else p
 
     @property
     def confidence(self) -> float:
         return min(1.0, self.conf)
+
+
+def danced_beat(theta: float, period: float, danced: float) -> tuple[float, float]:
+    """(phase, period) of the beats the performer dances to, from the beat tracker's phase
+    ``theta`` (radians, 0 on a beat) and ``period`` (frames): where the danced period
+    ``danced`` (:attr:`TempoFollower.period`) is an octave or more shorter (2 ** k times,
+    within 0.15 octave; vibeace_kevinmacleod: the tracker at 65 bpm, the dance at 129), the
+    beats between the tracker's count too: ``theta * 2 ** k`` (mod 2 pi) and ``period / 2 ** k``.
+    Elsewhere (the same level, a slower or a 3:2 level, no tempo yet) they are the tracker's."""
+    if danced <= 0.0 or period <= 0.0:
+        return theta, period
+    x = math.log2(period / danced)
+    k = round(x)
+    if k < 1 or abs(x - k) > 0.15:
+        return theta, period
+    m = float(2 ** k)
+    return (theta * m) % (2.0 * math.pi), period / m
 
 
 def track_periods(logp: np.ndarray, clarity: np.ndarray, onset: np.ndarray | None = None,
