@@ -550,6 +550,17 @@ class DanceStream:
     def music_present(self) -> bool:
         return self._music
 
+    @property
+    def tempo_bpm(self) -> float:
+        """The tempo the performer follows (beats per minute, in the danced range), 0 before a clear pulse."""
+        period = self._tempo.period
+        return 60.0 * FPS / period if period > 0.0 else 0.0
+
+    @property
+    def playback_rate(self) -> float:
+        """Exemplar frames a frame the current movement ends at (1: its own pace; tempo following)."""
+        return self._rate
+
     # -- generation ----------------------------------------------------------------------------
     def _gate(self, row: np.ndarray) -> None:
         present = True
