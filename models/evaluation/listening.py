@@ -462,7 +462,9 @@ def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict
     :func:`ramp_rate`) and ``speed`` (mean joint speed, m/s), both per frame and smoothed over
     :data:`SMOOTH_S`; their :func:`lagged_correlation` from the end of the hold on (and, to
     see where it is lost, the followed tempo's and the playback rate's, ``follower_corr`` and
-    ``rate_corr``); the largest bone rotation per frame after :data:`SETTLE_S`."""
+    ``rate_corr``; ``followed_bpm``, smoothed, is the curve; ``follows_tempo``: False for a
+    model that plays every movement at its own pace); the largest bone rotation per
+    frame after :data:`SETTLE_S`."""
     path, bpm = song
     hold = RAMP_HOLD_S
     total = hold + 2 * RAMP_S
@@ -483,7 +485,8 @@ def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict
     check = ramp_audio_check(y, bpm)
     return {"song": song_name(path), "bpm": bpm, "start_s": start, "corr": corr, "lag_s": lag / FPS,
             "corr_lag0": corr0, "follower_corr": follower, "rate_corr": rate, "max_step_deg": float(steps.max()), **check, "time_s": t.tolist(),
-            "tempo_bpm": tempo.tolist(), "speed": speed.tolist()}
+            "tempo_bpm": tempo.tolist(), "speed": speed.tolist(),
+            "followed_bpm": smooth(trace["tempo_bpm"]).tolist(), "follows_tempo": bool(np.ptp(trace["rate"]) > 0)}
 
 
 def ramp_audio_check(y: np.ndarray, bpm: float) -> dict[str, float]:
