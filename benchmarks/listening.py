@@ -40,7 +40,8 @@ import numpy as np  # noqa: E402
 
 
 def plot_ramp(result: dict, path: str | Path) -> None:
-    """Real tempo (bpm) and each model's mean joint speed (m/s) over the ramp, one plot, as PNG."""
+    """Real tempo (bpm), each model's mean joint speed (m/s) and the tempo it follows (bpm,
+    dashed) over the ramp, one plot, as PNG."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(10, 4), layout="constrained")
@@ -57,7 +58,10 @@ def plot_ramp(result: dict, path: str | Path) -> None:
             first = False
         ax2.plot(t, r["speed"], color=f"C{k}", lw=1.5,
                  label=f"{name}: speed, corr {r['corr']:.2f} at lag {r['lag_s']:.1f} s")
-    ax.set_xlabel("time (s); both curves smoothed over 4 s")
+        if r.get("follows_tempo"):  # a model that plays its movements at the tempo it follows
+            ax.plot(t, r["followed_bpm"], color=f"C{k}", lw=1, ls="--",
+                    label=f"{name}: the tempo it follows, corr {r['follower_corr']:.2f}")
+    ax.set_xlabel("time (s); all curves smoothed over 4 s")
     ax.set_ylabel("real tempo (bpm)")
     ax2.set_ylabel("performer's mean joint speed (m/s)")
     h1, l1 = ax.get_legend_handles_labels()

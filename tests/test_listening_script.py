@@ -161,6 +161,11 @@ def test_perform_is_generate_and_reads_the_idle_weight(shipped):
     assert L.settle_back(w, 6 * FPS, len(w), len(w))["settle_s"] <= 2.0
     # the recording sounds up to the end of the music (a frame's window reaches 2048 samples back)
     assert 6 * FPS <= L.sounding_frames(shipped, extract_features(y, shipped.features)) <= 6 * FPS + 3
+    trace: dict = {}
+    assert np.array_equal(L.perform(shipped, y, seed=3, trace=trace)[0], poses)  # tracing changes nothing
+    tempo, rate = trace["tempo_bpm"], trace["rate"]
+    assert tempo[0] == 0.0 and np.all((60 <= tempo[3 * FPS: 6 * FPS]) & (tempo[3 * FPS: 6 * FPS] <= 170))
+    assert rate[0] == 1.0 and np.mean(rate[3 * FPS: 6 * FPS] != 1.0) > 0.5  # the movements follow the heard tempo
 
 
 def test_run_on_a_tiny_synthetic_set(tmp_path, shipped):

@@ -195,3 +195,41 @@ def test_clip_periods_give_stretched_copies_of_a_song_the_same_octave():
     out = clip_periods(model, [base, fast])
     assert out[id(fast)] == pytest.approx(out[id(base)] / 1.25, rel=1e-9)
     assert out[id(base)] == pytest.approx(song_period(logp, c, onset), rel=1e-9)
+
+
+def _turning_head(base: np.ndarray, frames: int, deg_per_frame: float) -> np.ndarray:
+    """(frames, P) ``base`` (P,) with the head turning ``deg_per_frame`` about its vertical axis."""
+    from scipy.spatial.transform import Rotation
+
+    from models.rig.humanoid import BONE_INDEX
+
+    c = 3 + 4 * BONE_INDEX["Head"]
+    q0 = Rotation.from_quat(base[c:c + 4])
+    out = np.repeat(base[None].astype(np.float32), frames, axis=0)
+    for f in range(frames):
+        out[f, c:c + 4] = (q0 * Rotation.from_euler("y", deg_per_frame * f, degrees=True)).as_quat()
+    return out
+
+
+@pytest.mark.parametrize("cap_on", [True, False])
+def test_a_sped_up_movement_turns_no_bone_faster_than_the_dancers_largest(cap_on, monkeypatch):
+    """A movement whose head turns 30 degrees a frame, due at 1.6x (150 bpm) after a movement
+    played at 1.6x: the bone cap plays it (and the rate it takes over) slower, so no bone
+    passes the memory's bound (its 99.9th percentile of per-frame bone steps, about 30
+    degrees); uncapped the head would turn 48 degrees a frame (the soak's 57.6-degree head
+    step had this cause). The beat warp is off here: its depth is not what is tested."""
+    lm = load_model(None)
+    s = ds.DanceStream(lm.model, seed=0)
+    assert 20.0 < s._bone_cap < 50.0
+    if not cap_on:  # the behaviour switched off: the test must see the whip
+        monkeypatch.setattr(ds.DanceStream, "_bone_limit", lambda self, window, rate: np.inf)
+    window = _turning_head(s._idle_base, 2 * s.seg, 30.0)
+    s._beat_cols = None
+    s.codes_drawn, s._rate = [0], 1.6
+    s._played[:] = window[0]
+    s._play(window, 1.6, s._bone_limit(window, 1.6))
+    steps = ds.bone_steps(np.stack([s._warped(j) for j in range(s.seg)]))
+    if cap_on:
+        assert 25.0 < steps.max() <= s._bone_cap * 1.01
+    else:
+        assert steps.max() > 45.0

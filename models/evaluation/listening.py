@@ -327,21 +327,25 @@ class AudioCache:
 # --------------------------------------------------------------------------- the performer
 
 
-def perform(lm, audio: np.ndarray, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def perform(lm, audio: np.ndarray, seed: int = 0, trace: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(poses (T, P), idle weight after every frame (T,)) of a loaded dance_vq model ``lm``
     (:class:`models.generate.LoadedModel`) on ``audio`` (n,) at 22050 Hz, T = n // HOP:
     features as ``performer generate`` computes them, the live stream pushed frame by frame
-    (the same poses as :func:`models.networks.dance_stream.generate` with ``seed``)."""
+    (the same poses as :func:`models.networks.dance_stream.generate` with ``seed``). A
+    ``trace`` dict receives ``tempo_bpm`` and ``rate`` (T,): the stream's followed tempo and
+    playback rate after every frame."""
     from models.features.spectral import extract_features
     from models.networks.dance_stream import DanceStream
 
     feats = extract_features(np.asarray(audio, np.float32), lm.features)
     stream = DanceStream(lm.model, seed=seed)
     poses = np.empty((len(feats), lm.model.config.pose_dim), np.float32)
-    w = np.empty(len(feats))
+    w, tempo, rate = np.empty(len(feats)), np.empty(len(feats)), np.empty(len(feats))
     for t in range(len(feats)):
         poses[t] = stream.push(feats[t: t + 1])[0]
-        w[t] = stream.idle_weight
+        w[t], tempo[t], rate[t] = stream.idle_weight, stream.tempo_bpm, stream.playback_rate
+    if trace is not None:
+        trace.update(tempo_bpm=tempo, rate=rate)
     return poses, w
 
 
@@ -502,25 +506,33 @@ def ramp_song(cache: AudioCache, songs: list[tuple[Path, float]], opts: Options)
 def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict:
     """The ramp's figures and curves: ``tempo_bpm`` (real tempo: the song's bpm x
     :func:`ramp_rate`) and ``speed`` (mean joint speed, m/s), both per frame and smoothed over
-    :data:`SMOOTH_S`; their :func:`lagged_correlation` from the end of the hold on; the
-    largest bone rotation per frame after :data:`SETTLE_S`."""
+    :data:`SMOOTH_S`; their :func:`lagged_correlation` from the end of the hold on (and, to
+    see where it is lost, the followed tempo's and the playback rate's, ``follower_corr`` and
+    ``rate_corr``; ``followed_bpm``, smoothed, is the curve; ``follows_tempo``: False for a
+    model that plays every movement at its own pace); the largest bone rotation per
+    frame after :data:`SETTLE_S`."""
     path, bpm = song
     hold = RAMP_HOLD_S
     total = hold + 2 * RAMP_S
     source_s = hold * RAMP_RATES[0] + RAMP_S * (RAMP_RATES[0] + RAMP_RATES[1]) + 2.0
     start = min(opts.excerpt_start_s, max(0.0, len(cache.audio(path)) / SAMPLE_RATE - source_s))
     y = cache.ramp(path, start, source_s)[: int(total * SAMPLE_RATE)]
-    poses, _ = perform(lm, y, opts.seed)
+    trace: dict = {}
+    poses, _ = perform(lm, y, opts.seed, trace)
     t = (np.arange(len(poses)) + 1) / FPS
     tempo = smooth(bpm * ramp_rate(t))
     speed = smooth(motion_speed(positions(poses)))
     a = int(hold * FPS)
     corr, lag, corr0 = lagged_correlation(tempo[a:], speed[a:], int(MAX_LAG_S * FPS))
+    # where the speed's correlation is lost: the followed tempo, then the playback rate (best lag each)
+    follower = lagged_correlation(tempo[a:], smooth(trace["tempo_bpm"])[a:], int(MAX_LAG_S * FPS))[0]
+    rate = lagged_correlation(tempo[a:], smooth(trace["rate"])[a:], int(MAX_LAG_S * FPS))[0]
     steps = bone_steps_deg(poses[int(SETTLE_S * FPS):])
     check = ramp_audio_check(y, bpm)
     return {"song": song_name(path), "bpm": bpm, "start_s": start, "corr": corr, "lag_s": lag / FPS,
-            "corr_lag0": corr0, "max_step_deg": float(steps.max()), **check, "time_s": t.tolist(),
-            "tempo_bpm": tempo.tolist(), "speed": speed.tolist()}
+            "corr_lag0": corr0, "follower_corr": follower, "rate_corr": rate, "max_step_deg": float(steps.max()), **check, "time_s": t.tolist(),
+            "tempo_bpm": tempo.tolist(), "speed": speed.tolist(),
+            "followed_bpm": smooth(trace["tempo_bpm"]).tolist(), "follows_tempo": bool(np.ptp(trace["rate"]) > 0)}
 
 
 def ramp_audio_check(y: np.ndarray, bpm: float) -> dict[str, float]:
@@ -746,7 +758,9 @@ def markdown(result: dict, command: str | None = None) -> str:
             r = m["ramp"]
             lines += ["", f"Ramp on {r['song']} ({r['bpm']:.0f} bpm as recorded): correlation {r['corr']:.2f} at "
                       f"lag {r['lag_s']:.2f} s ({r['corr_lag0']:.2f} at lag 0), largest bone rotation "
-                      f"{r['max_step_deg']:.1f} deg a frame. The ramp's audio: local tempo (librosa's tempogram) against "
+                      f"{r['max_step_deg']:.1f} deg a frame. Against the real tempo, the followed tempo "
+                      f"correlates {r.get('follower_corr', float('nan')):.2f} and the playback rate "
+                      f"{r.get('rate_corr', float('nan')):.2f}. The ramp's audio: local tempo (librosa's tempogram) against "
                       f"the intended tempo, correlation {r['audio_tempo_corr']:.2f}, median error "
                       f"{100 * r['audio_tempo_err']:.1f} %."]
         pres = m.get("presence") or {}

@@ -111,6 +111,14 @@ RATE_CONFIDENCE: float = 0.15
 #: Quantile of the exemplars' mean joint speeds that no movement is sped up past (a movement
 #: already faster plays at rate 1 at most).
 SPEED_CAP: float = 0.9
+#: Quantile of the memory's per-frame largest bone rotation (over all its exemplars' frames:
+#: 30.5 degrees for the shipped model, the dancers' own 99.9th percentile) that no bone of a
+#: sped-up movement passes: a movement whose fastest bone, over the frames it is about to
+#: play, would turn faster at the tempo's rate plays slower (at its own pace at least), and
+#: the rate it takes over from the last movement is held to the same bound. The mean-speed
+#: cap alone let a fast head turn (37 degrees a frame in its exemplar) play at 1.37x under
+#: the beat warp: 58 degrees in one frame, once in the hour's soak (docs/listening.md).
+BONE_CAP: float = 0.999
 #: Classifier-free guidance of a requested style (Ho & Salimans 2021): the logits move from
 #: the music-only ones ("auto") past the style-conditioned ones by this factor. The predictor
 #: was trained with the style token dropped to "auto" 40 % of the time, which is what it needs.
@@ -338,6 +346,28 @@ def _cached_energy(model: DanceVQ, members: np.ndarray, seg: int) -> tuple[np.nd
     return cached[1]
 
 
+def bone_steps(window: np.ndarray) -> np.ndarray:
+    """(F - 1,) the largest bone rotation (degrees) between consecutive poses of ``window`` (F, P)
+    (root position, then quaternions x, y, z, w per bone; signs need not be continuous)."""
+    q = window[:, 3:].reshape(len(window), -1, 4)
+    dot = np.abs(np.add.reduce(q[1:] * q[:-1], axis=-1)) / np.maximum(
+        np.sqrt(np.add.reduce(q[1:] * q[1:], axis=-1) * np.add.reduce(q[:-1] * q[:-1], axis=-1)), 1e-12)
+    return np.degrees(2.0 * np.arccos(np.minimum(dot, 1.0))).max(axis=1)
+
+
+def _cached_bone_cap(model: DanceVQ, members: np.ndarray, counts: np.ndarray) -> float:
+    """The :data:`BONE_CAP` quantile (degrees a frame) of :func:`bone_steps` over every exemplar
+    frame of ``model``'s memory (inf without exemplars), kept on the model like :func:`_cached_members`."""
+    key = (_weights_key([model.member_poses, model.member_count]), BONE_CAP)
+    cached = getattr(model, "_bone_cap_cache", None)
+    if cached is None or cached[0] != key:
+        real = np.arange(members.shape[1])[None, :] < counts[:, None]
+        steps = [bone_steps(w) for w in members[real]]
+        cached = (key, float(np.quantile(np.concatenate(steps), BONE_CAP)) if steps else np.inf)
+        model._bone_cap_cache = cached
+    return cached[1]
+
+
 def _nlerp(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
     """Pose a -> b by weight w in [0, 1]: root lerped, every quaternion nlerped on b's hemisphere of a."""
     out = (1 - w) * a + w * b
@@ -401,6 +431,7 @@ class DanceStream:
         real = np.arange(speed.shape[1])[None, :] < self._counts[:, None]
         # how fast a movement may be sped up to (m/frame), and the memory's mean tempo (frames per beat)
         self._speed_cap = float(np.quantile(speed[real], SPEED_CAP)) if real.any() else np.inf
+        self._bone_cap = _cached_bone_cap(model, self._members, self._counts)  # degrees a frame
         self._member_speed = speed
         period = model.member_period.numpy().astype(np.float64)  # (K, M) each exemplar's song; 0 unknown
         known = period[real & (period > 0)]
@@ -519,6 +550,17 @@ class DanceStream:
     def music_present(self) -> bool:
         return self._music
 
+    @property
+    def tempo_bpm(self) -> float:
+        """The tempo the performer follows (beats per minute, in the danced range), 0 before a clear pulse."""
+        period = self._tempo.period
+        return 60.0 * FPS / period if period > 0.0 else 0.0
+
+    @property
+    def playback_rate(self) -> float:
+        """Exemplar frames a frame the current movement ends at (1: its own pace; tempo following)."""
+        return self._rate
+
     # -- generation ----------------------------------------------------------------------------
     def _gate(self, row: np.ndarray) -> None:
         present = True
@@ -606,7 +648,8 @@ class DanceStream:
             cont = np.stack([warp_pose(self._played, at), warp_pose(self._played, at + 1.0)])
             i, best = match_exemplar(cands, dips, cont, self._decay, frame, BEAT_WEIGHT * clarity,
                                      self.seg, VEL_CAP)  # match_exemplar's quaternions are unit already
-        self._play(best, self._rate_for(*pairs[i]))
+        rate = self._rate_for(*pairs[i])
+        self._play(best, rate, self._bone_limit(best, max(rate, self._rate)))
         self._commit(pairs[i][0])
         self._has_cont = True
 
@@ -621,16 +664,29 @@ class DanceStream:
         v = self._member_speed[code, member]
         return min(r, max(1.0, self._speed_cap / v)) if v > 0 else r
 
-    def _play(self, window: np.ndarray, rate: float) -> None:
-        """Start playing ``window`` (2 seg, P), the next movement and its continuation, at ``rate``:
-        the seg frames before it are those the current movement would have played next."""
+    def _bone_limit(self, window: np.ndarray, rate: float) -> float:
+        """The fastest rate (>= 1) at which no bone of ``window`` (2 seg, P) turns faster than
+        :data:`BONE_CAP`'s bound over the frames a movement at ``rate`` plays (inf: no limit)."""
+        if not FOLLOW_TEMPO or rate <= 1.0:
+            return np.inf
+        n = min(len(window), int(math.ceil(self.seg * rate + 2 * WARP_LAG)) + 1)
+        q = window[:n, 3:]  # unit quaternions (match_exemplar's, or _unit's): bone_steps without its norms
+        dot = float(np.abs(np.add.reduce((q[1:] * q[:-1]).reshape(n - 1, -1, 4), axis=-1)).min())
+        peak = math.degrees(2.0 * math.acos(min(dot, 1.0)))
+        return max(1.0, self._bone_cap / peak) if peak > 0.0 else np.inf
+
+    def _play(self, window: np.ndarray, rate: float, limit: float = np.inf) -> None:
+        """Start playing ``window`` (2 seg, P), the next movement and its continuation, at ``rate``
+        (and the rate it takes over from the current movement) at most ``limit``: the seg frames
+        before it are those the current movement would have played next."""
         if not self.codes_drawn:  # before the first movement there is only its first pose
             self._played[: self.seg] = window[0]
         else:
             at = self._advance(self.seg)  # the current movement's end, seg frames back
             self._played[: self.seg] = [warp_pose(self._played, at + i) for i in range(self.seg)]
         self._played[self.seg:] = window
-        self._rate_from = self._rate if self.codes_drawn else rate
+        rate = min(rate, limit)
+        self._rate_from = min(self._rate, limit) if self.codes_drawn else rate
         self._rate = rate
 
     def _advance(self, j: int) -> float:
