@@ -57,7 +57,8 @@ class ReferenceProbe:
     each frame it is sent (a frame arriving while one is pending is skipped, never queued).
 
     Put it last in the last lane, so that it fires once per hop after every performer sent.
-    ``times_ms()``: the wall time of each run, ms.
+    ``times_ms()``: the wall time of each run, ms; ``cpu_times_ms()``: its thread's CPU time
+    in each run, ms (no time waiting for a CPU or for the interpreter lock).
     """
 
     name = "reference"
@@ -65,6 +66,7 @@ class ReferenceProbe:
     def __init__(self, delay_s: float = PROBE_DELAY_S) -> None:
         self.delay_s = delay_s
         self._times: list[float] = []
+        self._cpu: list[float] = []
         self._go = threading.Event()
         self._stop = False
         reference_workload()  # first call outside the timing: allocations, BLAS start-up
@@ -81,12 +83,16 @@ class ReferenceProbe:
                 return
             time.sleep(self.delay_s)
             self._go.clear()
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.thread_time()
             reference_workload()
+            self._cpu.append((time.thread_time() - c) * 1000.0)
             self._times.append((time.perf_counter() - t) * 1000.0)
 
     def times_ms(self) -> list[float]:
         return list(self._times)
+
+    def cpu_times_ms(self) -> list[float]:
+        return list(self._cpu)
 
     def close(self) -> None:
         self._stop = True
