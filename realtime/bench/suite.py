@@ -533,6 +533,8 @@ def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seco
     from models.features.audio_io import load_audio
     from models.features.spectral import extract_features
     from models.generate import load_model
+    from realtime.engine import cycle_frames
+    from realtime.pipeline import build_pipeline
 
     audio = Path(audio)
     cores = pin_cores(cfg.cores)
@@ -563,6 +565,10 @@ def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seco
 
         loaded = load_model(checkpoint)
         result["model"] = loaded.name
+        result["lane_cycle"] = lane_cycle_ms([rec], cycle_frames(build_pipeline(checkpoint).model))
+        result["lane_cycle"].pop("medians")
+        result["lane_cycle"]["reference_cpu_ms_p50"] = summarize(
+            np.asarray(rec.get("reference_cpu_ms", []), dtype=np.float64))["p50"]
         naive, reason = naive_baseline(loaded.model)
         if naive_seconds > 0 and naive is not None:
             nrun = run_performers([spec], _settings(cfg, checkpoint, naive_seconds, "naive"), work / "naive")
@@ -608,6 +614,9 @@ def latency_metrics(r: dict) -> dict[str, float]:
         "reference_ms_p50": s["reference_ms"]["p50"],  # the machine's speed during the run (scaled budgets)
         "reference_ms_p99": s["reference_ms"]["p99"],
         "others_busy_percent": r["others_busy_percent"],  # other processes' share of the CPUs (quiet budgets)
+        # the costliest point of the model's cost cycle (lane CPU median) over the reference's CPU median
+        "lane_cycle_ms": r["lane_cycle"]["ms"],
+        "lane_cycle_over_reference": r["lane_cycle"]["ms"] / r["lane_cycle"]["reference_cpu_ms_p50"],
     }
     if r["model_step"].get("ratio_p50") is not None:
         m["model_step_naive_over_streaming"] = r["model_step"]["ratio_p50"]
