@@ -247,5 +247,5 @@ def format_verdicts(verdicts: list[Verdict], only_failures: bool = False) -> str
                                                if v.not_applicable is not None})
     scaled = "" if only_failures or not any(v.scaled for v in verdicts) else (
         "\nscaled budgets: max x speed, the speed from the reference workload timed in the same run "
-        "(benchmarks/budgets.toml [reference]; docs/latency.md, Budgets scaled to the machine)")
+        "([reference] of the budgets file; realtime/bench/budgets.py)")
     return table + scaled + "".join(f"\nn/a {metric}: {why}" for metric, why in reasons)
