@@ -28,7 +28,8 @@ An ensemble (``performer bench ensemble``): SPEC has ``performers``, a list of
 ``osc_port`` and ``name``. One engine runs them all on the one audio input, each with its
 own VMC target and its own path ``/ws/NAME`` on one WebSocket server; ``ready`` carries
 ``ws_paths``; ``out`` holds ``streams`` (one record as above per performer, its own
-compute: model to sends) and the process's figures: the whole hop per frame
+compute: model to sends, wall ``compute_ms`` and the worker thread's CPU ``lane_cpu_ms``)
+and the process's figures: the whole hop per frame
 (``compute_ms``), the input stage's share (``features_ms``), CPU, RSS, extractors.
 """
 
