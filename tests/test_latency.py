@@ -249,6 +249,7 @@ def test_quiet_budget_is_not_applicable_while_other_processes_hold_the_cpus(tmp_
 
     e2e, lost = verdicts(63.4)  # a shared machine: the wall-clock target is n/a, with the share
     assert e2e.ok and e2e.not_applicable is not None and "63% of the CPUs" in e2e.not_applicable and lost.ok
+    assert bud.format_verdicts([e2e]).splitlines()[1].split()[-3:] == ["40", "-", "n/a"]  # the figure, shown
     assert bud.tally([e2e, lost]) == "1 of 1 budget checks within budget, 0 over budget; 1 not applicable (not counted)"
     for busy in (4.0, None):  # a quiet machine, or a result without the figure: checked
         e2e, _ = verdicts(busy)

@@ -228,7 +228,8 @@ def format_verdicts(verdicts: list[Verdict], only_failures: bool = False) -> str
             continue
         sign = "<=" if v.budget.op == "max" else ">="
         if v.not_applicable is not None:
-            rows.append((v.label, v.budget.metric, f"{sign} {v.budget.limit:g}", "n/a", "-", "n/a"))
+            shown = "n/a" if v.measured is None else _fmt(v.measured)  # a quiet budget's figure, still shown
+            rows.append((v.label, v.budget.metric, f"{sign} {v.budget.limit:g}", shown, "-", "n/a"))
             continue
         if v.scaled:
             sign = f"{sign} {v.budget.limit:g} x {v.speed:.2f} ="
