@@ -237,6 +237,50 @@ def test_scaled_budget_follows_the_reference_workload_of_the_same_run(tmp_path):
     assert no_reference[0].limit == 5.0 and not no_reference[0].ok  # results without a reference: unscaled
 
 
+def test_quiet_budget_is_not_applicable_while_other_processes_hold_the_cpus(tmp_path):
+    f = tmp_path / "b.toml"
+    f.write_text("[quiet]\nothers_busy_percent = 10\n"
+                 "[latency]\ne2e_osc_ms_p99 = { max = 15.0, quiet = true }\nlost_frames = { max = 0 }\n")
+    budgets = bud.load_budgets(f)
+
+    def verdicts(busy: float | None) -> list[bud.Verdict]:
+        m = {"e2e_osc_ms_p99": 40.0, "lost_frames": 0} | ({} if busy is None else {"others_busy_percent": busy})
+        return bud.check([{"kind": "latency", "label": "clip", "metrics": m}], budgets)
+
+    e2e, lost = verdicts(63.4)  # a shared machine: the wall-clock target is n/a, with the share
+    assert e2e.ok and e2e.not_applicable is not None and "63% of the CPUs" in e2e.not_applicable and lost.ok
+    assert bud.format_verdicts([e2e]).splitlines()[1].split()[-3:] == ["40", "-", "n/a"]  # the figure, shown
+    assert bud.tally([e2e, lost]) == "1 of 1 budget checks within budget, 0 over budget; 1 not applicable (not counted)"
+    for busy in (4.0, None):  # a quiet machine, or a result without the figure: checked
+        e2e, _ = verdicts(busy)
+        assert e2e.not_applicable is None and not e2e.ok
+
+
+def test_lane_cycle_is_the_costliest_cycle_position_of_any_performer_robust_to_a_busy_few_frames():
+    """Per performer and position of its 8-frame cycle, the median lane CPU time: 1 ms more
+    on one performer's code steps (1 frame in 8) moves the figure by 1 ms; slow frames
+    on a busy machine (10% of all, anywhere) do not."""
+    from realtime.bench.suite import lane_cycle_ms
+
+    rng = np.random.default_rng(0)
+    idx = np.arange(600)
+
+    def lanes(extra_ms: float) -> list[dict]:
+        out = []
+        for j, phase in enumerate((0, 2, 4, 6)):
+            cpu = 0.3 + 0.01 * rng.random(600) + 0.6 * ((idx + phase) % 8 == 0)  # code step: +0.6 ms
+            cpu += rng.choice([0.0, 5.0], size=600, p=[0.9, 0.1])  # a busy machine's slow frames
+            if j == 0:
+                cpu += extra_ms * (idx % 8 == 0)
+            out.append({"index": idx.tolist(), "phase": phase, "lane_cpu_ms": cpu.tolist()})
+        return out
+
+    clean, planted = lane_cycle_ms(lanes(0.0), 8), lane_cycle_ms(lanes(1.0), 8)
+    assert clean["ms"] == pytest.approx(0.905, abs=0.01) and clean["position"] == 0
+    assert planted["ms"] == pytest.approx(1.905, abs=0.01) and (planted["lane"], planted["position"]) == (0, 0)
+    assert np.shape(planted["medians"]) == (4, 8)
+
+
 def test_own_hop_time_is_the_wall_time_less_the_run_queue_wait():
     from realtime.bench.suite import own_hop_ms
 
@@ -289,6 +333,10 @@ def test_run_queue_clock_counts_the_time_another_thread_held_the_cpu():
     ("[reference]\np50_ms = 0\n", "expected a positive p50_ms only"),
     ("[reference]\np50_ms = 1.0\n[streams]\nsustained_streams = { min = 8, scaled_by = \"r\" }\n",
      "scaled_by needs a max"),
+    ("[streams]\nsustained_streams = { min = 8, quiet = true }\n", "needs a [quiet] table"),
+    ("[quiet]\nothers_busy_percent = 10\n[streams]\nsustained_streams = { min = 8, quiet = 1 }\n",
+     "quiet must be true or false"),
+    ("[quiet]\nothers_busy_percent = 120\n", "expected others_busy_percent = a percentage"),
 ])
 def test_bad_budgets_file_is_a_config_error_naming_the_file(tmp_path, text, needle):
     from models.errors import ConfigError
@@ -415,29 +463,30 @@ def test_ensemble_bench_runs_performers_in_one_process_and_apart(tmp_path, capsy
 @pytest.mark.latency
 @pytest.mark.slow
 def test_ensemble_budget_passes_clean_and_fails_a_planted_regression(tmp_path, capsys):
-    """`make bench`'s ensemble part with benchmarks/budgets.toml, on the shipped model: the
-    4-performer hop (its own time, the budget scaled to the machine by the reference workload
-    of the same run) is within budget, and 3 ms of extra work every 8th frame in one
-    performer's lane (the hidden --inject-ms hook, on that performer's code-step frames) puts
-    it over. (1 ms moved the own p99 by 0.9 ms, 3.48 -> 4.38, inside the 5 ms budget's
-    headroom: docs/latency.md, "Budgets scaled to the machine".)"""
-    from pathlib import Path
-
-    budgets = Path(__file__).resolve().parents[1] / "benchmarks" / "budgets.toml"
-    verdicts = {}
-    for name, extra in (("clean", []), ("planted", ["--inject-ms", "3", "--inject-every", "8"])):
+    """`make bench`'s ensemble part with benchmarks/budgets.toml, on the shipped model, 4
+    performers in one process for 10 s: clean, every budget holds (the absolute wall-clock
+    ones n/a while other processes hold the CPUs); with 1 ms of extra work every 8th frame
+    in one performer's lane (the hidden --inject-ms hook, on that performer's code-step
+    frames), the budget on the costliest point of the cost cycle over the reference
+    workload of the same run, lane_cycle_over_reference_4, fails (docs/latency.md, "Budgets
+    on a shared machine")."""
+    budgets = REPO / "benchmarks" / "budgets.toml"
+    verdicts, lines = {}, []
+    for name, extra in (("clean", []), ("planted", ["--inject-ms", "1", "--inject-every", "8"])):
         out = tmp_path / name
-        code = main(["bench", "ensemble", "--counts", "4", "--no-separate", "--unstaggered", "--seconds", "20",
+        code = main(["bench", "ensemble", "--counts", "4", "--no-separate", "--unstaggered", "--seconds", "10",
                      "--out", str(out), "--budgets", str(budgets), *extra])
         printed = capsys.readouterr().out
         r = json.loads((out / "ensemble.json").read_text())
-        (v,) = [v for v in bud.check([r], bud.load_budgets(budgets)) if v.budget.metric.startswith("per_hop_ms_p99")]
-        verdicts[name] = (code, v, printed)
-        print(f"{name}: {v.budget.metric} {v.measured:.2f} ms against {v.limit:.2f} (x {v.speed:.2f}); cpu p99 "
-              f"{r['metrics']['per_hop_ms_p99_cpu_4']:.2f}; own p99 {r['metrics']['per_hop_ms_p99_own_4']:.2f}; wall p99 "
-              f"{r['metrics']['per_hop_ms_p99_4']:.2f}; reference p50 {r['metrics']['reference_ms_4_p50']:.2f}")
+        verdicts[name] = (code, {v.budget.metric: v for v in bud.check([r], bud.load_budgets(budgets))}, printed)
+        m = r["metrics"]
+        lines.append(f"{name}: lane cycle {m['lane_cycle_ms_4']:.2f} ms / reference CPU {r['rows'][0]['reference_cpu_ms_p50']:.2f}"
+              f" = {m['lane_cycle_over_reference_4']:.2f}; own p99 {m['per_hop_ms_p99_own_4']:.2f}; wall p99 "
+              f"{m['per_hop_ms_p99_4']:.2f}; other processes {m['others_busy_percent']:.0f}% of the CPUs")
+    print("\n".join(lines))
     code, v, printed = verdicts["clean"]
-    assert v.ok and code == 0, printed
+    assert code == 0 and all(x.ok for x in v.values()), printed
     code, v, printed = verdicts["planted"]
-    assert not v.ok and code == 1, printed
+    assert code == 1 and not v["lane_cycle_over_reference_4"].ok, printed
+    assert r["rows"][0]["lane_cycle_at"] == [0, 0]  # the first performer's code step, where the work was planted
     assert "Planted regression" in (tmp_path / "planted" / "ensemble.md").read_text()

@@ -8,8 +8,11 @@ for the sweep), each ``{ max = X }`` (measured must be <= X) or ``{ min = X }``:
     per_hop_ms_p99 = { max = 5.0 }
     [streams]
     sustained_streams = { min = 8 }
+    [quiet]
+    others_busy_percent = 10.0
     [ensemble]
-    per_hop_ms_p99_own_4 = { max = 5.0, scaled_by = "reference_ms_4" }
+    lane_cycle_over_reference_4 = { max = 2.0 }
+    per_hop_ms_p99_own_4 = { max = 5.0, quiet = true }
 
 Budgets scaled to the machine: an entry with ``scaled_by = "NAME"`` is checked against
 ``max * speed``, ``speed = max(1, NAME_p50 / p50_ms)``: the result's ``NAME_p50`` is the
@@ -19,6 +22,13 @@ same workload on the reference machine with nothing else running. A machine that
 today slows the workload as much as the hop; on the reference machine the budget is ``max``.
 Time the hop spent waiting for a CPU that another process held is not the hop's: the
 scaled figures are ``per_hop_ms_*_own`` (the hop minus its run-queue wait, docs/latency.md).
+
+Budgets for a quiet machine: an entry with ``quiet = true`` (an absolute wall-clock target)
+applies only to a result whose ``others_busy_percent`` (the share of the machine's CPUs that
+processes other than the benchmark's held during the run) is at most the ``[quiet]`` table's
+figure; on a busier machine its verdict is n/a, with the share measured, neither a pass nor
+a failure. Regressions are caught on any machine by the budgets on ratios of figures
+measured in the same run (``lane_cycle_over_reference_N``, docs/latency.md).
 """
 
 from __future__ import annotations
@@ -42,6 +52,7 @@ class Budget:
     op: str
     limit: float
     scaled_by: str | None = None  # reference figure of the result that scales a "max" limit
+    quiet: bool = False  # applies only when other processes left the machine quiet ([quiet])
 
 
 @dataclass(frozen=True)
@@ -100,9 +111,11 @@ def _number(x: object) -> bool:
 
 
 class BudgetList(list):
-    """The budgets of a file (a list of :class:`Budget`), with its ``[reference]`` (or None)."""
+    """The budgets of a file (a list of :class:`Budget`), with its ``[reference]`` (or None) and
+    its ``[quiet]`` figure: the most other processes may hold of the CPUs, percent (or None)."""
 
     reference: Reference | None = None
+    quiet_percent: float | None = None
 
 
 def load_budgets(path: str | Path) -> BudgetList:
@@ -120,6 +133,13 @@ def load_budgets(path: str | Path) -> BudgetList:
         if not (isinstance(ref, dict) and set(ref) == {"p50_ms"} and _number(ref["p50_ms"]) and ref["p50_ms"] > 0):
             raise ConfigError(f"[reference]: expected a positive p50_ms only, got {ref!r}", source=path)
         out.reference = Reference(float(ref["p50_ms"]))
+    quiet = data.pop("quiet", None)
+    if quiet is not None:
+        share = quiet.get("others_busy_percent") if isinstance(quiet, dict) and len(quiet) == 1 else None
+        if not (_number(share) and 0 <= share <= 100):
+            raise ConfigError(f"[quiet]: expected others_busy_percent = a percentage (0-100) only, got {quiet!r}",
+                              source=path)
+        out.quiet_percent = float(share)
     for kind, table in data.items():
         if kind not in KINDS or not isinstance(table, dict):
             raise ConfigError(f"unknown budget table [{kind}]; use [reference], "
@@ -127,9 +147,10 @@ def load_budgets(path: str | Path) -> BudgetList:
         for metric, spec in table.items():
             keys = set(spec) if isinstance(spec, dict) else set()
             ops = keys & {"max", "min"}
-            if len(ops) != 1 or keys - ops - {"scaled_by"}:
+            if len(ops) != 1 or keys - ops - {"scaled_by", "quiet"}:
                 raise ConfigError(f"[{kind}] {metric}: expected {{ max = X }} or {{ min = X }} "
-                                  f"(max may have scaled_by = \"NAME\"), got {spec!r}", source=path)
+                                  f"(max may have scaled_by = \"NAME\"; either may have quiet = true), got {spec!r}",
+                                  source=path)
             op = ops.pop()
             limit, scaled_by = spec[op], spec.get("scaled_by")
             if not _number(limit):
@@ -141,7 +162,13 @@ def load_budgets(path: str | Path) -> BudgetList:
                 if out.reference is None:
                     raise ConfigError(f"[{kind}] {metric}: scaled_by needs a [reference] table "
                                       "(p50_ms) before it", source=path)
-            out.append(Budget(kind, metric, op, float(limit), scaled_by))
+            quiet = spec.get("quiet", False)
+            if not isinstance(quiet, bool):
+                raise ConfigError(f"[{kind}] {metric}: quiet must be true or false, got {quiet!r}", source=path)
+            if quiet and out.quiet_percent is None:
+                raise ConfigError(f"[{kind}] {metric}: quiet = true needs a [quiet] table "
+                                  "(others_busy_percent) before it", source=path)
+            out.append(Budget(kind, metric, op, float(limit), scaled_by, quiet))
     return out
 
 
@@ -152,9 +179,12 @@ def check(results: list[dict], budgets: list[Budget]) -> list[Verdict]:
     it under ``not_applicable`` with the reason (a figure its model does not have, e.g. the
     naive-recompute ratio of a dance_vq model): that verdict is "n/a", neither a pass nor a
     failure. A scaled budget takes its speed from the result's reference figure (module
-    docstring); a result without one is checked against the budget's own limit.
+    docstring); a result without one is checked against the budget's own limit. A quiet
+    budget is n/a, with the share measured, for a result whose ``others_busy_percent`` is
+    over the ``[quiet]`` figure (a result without that figure is checked).
     """
     reference = getattr(budgets, "reference", None)
+    quiet_percent = getattr(budgets, "quiet_percent", None)
     verdicts = []
     for r in results:
         na = r.get("not_applicable") or {}
@@ -163,6 +193,10 @@ def check(results: list[dict], budgets: list[Budget]) -> list[Verdict]:
             if b.kind == r.get("kind"):
                 v = metrics.get(b.metric)
                 reason = na.get(b.metric) if v is None else None
+                busy = metrics.get("others_busy_percent")
+                if b.quiet and quiet_percent is not None and busy is not None and busy > quiet_percent:
+                    reason = (f"other processes held {busy:.0f}% of the CPUs during the run (> {quiet_percent:g}%): "
+                              "an absolute wall-clock target needs a quiet machine")
                 speed = 1.0
                 if b.scaled_by is not None and reference is not None:
                     speed = reference.speed(metrics.get(f"{b.scaled_by}_p50"))
@@ -194,7 +228,8 @@ def format_verdicts(verdicts: list[Verdict], only_failures: bool = False) -> str
             continue
         sign = "<=" if v.budget.op == "max" else ">="
         if v.not_applicable is not None:
-            rows.append((v.label, v.budget.metric, f"{sign} {v.budget.limit:g}", "n/a", "-", "n/a"))
+            shown = "n/a" if v.measured is None else _fmt(v.measured)  # a quiet budget's figure, still shown
+            rows.append((v.label, v.budget.metric, f"{sign} {v.budget.limit:g}", shown, "-", "n/a"))
             continue
         if v.scaled:
             sign = f"{sign} {v.budget.limit:g} x {v.speed:.2f} ="
@@ -213,5 +248,5 @@ def format_verdicts(verdicts: list[Verdict], only_failures: bool = False) -> str
                                                if v.not_applicable is not None})
     scaled = "" if only_failures or not any(v.scaled for v in verdicts) else (
         "\nscaled budgets: max x speed, the speed from the reference workload timed in the same run "
-        "(benchmarks/budgets.toml [reference]; docs/latency.md, Budgets scaled to the machine)")
+        "([reference] of the budgets file; realtime/bench/budgets.py)")
     return table + scaled + "".join(f"\nn/a {metric}: {why}" for metric, why in reasons)

@@ -4,11 +4,14 @@
 a mel-like projection and small dense layers, and Python-level packing as the OSC encoder
 does: the kinds of work a hop does) once per frame inside the performer process under test,
 half-way between two hops, so it runs on the same CPUs, at the same moments and under the
-same load as the hops it is compared with, and never overlaps one. Its p50 and p99 (ms) go
-into the run's result; a budget with ``scaled_by`` in benchmarks/budgets.toml is multiplied
-by ``max(1, reference p50 of the run / [reference] p50_ms)`` (:mod:`realtime.bench.budgets`):
-a machine that is slower today (a busy sibling core, a slow CPU) slows the reference too, a
-slower hop on the same machine does not.
+same load as the hops it is compared with, and never overlaps one. Its wall and CPU times
+(p50, p99, ms) go into the run's result: the budgets on ``lane_cycle_over_reference`` divide
+the costliest point of the performers' cost cycle by its CPU median
+(:func:`realtime.bench.suite.lane_cycle_ms`; docs/latency.md, "Budgets on a shared
+machine"), and a budget with ``scaled_by`` is multiplied by ``max(1, reference p50 of the
+run / [reference] p50_ms)`` (:mod:`realtime.bench.budgets`): a machine that is slower today
+(a busy sibling core, a slow CPU) slows the reference too, a slower hop on the same machine
+does not.
 
 :class:`InjectedWork` is the hidden testing hook: a sink that spins ``ms`` of CPU every
 ``every``-th frame in one performer's lane (``performer bench ensemble --inject-ms 1
@@ -57,7 +60,8 @@ class ReferenceProbe:
     each frame it is sent (a frame arriving while one is pending is skipped, never queued).
 
     Put it last in the last lane, so that it fires once per hop after every performer sent.
-    ``times_ms()``: the wall time of each run, ms.
+    ``times_ms()``: the wall time of each run, ms; ``cpu_times_ms()``: its thread's CPU time
+    in each run, ms (no time waiting for a CPU or for the interpreter lock).
     """
 
     name = "reference"
@@ -65,6 +69,7 @@ class ReferenceProbe:
     def __init__(self, delay_s: float = PROBE_DELAY_S) -> None:
         self.delay_s = delay_s
         self._times: list[float] = []
+        self._cpu: list[float] = []
         self._go = threading.Event()
         self._stop = False
         reference_workload()  # first call outside the timing: allocations, BLAS start-up
@@ -81,12 +86,16 @@ class ReferenceProbe:
                 return
             time.sleep(self.delay_s)
             self._go.clear()
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.thread_time()
             reference_workload()
+            self._cpu.append((time.thread_time() - c) * 1000.0)
             self._times.append((time.perf_counter() - t) * 1000.0)
 
     def times_ms(self) -> list[float]:
         return list(self._times)
+
+    def cpu_times_ms(self) -> list[float]:
+        return list(self._cpu)
 
     def close(self) -> None:
         self._stop = True

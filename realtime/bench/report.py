@@ -447,6 +447,14 @@ def _reference_line(rows: list[dict], settings: dict) -> str:
                      f"{_f(row.get('reference_ms_p99'))}" for row in rows)
     text = (f"Reference workload timed between the hops in the same process (p50 / p99 ms; budgets scaled to the "
             f"machine, docs/latency.md): {refs}.")
+    cycles = "; ".join(f"{row['performers']} {row['mode']}: {_f(row['lane_cycle_ms'])} ms (performer "
+                       f"{row['lane_cycle_at'][0]}, position {row['lane_cycle_at'][1]}) / {_f(row['reference_cpu_ms_p50'])}"
+                       f" = {_f(row['lane_cycle_over_reference'])}" for row in rows
+                       if row.get("lane_cycle_ms") is not None and row.get("lane_cycle_over_reference") is not None)
+    if cycles:
+        text += (" Costliest point of the cost cycle (median lane CPU time at one position of one performer's "
+                 f"cycle) over the reference workload's CPU median, same run (docs/latency.md, Budgets on a shared "
+                 f"machine): {cycles}.")
     if settings.get("inject_ms"):
         text += (f" **Planted regression (testing hook): {settings['inject_ms']:g} ms of busy work every "
                  f"{settings['inject_every']}th frame in the first performer's lane.**")

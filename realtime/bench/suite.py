@@ -198,6 +198,42 @@ def _cpu_ms(rec: dict, n: int) -> np.ndarray:
     return np.concatenate([cpu, np.full(n - len(cpu), np.nan)])
 
 
+def others_busy_percent(run: dict) -> float:
+    """The share of all the machine's CPUs that processes other than the benchmark's held
+    during a run of :func:`~realtime.bench.harness.run_performers`, percent: the machine's
+    busy share less the CPU time of the performer and receiver processes (at least 0; NaN
+    off Linux)."""
+    ours_s = sum(r["cpu_s"] for r in ([run["process"]] if "process" in run else run["streams"])) + run["receiver_cpu_s"]
+    ours = 100.0 * ours_s / max(run["wall_s"], 1e-9) / (os.cpu_count() or 1)
+    return max(0.0, run["machine_busy_percent"] - ours)
+
+
+def lane_cycle_ms(streams: list[dict], cycle: int) -> dict:
+    """The costliest point of the performers' cost cycle, from their lanes' CPU time.
+
+    For every performer (a record with ``index``, ``phase`` and ``lane_cpu_ms``: the worker
+    thread's CPU time in its lane, ms per frame) and every position ``m`` of its cycle of
+    ``cycle`` frames (its frames whose ``(index + phase) % cycle == m``; 0 is the code step
+    of a dance_vq model), the median lane CPU time. Returns the largest of these medians
+    (``ms``), whose performer (``lane``, 0-based) and ``position``, and every median
+    (``medians``: performers x positions). A median over a run's ~75 frames per position
+    ignores the few frames a busy machine slows; extra work on 1 frame in ``cycle`` moves
+    it by the whole amount.
+    """
+    med = np.full((len(streams), cycle), np.nan)
+    for j, rec in enumerate(streams):
+        idx = np.asarray(rec["index"], dtype=np.int64)
+        cpu = np.asarray(rec.get("lane_cpu_ms", []), dtype=np.float64)[: len(idx)]
+        pos = (idx[: len(cpu)] + int(rec.get("phase", 0))) % cycle
+        for m in range(cycle):
+            if np.any(pos == m):
+                med[j, m] = np.median(cpu[pos == m])
+    if not np.isfinite(med).any():
+        return {"ms": float("nan"), "lane": None, "position": None, "medians": med.tolist()}
+    j, m = np.unravel_index(np.nanargmax(med), med.shape)
+    return {"ms": float(med[j, m]), "lane": int(j), "position": int(m), "medians": med.tolist()}
+
+
 def frame_series(rec: dict) -> dict[str, np.ndarray]:
     """Per-frame arrays for the plots: time since start (s), per-hop, e2e OSC/WS, jitter (ms)."""
     idx = np.asarray(rec["index"], dtype=np.float64)
@@ -497,6 +533,8 @@ def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seco
     from models.features.audio_io import load_audio
     from models.features.spectral import extract_features
     from models.generate import load_model
+    from realtime.engine import cycle_frames
+    from realtime.pipeline import build_pipeline
 
     audio = Path(audio)
     cores = pin_cores(cfg.cores)
@@ -521,11 +559,16 @@ def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seco
         rec = run["streams"][0]
         result["streaming"] = stream_metrics(rec)
         result["machine_busy_percent"] = run["machine_busy_percent"]
+        result["others_busy_percent"] = others_busy_percent(run)
         result["receiver_cpu_percent"] = 100.0 * run["receiver_cpu_s"] / max(run["wall_s"], 1e-9)
         series = frame_series(rec)
 
         loaded = load_model(checkpoint)
         result["model"] = loaded.name
+        result["lane_cycle"] = lane_cycle_ms([rec], cycle_frames(build_pipeline(checkpoint).model))
+        result["lane_cycle"].pop("medians")
+        result["lane_cycle"]["reference_cpu_ms_p50"] = summarize(
+            np.asarray(rec.get("reference_cpu_ms", []), dtype=np.float64))["p50"]
         naive, reason = naive_baseline(loaded.model)
         if naive_seconds > 0 and naive is not None:
             nrun = run_performers([spec], _settings(cfg, checkpoint, naive_seconds, "naive"), work / "naive")
@@ -570,6 +613,10 @@ def latency_metrics(r: dict) -> dict[str, float]:
         "stream_offline_max_abs": r["stream_vs_offline"]["max_abs"],
         "reference_ms_p50": s["reference_ms"]["p50"],  # the machine's speed during the run (scaled budgets)
         "reference_ms_p99": s["reference_ms"]["p99"],
+        "others_busy_percent": r["others_busy_percent"],  # other processes' share of the CPUs (quiet budgets)
+        # the costliest point of the model's cost cycle (lane CPU median) over the reference's CPU median
+        "lane_cycle_ms": r["lane_cycle"]["ms"],
+        "lane_cycle_over_reference": r["lane_cycle"]["ms"] / r["lane_cycle"]["reference_cpu_ms_p50"],
     }
     if r["model_step"].get("ratio_p50") is not None:
         m["model_step_naive_over_streaming"] = r["model_step"]["ratio_p50"]
@@ -626,7 +673,8 @@ def run_streams(audios: Sequence[Path], cfg: BenchConfig, counts: Sequence[int] 
         "frame_period_ms": FRAME_PERIOD_MS,
         "rows": rows,
         "sustained_streams": sustained,
-        "metrics": {"sustained_streams": sustained},
+        "metrics": {"sustained_streams": sustained,  # other processes' share of the CPUs, worst row (quiet budgets)
+                    "others_busy_percent": max(row["others_busy_percent"] for row in rows)},
     }
 
 
@@ -647,6 +695,7 @@ def _sweep_row(n: int, run: dict) -> dict:
         "performer_cpu_percent": 100.0 * cpu_s / max(run["wall_s"], 1e-9),
         "receiver_cpu_percent": 100.0 * run["receiver_cpu_s"] / max(run["wall_s"], 1e-9),
         "machine_busy_percent": run["machine_busy_percent"],
+        "others_busy_percent": others_busy_percent(run),
         "max_peak_rss_mb": max(m["peak_rss_mb"] for m in per),
         "overruns": sum(m["overruns"] for m in per),
         "pass": bool(math.isfinite(worst) and worst < FRAME_PERIOD_MS),
@@ -685,6 +734,7 @@ def run_ensemble(audio: Path, cfg: BenchConfig, counts: Sequence[int] = (1, 2, 4
     audio = Path(audio)
     rows = []
     with _sweep(cfg) as (work, checkpoint, how, info):
+        cycle = cycle_frames(build_pipeline(checkpoint).model)
         seg = audio_segment(audio, cfg.sample_rate, seconds, 0.0, work / "audio.npy")
         settings = _settings(cfg, checkpoint, seconds)
         plan = [(n, "one process", True) for n in counts]
@@ -695,9 +745,7 @@ def run_ensemble(audio: Path, cfg: BenchConfig, counts: Sequence[int] = (1, 2, 4
             specs = [StreamSpec(label or audio.stem, seg, cfg.sample_rate)] * n
             run = run_performers(specs, settings, work / f"n{n}-{len(rows)}", ensemble=mode != "separate processes",
                                  stagger=stagger)
-            rows.append(_ensemble_row(n, mode, run))
-        pipeline = build_pipeline(checkpoint)
-        cycle = cycle_frames(pipeline.model)
+            rows.append(_ensemble_row(n, mode, run, cycle))
         phases = sorted({j * cycle // max(counts) for j in range(max(counts))})
         loaded = load_model(checkpoint)
         torch.set_num_threads(cfg.threads)
@@ -723,9 +771,11 @@ def run_ensemble(audio: Path, cfg: BenchConfig, counts: Sequence[int] = (1, 2, 4
     return result
 
 
-def _ensemble_row(n: int, mode: str, run: dict) -> dict:
-    """One row of the ensemble table from :func:`~realtime.bench.harness.run_performers`."""
+def _ensemble_row(n: int, mode: str, run: dict, cycle: int = 1) -> dict:
+    """One row of the ensemble table from :func:`~realtime.bench.harness.run_performers`;
+    ``cycle``: the model's cost cycle, frames (:func:`lane_cycle_ms`, one process only)."""
     per = [stream_metrics(r) for r in run["streams"]]
+    lanes = {"ms": None, "lane": None, "position": None, "medians": None}
     frames = per[0]["frames"]
     if "process" in run:  # one process: its whole hop, its own CPU and memory
         proc = run["process"]
@@ -738,6 +788,8 @@ def _ensemble_row(n: int, mode: str, run: dict) -> dict:
         cpu_s, rss = proc["cpu_s"], proc["peak_rss_mb"]
         extractors = proc["extractors"]
         reference = summarize(np.asarray(proc.get("reference_ms", []), dtype=np.float64))
+        reference_cpu = summarize(np.asarray(proc.get("reference_cpu_ms", []), dtype=np.float64))["p50"]
+        lanes = lane_cycle_ms(run["streams"], cycle)
     else:  # separate processes: each its own hop (features included); CPU and memory summed
         hop_p50 = float(np.median([m["per_hop_ms"]["p50"] for m in per]))
         hop_p99 = max(m["per_hop_ms"]["p99"] for m in per)
@@ -750,6 +802,7 @@ def _ensemble_row(n: int, mode: str, run: dict) -> dict:
         extractors = n
         reference = summarize(np.concatenate([np.asarray(r.get("reference_ms", []), dtype=np.float64)
                                               for r in run["streams"]]))
+        reference_cpu = None
     return {
         "performers": n,
         "mode": mode,
@@ -774,6 +827,13 @@ def _ensemble_row(n: int, mode: str, run: dict) -> dict:
         "receiver_cpu_percent": 100.0 * run["receiver_cpu_s"] / max(run["wall_s"], 1e-9),
         "reference_ms_p50": reference["p50"],
         "reference_ms_p99": reference["p99"],
+        "reference_cpu_ms_p50": reference_cpu,  # the reference workload's CPU time (one process)
+        "lane_cycle_ms": lanes["ms"],  # costliest point of the cost cycle, lane CPU median (one process)
+        "lane_cycle_at": [lanes["lane"], lanes["position"]],  # its performer, cycle position
+        "lane_cycle_medians": lanes["medians"],
+        "lane_cycle_over_reference": (lanes["ms"] / reference_cpu if lanes["ms"] is not None and reference_cpu
+                                      else None),
+        "others_busy_percent": others_busy_percent(run),
     }
 
 
@@ -800,8 +860,11 @@ def _marginal(rows: list[dict]) -> dict:
 def ensemble_metrics(r: dict) -> dict[str, float]:
     """The flat figures budgets are checked against (keys of ``[ensemble]`` in budgets.toml):
     ``per_hop_ms_p99_N`` / ``per_hop_ms_p50_N`` (one process, staggered) for every N run,
-    the slopes of the added performer's cost in one process, lost frames (one process) and
-    the largest stream-vs-offline difference over the phases."""
+    ``lane_cycle_ms_N`` and its ratio to the reference workload's CPU time of the same run
+    (``lane_cycle_over_reference_N``, :func:`lane_cycle_ms`), the slopes of the added
+    performer's cost in one process, lost frames (one process), the largest
+    stream-vs-offline difference over the phases and the other processes' largest share of
+    the CPUs during a run (``others_busy_percent``)."""
     m: dict[str, float] = {}
     for row in r["rows"]:
         if row["mode"] == "one process":
@@ -813,6 +876,8 @@ def ensemble_metrics(r: dict) -> dict[str, float]:
             m[f"per_hop_ms_p95_cpu_{row['performers']}"] = row["per_hop_ms_p95_cpu"]
             m[f"reference_ms_{row['performers']}_p50"] = row["reference_ms_p50"]
             m[f"reference_ms_{row['performers']}_p99"] = row["reference_ms_p99"]
+            m[f"lane_cycle_ms_{row['performers']}"] = row["lane_cycle_ms"]
+            m[f"lane_cycle_over_reference_{row['performers']}"] = row["lane_cycle_over_reference"]
     one = r["marginal"].get("one process")
     if one is not None:
         m["added_performer_hop_ms_p50"] = one["per_hop_ms_p50"]["slope"]
@@ -822,4 +887,5 @@ def ensemble_metrics(r: dict) -> dict[str, float]:
         m["added_process_cpu_ms"] = sep["cpu_ms_per_frame"]["slope"]
     m["lost_frames"] = sum(row["lost_frames"] for row in r["rows"] if row["mode"] != "separate processes")
     m["stream_offline_max_abs"] = max(c["max_abs"] for c in r["stream_vs_offline"])
+    m["others_busy_percent"] = max(row["others_busy_percent"] for row in r["rows"])  # quiet budgets
     return m

@@ -20,14 +20,16 @@ model ("streaming" or "naive"), osc_port, out, name, lead_ms (the performer's le
 optional inject_ms and inject_every
 (:class:`~realtime.bench.reference.InjectedWork` in the first performer's lane: a planted
 regression). Every run also times the reference workload once per hop
-(:class:`~realtime.bench.reference.ReferenceProbe`): ``reference_ms`` in ``out``.
+(:class:`~realtime.bench.reference.ReferenceProbe`): ``reference_ms`` (wall) and
+``reference_cpu_ms`` (its thread's CPU time) in ``out``.
 
 An ensemble (``performer bench ensemble``): SPEC has ``performers``, a list of
 ``{"name", "osc_port", "seed", "phase"}`` (phase null: the engine's stagger), instead of
 ``osc_port`` and ``name``. One engine runs them all on the one audio input, each with its
 own VMC target and its own path ``/ws/NAME`` on one WebSocket server; ``ready`` carries
 ``ws_paths``; ``out`` holds ``streams`` (one record as above per performer, its own
-compute: model to sends) and the process's figures: the whole hop per frame
+compute: model to sends, wall ``compute_ms`` and the worker thread's CPU ``lane_cpu_ms``)
+and the process's figures: the whole hop per frame
 (``compute_ms``), the input stage's share (``features_ms``), CPU, RSS, extractors.
 """
 
@@ -243,6 +245,7 @@ def run(spec: dict) -> dict:
         "late_blocks": int(source.inner.late_blocks),
         "overruns": int(stats["overruns"]),
         "reference_ms": probe.times_ms(),
+        "reference_cpu_ms": probe.cpu_times_ms(),  # the probe thread's CPU time per run
         # per frame, the whole hop's run-queue wait (ms): other threads held the CPU
         "compute_wait_ms": engine.compute_wait_ms.values()[: lanes[0][1][2].count].tolist(),
         "compute_cpu_ms": engine.compute_cpu_ms.values()[: lanes[0][1][2].count].tolist(),  # the worker's CPU
@@ -264,6 +267,8 @@ def run(spec: dict) -> dict:
             # one performer: the whole hop (the engine's own timer); in an ensemble: this performer's part
             "compute_ms": (engine.compute_ms if ensemble is None else
                            engine.performer_compute_ms(engine.performers[len(records)])).values()[:n].tolist(),
+            # the worker thread's CPU time in it (one performer: in its model and sends only)
+            "lane_cpu_ms": engine.performer_compute_cpu_ms(engine.performers[len(records)]).values()[:n].tolist(),
             "nan_frames": int(lane["nan_frames"]),
             "sink_errors": int(lane["sink_errors"]),
             "ws_drops": int(lane["sinks"].get(ws.name, {}).get("drops", 0)),

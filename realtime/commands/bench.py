@@ -77,7 +77,9 @@ separate: each process's own), its input stage (features), CPU ms per frame of a
 performer processes, worst end-to-end p99 (OSC and WebSocket, lost frames counted as
 late), lost frames, memory; the cost of each added performer ((figure(N) - figure(1)) /
 (N - 1), and the slope over the counts); streaming equal to offline for every stagger
-phase. Budget (benchmarks/budgets.toml [ensemble]): per_hop_ms_p99_4.
+phase; the costliest point of the performers' cost cycle (median lane CPU time) over the
+reference workload's CPU median of the same run. Budgets (benchmarks/budgets.toml
+[ensemble]): lane_cycle_over_reference_4 (any machine), per_hop_ms_p99_own_4 (a quiet one).
 
 Writes OUT/ensemble.json, ensemble.md, ensemble.png.
 exit status: 0, 1 when --budgets is given and a budget is exceeded, 2 on bad input.
