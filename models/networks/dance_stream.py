@@ -80,7 +80,7 @@ BEAT_WEIGHT: float = 1.0
 #: :data:`WARP_CLARITY` (at most 1), so the motion slows into every expected beat and
 #: catches up between them: speed dips (kinematic beats) move onto the music's beats, as
 #: Dancing to Music warps its dance units to the beat. 0 plays every movement at its own pace.
-BEAT_WARP: float = 0.35
+BEAT_WARP: float = 0.45
 #: Pulse clarity at which the beat warp is at full depth (a clean click track gives about 0.5).
 WARP_CLARITY: float = 0.3
 #: The warp plays the movement this many frames late on average (the slack it slows into
