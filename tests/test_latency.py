@@ -281,6 +281,18 @@ def test_lane_cycle_is_the_costliest_cycle_position_of_any_performer_robust_to_a
     assert np.shape(planted["medians"]) == (4, 8)
 
 
+def test_hop_cycle_peak_sees_code_steps_piled_on_one_hop():
+    """4 performers whose code steps (+0.6 ms) fall on 4 of the 8 positions: the costliest
+    position stands little above the median one; all 4 on position 0 (no stagger): far above."""
+    from realtime.bench.suite import hop_cycle_peak
+
+    idx = np.arange(600)
+    staggered = 2.0 + 0.6 * (idx % 2 == 0)  # one code step on every other hop
+    piled = 2.0 + 2.4 * (idx % 8 == 0)
+    assert hop_cycle_peak(idx, staggered, 8) == pytest.approx(2.6 / 2.3)
+    assert hop_cycle_peak(idx, piled, 8) == pytest.approx(2.2) and hop_cycle_peak(idx, piled, 1) == 1.0
+
+
 def test_own_hop_time_is_the_wall_time_less_the_run_queue_wait():
     from realtime.bench.suite import own_hop_ms
 
@@ -481,7 +493,7 @@ def test_ensemble_budget_passes_clean_and_fails_a_planted_regression(tmp_path, c
         verdicts[name] = (code, {v.budget.metric: v for v in bud.check([r], bud.load_budgets(budgets))}, printed)
         m = r["metrics"]
         lines.append(f"{name}: lane cycle {m['lane_cycle_ms_4']:.2f} ms / reference CPU {r['rows'][0]['reference_cpu_ms_p50']:.2f}"
-              f" = {m['lane_cycle_over_reference_4']:.2f}; own p99 {m['per_hop_ms_p99_own_4']:.2f}; wall p99 "
+              f" = {m['lane_cycle_over_reference_4']:.2f}; hop cycle peak {m['hop_cycle_peak_4']:.2f}; own p99 {m['per_hop_ms_p99_own_4']:.2f}; wall p99 "
               f"{m['per_hop_ms_p99_4']:.2f}; other processes {m['others_busy_percent']:.0f}% of the CPUs")
     print("\n".join(lines))
     code, v, printed = verdicts["clean"]
