@@ -251,6 +251,14 @@ def test_quiet_budget_is_not_applicable_while_other_processes_hold_the_cpus(tmp_
     assert e2e.ok and e2e.not_applicable is not None and "63% of the CPUs" in e2e.not_applicable and lost.ok
     assert bud.format_verdicts([e2e]).splitlines()[1].split()[-3:] == ["40", "-", "n/a"]  # the figure, shown
     assert bud.tally([e2e, lost]) == "1 of 1 budget checks within budget, 0 over budget; 1 not applicable (not counted)"
+    import os
+
+    from realtime.bench.suite import others_busy_percent
+
+    # the machine's busy share less the benchmark's own processes (performers, receiver)
+    run = {"streams": [{"cpu_s": 3.0}, {"cpu_s": 1.0}], "receiver_cpu_s": 1.0, "wall_s": 10.0, "machine_busy_percent": 80.0}
+    assert others_busy_percent(run) == pytest.approx(80.0 - 50.0 / (os.cpu_count() or 1))
+    assert others_busy_percent({**run, "machine_busy_percent": 1.0}) == 0.0
     for busy in (4.0, None):  # a quiet machine, or a result without the figure: checked
         e2e, _ = verdicts(busy)
         assert e2e.not_applicable is None and not e2e.ok
