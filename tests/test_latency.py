@@ -251,6 +251,14 @@ def test_quiet_budget_is_not_applicable_while_other_processes_hold_the_cpus(tmp_
     assert e2e.ok and e2e.not_applicable is not None and "63% of the CPUs" in e2e.not_applicable and lost.ok
     assert bud.format_verdicts([e2e]).splitlines()[1].split()[-3:] == ["40", "-", "n/a"]  # the figure, shown
     assert bud.tally([e2e, lost]) == "1 of 1 budget checks within budget, 0 over budget; 1 not applicable (not counted)"
+    import os
+
+    from realtime.bench.suite import others_busy_percent
+
+    # the machine's busy share less the benchmark's own processes (performers, receiver)
+    run = {"streams": [{"cpu_s": 3.0}, {"cpu_s": 1.0}], "receiver_cpu_s": 1.0, "wall_s": 10.0, "machine_busy_percent": 80.0}
+    assert others_busy_percent(run) == pytest.approx(80.0 - 50.0 / (os.cpu_count() or 1))
+    assert others_busy_percent({**run, "machine_busy_percent": 1.0}) == 0.0
     for busy in (4.0, None):  # a quiet machine, or a result without the figure: checked
         e2e, _ = verdicts(busy)
         assert e2e.not_applicable is None and not e2e.ok
@@ -279,6 +287,18 @@ def test_lane_cycle_is_the_costliest_cycle_position_of_any_performer_robust_to_a
     assert clean["ms"] == pytest.approx(0.905, abs=0.01) and clean["position"] == 0
     assert planted["ms"] == pytest.approx(1.905, abs=0.01) and (planted["lane"], planted["position"]) == (0, 0)
     assert np.shape(planted["medians"]) == (4, 8)
+
+
+def test_hop_cycle_peak_sees_code_steps_piled_on_one_hop():
+    """4 performers whose code steps (+0.6 ms) fall on 4 of the 8 positions: the costliest
+    position stands little above the median one; all 4 on position 0 (no stagger): far above."""
+    from realtime.bench.suite import hop_cycle_peak
+
+    idx = np.arange(600)
+    staggered = 2.0 + 0.6 * (idx % 2 == 0)  # one code step on every other hop
+    piled = 2.0 + 2.4 * (idx % 8 == 0)
+    assert hop_cycle_peak(idx, staggered, 8) == pytest.approx(2.6 / 2.3)
+    assert hop_cycle_peak(idx, piled, 8) == pytest.approx(2.2) and hop_cycle_peak(idx, piled, 1) == 1.0
 
 
 def test_own_hop_time_is_the_wall_time_less_the_run_queue_wait():
@@ -481,7 +501,7 @@ def test_ensemble_budget_passes_clean_and_fails_a_planted_regression(tmp_path, c
         verdicts[name] = (code, {v.budget.metric: v for v in bud.check([r], bud.load_budgets(budgets))}, printed)
         m = r["metrics"]
         lines.append(f"{name}: lane cycle {m['lane_cycle_ms_4']:.2f} ms / reference CPU {r['rows'][0]['reference_cpu_ms_p50']:.2f}"
-              f" = {m['lane_cycle_over_reference_4']:.2f}; own p99 {m['per_hop_ms_p99_own_4']:.2f}; wall p99 "
+              f" = {m['lane_cycle_over_reference_4']:.2f}; hop cycle peak {m['hop_cycle_peak_4']:.2f}; own p99 {m['per_hop_ms_p99_own_4']:.2f}; wall p99 "
               f"{m['per_hop_ms_p99_4']:.2f}; other processes {m['others_busy_percent']:.0f}% of the CPUs")
     print("\n".join(lines))
     code, v, printed = verdicts["clean"]

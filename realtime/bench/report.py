@@ -445,11 +445,12 @@ def _reference_line(rows: list[dict], settings: dict) -> str:
     """The reference workload's p50 / p99 per run (what scaled budgets use), and a planted regression if any."""
     refs = "; ".join(f"{row['performers']} {row['mode']}: {_f(row.get('reference_ms_p50'))} / "
                      f"{_f(row.get('reference_ms_p99'))}" for row in rows)
-    text = (f"Reference workload timed between the hops in the same process (p50 / p99 ms; budgets scaled to the "
-            f"machine, docs/latency.md): {refs}.")
+    text = (f"Reference workload timed between the hops in the same process (p50 / p99 ms; docs/latency.md, "
+            f"Budgets on a shared machine): {refs}.")
     cycles = "; ".join(f"{row['performers']} {row['mode']}: {_f(row['lane_cycle_ms'])} ms (performer "
                        f"{row['lane_cycle_at'][0]}, position {row['lane_cycle_at'][1]}) / {_f(row['reference_cpu_ms_p50'])}"
-                       f" = {_f(row['lane_cycle_over_reference'])}" for row in rows
+                       f" = {_f(row['lane_cycle_over_reference'])}; whole hop's costliest position over the median "
+                       f"one {_f(row.get('hop_cycle_peak'))}" for row in rows
                        if row.get("lane_cycle_ms") is not None and row.get("lane_cycle_over_reference") is not None)
     if cycles:
         text += (" Costliest point of the cost cycle (median lane CPU time at one position of one performer's "

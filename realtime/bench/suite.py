@@ -234,6 +234,22 @@ def lane_cycle_ms(streams: list[dict], cycle: int) -> dict:
     return {"ms": float(med[j, m]), "lane": int(j), "position": int(m), "medians": med.tolist()}
 
 
+def hop_cycle_peak(index, hop_cpu_ms, cycle: int) -> float:
+    """How far the costliest position of the cost cycle stands above the others, for the whole
+    hop: per position ``m`` (frames whose ``index % cycle == m``), the median of the worker
+    thread's CPU time per frame (``hop_cpu_ms``); the largest median over the median of these
+    medians (1.0 for a cycle of 1 frame; NaN without data). Staggered performers spread their
+    code steps over the positions (about 1.03 for 4 dance_vq performers); code steps piled on
+    one hop (a broken stagger) or work added on one position raise it."""
+    idx = np.asarray(index, dtype=np.int64)
+    cpu = np.asarray(hop_cpu_ms, dtype=np.float64)[: len(idx)]
+    pos = idx[: len(cpu)] % cycle
+    med = np.array([np.nanmedian(cpu[pos == m]) if np.any(pos == m) else np.nan for m in range(cycle)])
+    if not np.isfinite(med).any():
+        return float("nan")
+    return float(np.nanmax(med) / np.nanmedian(med))
+
+
 def frame_series(rec: dict) -> dict[str, np.ndarray]:
     """Per-frame arrays for the plots: time since start (s), per-hop, e2e OSC/WS, jitter (ms)."""
     idx = np.asarray(rec["index"], dtype=np.float64)
@@ -790,6 +806,7 @@ def _ensemble_row(n: int, mode: str, run: dict, cycle: int = 1) -> dict:
         reference = summarize(np.asarray(proc.get("reference_ms", []), dtype=np.float64))
         reference_cpu = summarize(np.asarray(proc.get("reference_cpu_ms", []), dtype=np.float64))["p50"]
         lanes = lane_cycle_ms(run["streams"], cycle)
+        peak = hop_cycle_peak(run["streams"][0]["index"], _cpu_ms(proc, len(proc["compute_ms"])), cycle)
     else:  # separate processes: each its own hop (features included); CPU and memory summed
         hop_p50 = float(np.median([m["per_hop_ms"]["p50"] for m in per]))
         hop_p99 = max(m["per_hop_ms"]["p99"] for m in per)
@@ -802,7 +819,7 @@ def _ensemble_row(n: int, mode: str, run: dict, cycle: int = 1) -> dict:
         extractors = n
         reference = summarize(np.concatenate([np.asarray(r.get("reference_ms", []), dtype=np.float64)
                                               for r in run["streams"]]))
-        reference_cpu = None
+        reference_cpu = peak = None
     return {
         "performers": n,
         "mode": mode,
@@ -833,6 +850,7 @@ def _ensemble_row(n: int, mode: str, run: dict, cycle: int = 1) -> dict:
         "lane_cycle_medians": lanes["medians"],
         "lane_cycle_over_reference": (lanes["ms"] / reference_cpu if lanes["ms"] is not None and reference_cpu
                                       else None),
+        "hop_cycle_peak": peak,  # the whole hop's costliest cycle position over the others (one process)
         "others_busy_percent": others_busy_percent(run),
     }
 
@@ -861,7 +879,8 @@ def ensemble_metrics(r: dict) -> dict[str, float]:
     """The flat figures budgets are checked against (keys of ``[ensemble]`` in budgets.toml):
     ``per_hop_ms_p99_N`` / ``per_hop_ms_p50_N`` (one process, staggered) for every N run,
     ``lane_cycle_ms_N`` and its ratio to the reference workload's CPU time of the same run
-    (``lane_cycle_over_reference_N``, :func:`lane_cycle_ms`), the slopes of the added
+    (``lane_cycle_over_reference_N``, :func:`lane_cycle_ms`), ``hop_cycle_peak_N``
+    (:func:`hop_cycle_peak`), the slopes of the added
     performer's cost in one process, lost frames (one process), the largest
     stream-vs-offline difference over the phases and the other processes' largest share of
     the CPUs during a run (``others_busy_percent``)."""
@@ -878,6 +897,7 @@ def ensemble_metrics(r: dict) -> dict[str, float]:
             m[f"reference_ms_{row['performers']}_p99"] = row["reference_ms_p99"]
             m[f"lane_cycle_ms_{row['performers']}"] = row["lane_cycle_ms"]
             m[f"lane_cycle_over_reference_{row['performers']}"] = row["lane_cycle_over_reference"]
+            m[f"hop_cycle_peak_{row['performers']}"] = row["hop_cycle_peak"]
     one = r["marginal"].get("one process")
     if one is not None:
         m["added_performer_hop_ms_p50"] = one["per_hop_ms_p50"]["slope"]
