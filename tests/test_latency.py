@@ -301,6 +301,22 @@ def test_hop_cycle_peak_sees_code_steps_piled_on_one_hop():
     assert hop_cycle_peak(idx, piled, 8) == pytest.approx(2.2) and hop_cycle_peak(idx, piled, 1) == 1.0
 
 
+def test_hop_cycle_medians_see_work_added_to_every_hop():
+    """The whole hop's median per position (hop_cycle_over_reference's numerator): 1 ms more on
+    every hop (an input-stage regression, which no lane ratio sees) moves every median by 1 ms,
+    rare slow hops (a busy machine) move none."""
+    from realtime.bench.suite import hop_cycle_medians
+
+    idx = np.arange(600)
+    base = 2.0 + 0.6 * (idx % 2 == 0)
+    busy = base + 20.0 * (idx % 37 == 0)  # a slow hop now and then, on every position
+    assert hop_cycle_medians(idx, base, 8) == pytest.approx([2.6, 2.0] * 4)
+    assert hop_cycle_medians(idx, busy, 8) == pytest.approx([2.6, 2.0] * 4)
+    assert hop_cycle_medians(idx, base + 1.0, 8) == pytest.approx([3.6, 3.0] * 4)
+    nan = hop_cycle_medians(idx[:3], base[:3], 8)
+    assert nan[:3] == pytest.approx([2.6, 2.0, 2.6]) and np.isnan(nan[3:]).all()
+
+
 def test_own_hop_time_is_the_wall_time_less_the_run_queue_wait():
     from realtime.bench.suite import own_hop_ms
 
@@ -489,11 +505,13 @@ def test_ensemble_budget_passes_clean_and_fails_a_planted_regression(tmp_path, c
     in one performer's lane (the hidden --inject-ms hook, on that performer's code-step
     frames), the budget on the costliest point of the cost cycle over the reference
     workload of the same run, lane_cycle_over_reference_4, fails (docs/latency.md, "Budgets
-    on a shared machine")."""
+    on a shared machine"); with 2 ms on every frame, as an input-stage regression would add
+    to every hop, the whole hop's budget hop_cycle_over_reference_4 fails."""
     budgets = REPO / "benchmarks" / "budgets.toml"
     verdicts, lines = {}, []
-    for name, extra in (("clean", []), ("planted", ["--inject-ms", "1", "--inject-every", "8"])):
-        out = tmp_path / name
+    for name, extra in (("clean", []), ("planted", ["--inject-ms", "1", "--inject-every", "8"]),
+                        ("every hop", ["--inject-ms", "2", "--inject-every", "1"])):
+        out = tmp_path / name.replace(" ", "_")
         code = main(["bench", "ensemble", "--counts", "4", "--no-separate", "--unstaggered", "--seconds", "10",
                      "--out", str(out), "--budgets", str(budgets), *extra])
         printed = capsys.readouterr().out
@@ -501,11 +519,14 @@ def test_ensemble_budget_passes_clean_and_fails_a_planted_regression(tmp_path, c
         verdicts[name] = (code, {v.budget.metric: v for v in bud.check([r], bud.load_budgets(budgets))}, printed)
         m = r["metrics"]
         lines.append(f"{name}: lane cycle {m['lane_cycle_ms_4']:.2f} ms / reference CPU {r['rows'][0]['reference_cpu_ms_p50']:.2f}"
-              f" = {m['lane_cycle_over_reference_4']:.2f}; hop cycle peak {m['hop_cycle_peak_4']:.2f}; own p99 {m['per_hop_ms_p99_own_4']:.2f}; wall p99 "
+              f" = {m['lane_cycle_over_reference_4']:.2f}; hop cycle peak {m['hop_cycle_peak_4']:.2f}; hop cycle / reference "
+              f"{m['hop_cycle_over_reference_4']:.2f}; own p99 {m['per_hop_ms_p99_own_4']:.2f}; wall p99 "
               f"{m['per_hop_ms_p99_4']:.2f}; other processes {m['others_busy_percent']:.0f}% of the CPUs")
     print("\n".join(lines))
     code, v, printed = verdicts["clean"]
     assert code == 0 and all(x.ok for x in v.values()), printed
+    code, v, printed = verdicts["every hop"]  # work on every hop, as an input-stage regression would add
+    assert code == 1 and not v["hop_cycle_over_reference_4"].ok, printed
     code, v, printed = verdicts["planted"]
     assert code == 1 and not v["lane_cycle_over_reference_4"].ok, printed
     assert r["rows"][0]["lane_cycle_at"] == [0, 0]  # the first performer's code step, where the work was planted

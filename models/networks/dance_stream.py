@@ -109,7 +109,9 @@ RATE_RANGE: tuple[float, float] = (0.55, 1.75)
 #: rate is blended towards 1 (no clear pulse: the movements' own pace).
 RATE_CONFIDENCE: float = 0.15
 #: Quantile of the exemplars' mean joint speeds that no movement is sped up past (a movement
-#: already faster plays at rate 1 at most).
+#: already faster plays at rate 1 at most). Above energy 1 (:meth:`DanceStream.set_energy`)
+#: the quantile rises with the energy, to the memory's fastest exemplar at 2: at a fast
+#: tempo the capped livelier movements would otherwise play no faster than energy 1's.
 SPEED_CAP: float = 0.9
 #: Quantile of the memory's per-frame largest bone rotation (over all its exemplars' frames:
 #: 30.5 degrees for the shipped model, the dancers' own 99.9th percentile) that no bone of a
@@ -430,7 +432,8 @@ class DanceStream:
         self._code_energy, speed = _cached_energy(model, self._members, self.seg)  # (K,) z-scores, (K, M) m/frame
         real = np.arange(speed.shape[1])[None, :] < self._counts[:, None]
         # how fast a movement may be sped up to (m/frame), and the memory's mean tempo (frames per beat)
-        self._speed_cap = float(np.quantile(speed[real], SPEED_CAP)) if real.any() else np.inf
+        self._speeds = speed[real]  # every exemplar's mean joint speed (m/frame): the speed cap's quantiles
+        self._speed_cap = self._speed_cap_at(1.0)
         self._bone_cap = _cached_bone_cap(model, self._members, self._counts)  # degrees a frame
         self._member_speed = speed
         period = model.member_period.numpy().astype(np.float64)  # (K, M) each exemplar's song; 0 unknown
@@ -511,7 +514,17 @@ class DanceStream:
         if not lo <= e <= hi:  # NaN fails too
             raise ConfigError(f"energy must be in [{lo:g}, {hi:g}] (1: as the music asks), got {energy!r}")
         self._energy_bias = None if e == 1.0 else (ENERGY_GAIN * (e - 1.0) * self._code_energy).astype(np.float32)
+        self._speed_cap = self._speed_cap_at(e)
         self.energy = e
+
+    def _speed_cap_at(self, energy: float) -> float:
+        """The speed (m/frame) no movement is sped up past at ``energy``: the memory's
+        :data:`SPEED_CAP` quantile up to energy 1, rising linearly to its fastest exemplar at 2
+        (inf without exemplars)."""
+        if not len(self._speeds):
+            return np.inf
+        q = SPEED_CAP + (1.0 - SPEED_CAP) * min(1.0, max(0.0, energy - 1.0))
+        return float(np.quantile(self._speeds, q))
 
     def set_lead(self, lead_ms: float) -> None:
         """Send the poses ``lead_ms`` (0..200 ms, rounded to whole 30 fps frames) ahead of the

@@ -234,17 +234,24 @@ def lane_cycle_ms(streams: list[dict], cycle: int) -> dict:
     return {"ms": float(med[j, m]), "lane": int(j), "position": int(m), "medians": med.tolist()}
 
 
-def hop_cycle_peak(index, hop_cpu_ms, cycle: int) -> float:
-    """How far the costliest position of the cost cycle stands above the others, for the whole
-    hop: per position ``m`` (frames whose ``index % cycle == m``), the median of the worker
-    thread's CPU time per frame (``hop_cpu_ms``); the largest median over the median of these
-    medians (1.0 for a cycle of 1 frame; NaN without data). Staggered performers spread their
-    code steps over the positions (about 1.03 for 4 dance_vq performers); code steps piled on
-    one hop (a broken stagger) or work added on one position raise it."""
+def hop_cycle_medians(index, hop_cpu_ms, cycle: int) -> np.ndarray:
+    """Per position ``m`` of the cost cycle (frames whose ``index % cycle == m``), the median of
+    the worker thread's CPU time per frame for the whole hop (``hop_cpu_ms``: input stage and
+    every lane), ms (cycle,); NaN for a position without data."""
     idx = np.asarray(index, dtype=np.int64)
     cpu = np.asarray(hop_cpu_ms, dtype=np.float64)[: len(idx)]
     pos = idx[: len(cpu)] % cycle
-    med = np.array([np.nanmedian(cpu[pos == m]) if np.any(pos == m) else np.nan for m in range(cycle)])
+    return np.array([np.nanmedian(cpu[pos == m]) if np.any(pos == m) and np.isfinite(cpu[pos == m]).any()
+                     else np.nan for m in range(cycle)])
+
+
+def hop_cycle_peak(index, hop_cpu_ms, cycle: int) -> float:
+    """How far the costliest position of the cost cycle stands above the others, for the whole
+    hop: the largest of :func:`hop_cycle_medians` over their median (1.0 for a cycle of 1
+    frame; NaN without data). Staggered performers spread their code steps over the positions
+    (about 1.03 for 4 dance_vq performers); code steps piled on one hop (a broken stagger) or
+    work added on one position raise it."""
+    med = hop_cycle_medians(index, hop_cpu_ms, cycle)
     if not np.isfinite(med).any():
         return float("nan")
     return float(np.nanmax(med) / np.nanmedian(med))
@@ -807,6 +814,8 @@ def _ensemble_row(n: int, mode: str, run: dict, cycle: int = 1) -> dict:
         reference_cpu = summarize(np.asarray(proc.get("reference_cpu_ms", []), dtype=np.float64))["p50"]
         lanes = lane_cycle_ms(run["streams"], cycle)
         peak = hop_cycle_peak(run["streams"][0]["index"], _cpu_ms(proc, len(proc["compute_ms"])), cycle)
+        hop_med = hop_cycle_medians(run["streams"][0]["index"], _cpu_ms(proc, len(proc["compute_ms"])), cycle)
+        hop_cycle = float(np.nanmax(hop_med)) if np.isfinite(hop_med).any() else None
     else:  # separate processes: each its own hop (features included); CPU and memory summed
         hop_p50 = float(np.median([m["per_hop_ms"]["p50"] for m in per]))
         hop_p99 = max(m["per_hop_ms"]["p99"] for m in per)
@@ -819,7 +828,7 @@ def _ensemble_row(n: int, mode: str, run: dict, cycle: int = 1) -> dict:
         extractors = n
         reference = summarize(np.concatenate([np.asarray(r.get("reference_ms", []), dtype=np.float64)
                                               for r in run["streams"]]))
-        reference_cpu = peak = None
+        reference_cpu = peak = hop_cycle = None
     return {
         "performers": n,
         "mode": mode,
@@ -851,6 +860,8 @@ def _ensemble_row(n: int, mode: str, run: dict, cycle: int = 1) -> dict:
         "lane_cycle_over_reference": (lanes["ms"] / reference_cpu if lanes["ms"] is not None and reference_cpu
                                       else None),
         "hop_cycle_peak": peak,  # the whole hop's costliest cycle position over the others (one process)
+        # the whole hop's (input stage and lanes) costliest cycle position, CPU median, over the reference's
+        "hop_cycle_over_reference": (hop_cycle / reference_cpu if hop_cycle is not None and reference_cpu else None),
         "others_busy_percent": others_busy_percent(run),
     }
 
@@ -880,7 +891,8 @@ def ensemble_metrics(r: dict) -> dict[str, float]:
     ``per_hop_ms_p99_N`` / ``per_hop_ms_p50_N`` (one process, staggered) for every N run,
     ``lane_cycle_ms_N`` and its ratio to the reference workload's CPU time of the same run
     (``lane_cycle_over_reference_N``, :func:`lane_cycle_ms`), ``hop_cycle_peak_N``
-    (:func:`hop_cycle_peak`), the slopes of the added
+    (:func:`hop_cycle_peak`), the whole hop's costliest position over the reference
+    (``hop_cycle_over_reference_N``, :func:`hop_cycle_medians`), the slopes of the added
     performer's cost in one process, lost frames (one process), the largest
     stream-vs-offline difference over the phases and the other processes' largest share of
     the CPUs during a run (``others_busy_percent``)."""
@@ -898,6 +910,7 @@ def ensemble_metrics(r: dict) -> dict[str, float]:
             m[f"lane_cycle_ms_{row['performers']}"] = row["lane_cycle_ms"]
             m[f"lane_cycle_over_reference_{row['performers']}"] = row["lane_cycle_over_reference"]
             m[f"hop_cycle_peak_{row['performers']}"] = row["hop_cycle_peak"]
+            m[f"hop_cycle_over_reference_{row['performers']}"] = row.get("hop_cycle_over_reference")
     one = r["marginal"].get("one process")
     if one is not None:
         m["added_performer_hop_ms_p50"] = one["per_hop_ms_p50"]["slope"]
