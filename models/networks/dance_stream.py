@@ -119,7 +119,7 @@ SPEED_CAP: float = 0.9
 #: play, would turn faster at the tempo's rate plays slower (at its own pace at least), and
 #: the rate it takes over from the last movement is held to the same bound. The mean-speed
 #: cap alone let a fast head turn (37 degrees a frame in its exemplar) play at 1.37x under
-#: the beat warp: 58 degrees in one frame, once in the hour's soak (docs/listening.md).
+#: the beat warp: 58 degrees in one frame, once in the hour's soak (docs/reliability.md).
 BONE_CAP: float = 0.999
 #: Classifier-free guidance of a requested style (Ho & Salimans 2021): the logits move from
 #: the music-only ones ("auto") past the style-conditioned ones by this factor. The predictor
@@ -504,7 +504,7 @@ class DanceStream:
     def set_energy(self, energy: float) -> None:
         """How lively the movements are, from the next code on: 0 (the calmest the music
         allows) .. 1 (as the music asks, the default) .. 2 (the liveliest); ConfigError
-        outside :data:`ENERGY_RANGE` or not a number. See :data:`ENERGY_GAIN`."""
+        outside :data:`ENERGY_RANGE` or not a number. See :data:`ENERGY_GAIN` and :data:`SPEED_CAP`."""
         lo, hi = ENERGY_RANGE
         try:
             e = float(energy)
