@@ -57,9 +57,9 @@ def hand_speed(pos: np.ndarray) -> float:
 
 def largest_bone_step(poses: np.ndarray) -> float:
     """The largest rotation of any bone between consecutive frames, degrees; poses (T, P)."""
-    q = poses[:, 3:].reshape(len(poses), -1, 4).astype(np.float64)
-    dot = np.clip(np.abs((q[1:] * q[:-1]).sum(-1)), 0.0, 1.0)
-    return float(np.degrees(2.0 * np.arccos(dot)).max()) if len(dot) else 0.0
+    from models.evaluation.listening import bone_steps_deg
+
+    return float(bone_steps_deg(poses).max()) if len(poses) > 1 else 0.0
 
 
 def measure_song(model, features: np.ndarray, real_pos: np.ndarray, levels: Sequence[float],

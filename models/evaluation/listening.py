@@ -140,10 +140,11 @@ def beat_hits(pos: np.ndarray, beats: np.ndarray, fps: float = FPS, tolerance: i
 
 def bone_steps_deg(poses: np.ndarray) -> np.ndarray:
     """(T - 1,) largest bone rotation (degrees) between consecutive poses (T, P) (root
-    position then unit quaternions x, y, z, w per bone)."""
-    q = np.asarray(poses)[:, 3:].reshape(len(poses), -1, 4)
-    dot = np.clip(np.abs((q[1:] * q[:-1]).sum(-1)), 0, 1)
-    return np.degrees(2 * np.arccos(dot)).max(1)
+    position then quaternions x, y, z, w per bone): :func:`models.rig.kinematics.rotation_jumps_deg`."""
+    from models.rig.kinematics import rotation_jumps_deg
+
+    p = np.asarray(poses, np.float64)
+    return rotation_jumps_deg(p[:, 3:].reshape(len(p), -1, 4)).max(1)
 
 
 def smooth(x: np.ndarray, seconds: float = SMOOTH_S, fps: float = FPS) -> np.ndarray:

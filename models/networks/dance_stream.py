@@ -51,6 +51,7 @@ from models.networks.music_gate import ENERGY_COL, START_FRAMES, MusicGate
 from models.networks.streaming import FEATURE_LIMIT
 from models.networks.tempo import DENSITY_WINDOW, TempoFollower, danced_beat, onset_density
 from models.rig.humanoid import BONE_INDEX
+from models.rig.kinematics import rotation_jumps_deg
 from models.timebase import FPS
 
 #: Frames without music before the performer starts to settle (0.5 s).
@@ -348,23 +349,15 @@ def _cached_energy(model: DanceVQ, members: np.ndarray, seg: int) -> tuple[np.nd
     return cached[1]
 
 
-def bone_steps(window: np.ndarray) -> np.ndarray:
-    """(F - 1,) the largest bone rotation (degrees) between consecutive poses of ``window`` (F, P)
-    (root position, then quaternions x, y, z, w per bone; signs need not be continuous)."""
-    q = window[:, 3:].reshape(len(window), -1, 4)
-    dot = np.abs(np.add.reduce(q[1:] * q[:-1], axis=-1)) / np.maximum(
-        np.sqrt(np.add.reduce(q[1:] * q[1:], axis=-1) * np.add.reduce(q[:-1] * q[:-1], axis=-1)), 1e-12)
-    return np.degrees(2.0 * np.arccos(np.minimum(dot, 1.0))).max(axis=1)
-
-
 def _cached_bone_cap(model: DanceVQ, members: np.ndarray, counts: np.ndarray) -> float:
-    """The :data:`BONE_CAP` quantile (degrees a frame) of :func:`bone_steps` over every exemplar
-    frame of ``model``'s memory (inf without exemplars), kept on the model like :func:`_cached_members`."""
+    """The :data:`BONE_CAP` quantile (degrees a frame) of every exemplar frame's largest bone
+    rotation (:func:`models.rig.kinematics.rotation_jumps_deg`) in ``model``'s memory (inf
+    without exemplars), kept on the model like :func:`_cached_members`."""
     key = (_weights_key([model.member_poses, model.member_count]), BONE_CAP)
     cached = getattr(model, "_bone_cap_cache", None)
     if cached is None or cached[0] != key:
         real = np.arange(members.shape[1])[None, :] < counts[:, None]
-        steps = [bone_steps(w) for w in members[real]]
+        steps = [rotation_jumps_deg(w[:, 3:].reshape(len(w), -1, 4)).max(axis=1) for w in members[real]]
         cached = (key, float(np.quantile(np.concatenate(steps), BONE_CAP)) if steps else np.inf)
         model._bone_cap_cache = cached
     return cached[1]
@@ -683,7 +676,7 @@ class DanceStream:
         if not FOLLOW_TEMPO or rate <= 1.0:
             return np.inf
         n = min(len(window), int(math.ceil(self.seg * rate + 2 * WARP_LAG)) + 1)
-        q = window[:n, 3:]  # unit quaternions (match_exemplar's, or _unit's): bone_steps without its norms
+        q = window[:n, 3:]  # unit quaternions (match_exemplar's, or _unit's): rotation_jumps_deg without its norms
         dot = float(np.abs(np.add.reduce((q[1:] * q[:-1]).reshape(n - 1, -1, 4), axis=-1)).min())
         peak = math.degrees(2.0 * math.acos(min(dot, 1.0)))
         return max(1.0, self._bone_cap / peak) if peak > 0.0 else np.inf
