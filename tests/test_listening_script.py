@@ -163,7 +163,8 @@ def test_perform_is_generate_and_reads_the_idle_weight(shipped):
     assert 6 * FPS <= L.sounding_frames(shipped, extract_features(y, shipped.features)) <= 6 * FPS + 3
     trace: dict = {}
     assert np.array_equal(L.perform(shipped, y, seed=3, trace=trace)[0], poses)  # tracing changes nothing
-    tempo, rate = trace["tempo_bpm"], trace["rate"]
+    tempo, rate, own = trace["tempo_bpm"], trace["rate"], trace["movement_speed"]
+    assert np.all(own[: 6 * FPS] > 0.0)  # the playing movement's own speed, m/s, from the first code step on
     assert tempo[0] == 0.0 and np.all((60 <= tempo[3 * FPS: 6 * FPS]) & (tempo[3 * FPS: 6 * FPS] <= 170))
     assert rate[0] == 1.0 and np.mean(rate[3 * FPS: 6 * FPS] != 1.0) > 0.5  # the movements follow the heard tempo
 
@@ -194,7 +195,7 @@ def test_run_on_a_tiny_synthetic_set(tmp_path, shipped):
     assert len(m["presence"]["speech"]) == 1
     assert len(list((tmp_path / "cache").glob("clip-*-x1.25-*.npy"))) == 1  # the stretch is cached
     s = m["summary"]
-    assert {"speed_ratio", "centroid_ratio", "hit_min", "idle_max", "idle_sounding_max", "speech_held"} <= set(s)
+    assert {"speed_ratio", "movement_speed_ratio", "centroid_ratio", "hit_min", "idle_max", "idle_sounding_max", "speech_held"} <= set(s)
     text = L.markdown(res, "cmd")
     assert "| mean joint speed 1.25x / 0.8x (>= 1.4) |" in text and "clip" in text
     assert any(line.startswith(("PASS", "FAIL")) for line in L.verdict_lines(res))

@@ -333,20 +333,22 @@ def perform(lm, audio: np.ndarray, seed: int = 0, trace: dict | None = None) -> 
     (:class:`models.generate.LoadedModel`) on ``audio`` (n,) at 22050 Hz, T = n // HOP:
     features as ``performer generate`` computes them, the live stream pushed frame by frame
     (the same poses as :func:`models.networks.dance_stream.generate` with ``seed``). A
-    ``trace`` dict receives ``tempo_bpm`` and ``rate`` (T,): the stream's followed tempo and
-    playback rate after every frame."""
+    ``trace`` dict receives ``tempo_bpm``, ``rate`` and ``movement_speed`` (T,): the stream's
+    followed tempo, playback rate and the playing movement's own mean joint speed (m/s at its
+    own pace: what the choice of movement sets) after every frame."""
     from models.features.spectral import extract_features
     from models.networks.dance_stream import DanceStream
 
     feats = extract_features(np.asarray(audio, np.float32), lm.features)
     stream = DanceStream(lm.model, seed=seed)
     poses = np.empty((len(feats), lm.model.config.pose_dim), np.float32)
-    w, tempo, rate = np.empty(len(feats)), np.empty(len(feats)), np.empty(len(feats))
+    w, tempo, rate, own = (np.empty(len(feats)) for _ in range(4))
     for t in range(len(feats)):
         poses[t] = stream.push(feats[t: t + 1])[0]
-        w[t], tempo[t], rate[t] = stream.idle_weight, stream.tempo_bpm, stream.playback_rate
+        w[t], tempo[t], rate[t], own[t] = (stream.idle_weight, stream.tempo_bpm, stream.playback_rate,
+                                           stream.movement_speed)
     if trace is not None:
-        trace.update(tempo_bpm=tempo, rate=rate)
+        trace.update(tempo_bpm=tempo, rate=rate, movement_speed=own)
     return poses, w
 
 
@@ -474,14 +476,18 @@ def stretch_set(lm, cache: AudioCache, songs: list[tuple[Path, float]], opts: Op
     for p, bpm, r in _bar(jobs, f"stretch set {lm.path.name}", opts):
         start, seconds = _excerpt_window(cache, p, opts)
         y = cache.excerpt(p, start, seconds, r)
-        poses, _ = perform(lm, y, opts.seed)
+        trace: dict = {}
+        poses, _ = perform(lm, y, opts.seed, trace)
         row = by_song.setdefault(p, {"song": song_name(p), "bpm": bpm, "start_s": start, "seconds": seconds,
                                      "rates": {}})
         row["rates"][f"{r:g}"] = score_motion(poses, reference_beats(cache, p, start, r, len(poses)))
+        # the chosen movements' own speed (m/s, at their own pace), from SETTLE_S on, as score_motion
+        row["rates"][f"{r:g}"]["movement_speed"] = float(trace["movement_speed"][int(SETTLE_S * FPS):].mean())
     for p, _ in songs:
         row = by_song[p]
         lo, mid, hi = (row["rates"][f"{r:g}"] for r in STRETCH_RATES)
         row["speed_ratio"] = hi["speed"] / max(lo["speed"], 1e-12)
+        row["movement_speed_ratio"] = hi["movement_speed"] / max(lo["movement_speed"], 1e-12)
         row["centroid_ratio"] = hi["centroid_hz"] / max(lo["centroid_hz"], 1e-12)
         row["kin_bpm_ratio"] = hi["kin_bpm"] / max(lo["kin_bpm"], 1e-12)
         row["amp_rel"] = {k: v["amp_m"] / max(mid["amp_m"], 1e-12) for k, v in row["rates"].items()}
@@ -528,10 +534,13 @@ def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict
     # where the speed's correlation is lost: the followed tempo, then the playback rate (best lag each)
     follower = lagged_correlation(tempo[a:], smooth(trace["tempo_bpm"])[a:], int(MAX_LAG_S * FPS))[0]
     rate = lagged_correlation(tempo[a:], smooth(trace["rate"])[a:], int(MAX_LAG_S * FPS))[0]
+    own = smooth(trace["movement_speed"])
+    movement = lagged_correlation(tempo[a:], own[a:], int(MAX_LAG_S * FPS))[0]
     steps = bone_steps_deg(poses[int(SETTLE_S * FPS):])
     check = ramp_audio_check(y, bpm)
     return {"song": song_name(path), "bpm": bpm, "start_s": start, "corr": corr, "lag_s": lag / FPS,
-            "corr_lag0": corr0, "follower_corr": follower, "rate_corr": rate, "max_step_deg": float(steps.max()), **check, "time_s": t.tolist(),
+            "corr_lag0": corr0, "follower_corr": follower, "rate_corr": rate,
+            "movement_corr": movement, "movement_speed_range": [float(own[a:].min()), float(own[a:].max())], "max_step_deg": float(steps.max()), **check, "time_s": t.tolist(),
             "tempo_bpm": tempo.tolist(), "speed": speed.tolist(),
             "followed_bpm": smooth(trace["tempo_bpm"]).tolist(), "follows_tempo": bool(np.ptp(trace["rate"]) > 0)}
 
@@ -618,6 +627,7 @@ def summary(result: dict) -> dict[str, float | None]:
     if rows:
         mean = lambda xs: float(np.mean(xs))  # noqa: E731
         s["speed_ratio"] = mean([r["speed_ratio"] for r in rows])
+        s["movement_speed_ratio"] = mean([r.get("movement_speed_ratio", float("nan")) for r in rows])
         s["centroid_ratio"] = mean([r["centroid_ratio"] for r in rows])
         s["kin_bpm_ratio"] = mean([r["kin_bpm_ratio"] for r in rows])
         for k in (f"{r:g}" for r in STRETCH_RATES):
@@ -755,13 +765,21 @@ def markdown(result: dict, command: str | None = None) -> str:
                          f"{s['kin_bpm_ratio']:.2f} | " + " / ".join(f"{s[f'amp_{k}']:.2f}" for k in rates)
                          + " | " + " / ".join(f"{s[f'hit_{k}']:.2f}" for k in rates) + " | "
                          + " / ".join(f"{s[f'hit_half_{k}']:.2f}" for k in rates) + " |")
+            lines += ["", "The chosen movements' own speed (at their own pace), 1.25x over 0.8x: "
+                      + ", ".join(f"{r['song']} {r['movement_speed_ratio']:.2f}" for r in m["stretch"]
+                                  if "movement_speed_ratio" in r)
+                      + f"; mean {s.get('movement_speed_ratio', float('nan')):.2f} (1: the choice does not "
+                      "follow the tempo; the speed ratio over it is what the playback rate adds)."]
         if m.get("ramp"):
             r = m["ramp"]
             lines += ["", f"Ramp on {r['song']} ({r['bpm']:.0f} bpm as recorded): correlation {r['corr']:.2f} at "
                       f"lag {r['lag_s']:.2f} s ({r['corr_lag0']:.2f} at lag 0), largest bone rotation "
                       f"{r['max_step_deg']:.1f} deg a frame. Against the real tempo, the followed tempo "
-                      f"correlates {r.get('follower_corr', float('nan')):.2f} and the playback rate "
-                      f"{r.get('rate_corr', float('nan')):.2f}. The ramp's audio: local tempo (librosa's tempogram) against "
+                      f"correlates {r.get('follower_corr', float('nan')):.2f}, the playback rate "
+                      f"{r.get('rate_corr', float('nan')):.2f}, and the chosen movements' own speed "
+                      f"{r.get('movement_corr', float('nan')):.2f} ("
+                      + " to ".join(f"{v:.2f}" for v in r.get("movement_speed_range", [float("nan")] * 2))
+                      + " m/s over 4 s, at their own pace). The ramp's audio: local tempo (librosa's tempogram) against "
                       f"the intended tempo, correlation {r['audio_tempo_corr']:.2f}, median error "
                       f"{100 * r['audio_tempo_err']:.1f} %."]
         pres = m.get("presence") or {}

@@ -473,6 +473,7 @@ class DanceStream:
         # seg + rate * j - lag of the movement's frame j
         self._played = np.zeros((3 * self.seg, self.pose_dim), np.float32)
         self._rate = 1.0  # exemplar frames per frame at the end of the current movement (tempo following)
+        self._own_speed = 0.0  # the current movement's exemplar's own mean joint speed, m/frame (0: none)
         self._rate_from = 1.0  # ... and at its start
         self._tempo = TempoFollower()
         self._onsets = np.zeros(DENSITY_WINDOW, np.float64)  # the last DENSITY_WINDOW onset strengths, a ring
@@ -567,6 +568,12 @@ class DanceStream:
         """Exemplar frames a frame the current movement ends at (1: its own pace; tempo following)."""
         return self._rate
 
+    @property
+    def movement_speed(self) -> float:
+        """The current movement's exemplar's own mean joint speed (m/s at its own pace; 0 before
+        the first, or for a decoded movement): what the choice of movement, not the tempo, sets."""
+        return self._own_speed * FPS
+
     # -- generation ----------------------------------------------------------------------------
     def _gate(self, row: np.ndarray) -> None:
         present = True
@@ -629,6 +636,7 @@ class DanceStream:
             self._codes.pop()
             window = np.concatenate([segment, np.repeat(segment[-1:], self.seg, axis=0)])
             self._play(window, 1.0)  # no continuation to play into: its own pace
+            self._own_speed = 0.0
             self._commit(draws[0])
             self._has_cont = False
             return
@@ -656,6 +664,7 @@ class DanceStream:
                                      self.seg, VEL_CAP)  # match_exemplar's quaternions are unit already
         rate = self._rate_for(*pairs[i])
         self._play(best, rate, self._bone_limit(best, max(rate, self._rate)))
+        self._own_speed = float(self._member_speed[pairs[i]])
         self._commit(pairs[i][0])
         self._has_cont = True
 
