@@ -251,7 +251,11 @@ def hop_cycle_peak(index, hop_cpu_ms, cycle: int) -> float:
     frame; NaN without data). Staggered performers spread their code steps over the positions
     (about 1.03 for 4 dance_vq performers); code steps piled on one hop (a broken stagger) or
     work added on one position raise it."""
-    med = hop_cycle_medians(index, hop_cpu_ms, cycle)
+    return _peak_over_median(hop_cycle_medians(index, hop_cpu_ms, cycle))
+
+
+def _peak_over_median(med: np.ndarray) -> float:
+    """The largest of per-position medians over their median (NaN without data)."""
     if not np.isfinite(med).any():
         return float("nan")
     return float(np.nanmax(med) / np.nanmedian(med))
@@ -813,8 +817,8 @@ def _ensemble_row(n: int, mode: str, run: dict, cycle: int = 1) -> dict:
         reference = summarize(np.asarray(proc.get("reference_ms", []), dtype=np.float64))
         reference_cpu = summarize(np.asarray(proc.get("reference_cpu_ms", []), dtype=np.float64))["p50"]
         lanes = lane_cycle_ms(run["streams"], cycle)
-        peak = hop_cycle_peak(run["streams"][0]["index"], _cpu_ms(proc, len(proc["compute_ms"])), cycle)
         hop_med = hop_cycle_medians(run["streams"][0]["index"], _cpu_ms(proc, len(proc["compute_ms"])), cycle)
+        peak = _peak_over_median(hop_med)  # hop_cycle_peak, from the same medians
         hop_cycle = float(np.nanmax(hop_med)) if np.isfinite(hop_med).any() else None
     else:  # separate processes: each its own hop (features included); CPU and memory summed
         hop_p50 = float(np.median([m["per_hop_ms"]["p50"] for m in per]))
