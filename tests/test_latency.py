@@ -216,27 +216,6 @@ def test_not_applicable_checks_are_counted_apart_from_passes():
                                                   "1 not applicable (not counted)")
 
 
-def test_scaled_budget_follows_the_reference_workload_of_the_same_run(tmp_path):
-    f = tmp_path / "b.toml"
-    f.write_text("[reference]\np50_ms = 1.0\n"
-                 "[ensemble]\nper_hop_ms_p99_own_4 = { max = 5.0, scaled_by = \"reference_ms_4\" }\n")
-    budgets = bud.load_budgets(f)
-
-    def verdict(hop: float, p50: float) -> bud.Verdict:
-        r = {"kind": "ensemble", "label": "clip", "metrics": {"per_hop_ms_p99_own_4": hop, "reference_ms_4_p50": p50}}
-        (v,) = bud.check([r], budgets)
-        return v
-
-    quiet = verdict(5.5, 0.9)  # a reference at or under its nominal figure: the budget itself
-    assert (quiet.speed, quiet.limit, quiet.ok) == (1.0, 5.0, False)
-    slow = verdict(5.5, 1.5)  # everything 1.5x slower: the budget too
-    assert slow.speed == pytest.approx(1.5) and slow.limit == pytest.approx(7.5) and slow.ok
-    assert "<= 5 x 1.50 = 7.5" in bud.format_verdicts([slow])
-    no_reference = bud.check([{"kind": "ensemble", "label": "old", "metrics": {"per_hop_ms_p99_own_4": 5.5}}],
-                             budgets)
-    assert no_reference[0].limit == 5.0 and not no_reference[0].ok  # results without a reference: unscaled
-
-
 def test_quiet_budget_is_not_applicable_while_other_processes_hold_the_cpus(tmp_path):
     f = tmp_path / "b.toml"
     f.write_text("[quiet]\nothers_busy_percent = 10\n"
@@ -365,10 +344,8 @@ def test_run_queue_clock_counts_the_time_another_thread_held_the_cpu():
     ("[latency]\nper_hop_ms_p99 = { max = 'five' }\n", "must be a number"),
     ("[speed]\nx = { max = 1 }\n", "unknown budget table [speed]"),
     ("[latency\n", "cannot read budgets"),
-    ("[latency]\nper_hop_ms_p99 = { max = 5.0, scaled_by = \"reference_ms\" }\n", "needs a [reference] table"),
-    ("[reference]\np50_ms = 0\n", "expected a positive p50_ms only"),
-    ("[reference]\np50_ms = 1.0\n[streams]\nsustained_streams = { min = 8, scaled_by = \"r\" }\n",
-     "scaled_by needs a max"),
+    ("[latency]\nper_hop_ms_p99 = { max = 5.0, scaled_by = \"reference_ms\" }\n", "expected { max = X }"),
+    ("[reference]\np50_ms = 1.0\n", "unknown budget table [reference]"),
     ("[streams]\nsustained_streams = { min = 8, quiet = true }\n", "needs a [quiet] table"),
     ("[quiet]\nothers_busy_percent = 10\n[streams]\nsustained_streams = { min = 8, quiet = 1 }\n",
      "quiet must be true or false"),

@@ -14,15 +14,6 @@ for the sweep), each ``{ max = X }`` (measured must be <= X) or ``{ min = X }``:
     lane_cycle_over_reference_4 = { max = 2.1 }
     per_hop_ms_p99_own_4 = { max = 5.0, quiet = true }
 
-Budgets scaled to the machine: an entry with ``scaled_by = "NAME"`` is checked against
-``max * speed``, ``speed = max(1, NAME_p50 / p50_ms)``: the result's ``NAME_p50`` is the
-reference workload timed in the same process during the same run
-(:mod:`realtime.bench.reference`), ``p50_ms`` the ``[reference]`` table's figure for the
-same workload on the reference machine with nothing else running. A machine that is slower
-today slows the workload as much as the hop; on the reference machine the budget is ``max``.
-Time the hop spent waiting for a CPU that another process held is not the hop's: the
-scaled figures are ``per_hop_ms_*_own`` (the hop minus its run-queue wait, docs/latency.md).
-
 Budgets for a quiet machine: an entry with ``quiet = true`` (an absolute wall-clock target)
 applies only to a result whose ``others_busy_percent`` (the share of the machine's CPUs that
 processes other than the benchmark's held during the run) is at most the ``[quiet]`` table's
@@ -51,22 +42,7 @@ class Budget:
     metric: str
     op: str
     limit: float
-    scaled_by: str | None = None  # reference figure of the result that scales a "max" limit
     quiet: bool = False  # applies only when other processes left the machine quiet ([quiet])
-
-
-@dataclass(frozen=True)
-class Reference:
-    """The reference workload on the reference machine, nothing else running (``[reference]``), ms."""
-
-    p50_ms: float
-
-    def speed(self, p50: float | None) -> float:
-        """How much slower than the reference machine a run whose reference took ``p50`` ms was
-        (at least 1; 1 when unknown)."""
-        if p50 is None or not math.isfinite(p50) or p50 <= 0:
-            return 1.0
-        return max(1.0, p50 / self.p50_ms)
 
 
 @dataclass(frozen=True)
@@ -77,16 +53,10 @@ class Verdict:
     budget: Budget
     measured: float | None  # None: the result does not have this metric
     not_applicable: str | None = None  # why the metric does not apply to this result's model (then ok)
-    speed: float = 1.0  # scaled budgets: how much slower than the reference machine this run was
 
     @property
     def limit(self) -> float:
-        """The limit applied: the budget's, or for a scaled budget ``max * speed``."""
-        return self.budget.limit * self.speed
-
-    @property
-    def scaled(self) -> bool:
-        return self.budget.scaled_by is not None
+        return self.budget.limit
 
     @property
     def ok(self) -> bool:
@@ -111,10 +81,9 @@ def _number(x: object) -> bool:
 
 
 class BudgetList(list):
-    """The budgets of a file (a list of :class:`Budget`), with its ``[reference]`` (or None) and
-    its ``[quiet]`` figure: the most other processes may hold of the CPUs, percent (or None)."""
+    """The budgets of a file (a list of :class:`Budget`) with its ``[quiet]`` figure: the most
+    other processes may hold of the CPUs, percent (or None)."""
 
-    reference: Reference | None = None
     quiet_percent: float | None = None
 
 
@@ -128,11 +97,6 @@ def load_budgets(path: str | Path) -> BudgetList:
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"cannot read budgets: {exc}", source=path) from None
     out = BudgetList()
-    ref = data.pop("reference", None)
-    if ref is not None:
-        if not (isinstance(ref, dict) and set(ref) == {"p50_ms"} and _number(ref["p50_ms"]) and ref["p50_ms"] > 0):
-            raise ConfigError(f"[reference]: expected a positive p50_ms only, got {ref!r}", source=path)
-        out.reference = Reference(float(ref["p50_ms"]))
     quiet = data.pop("quiet", None)
     if quiet is not None:
         share = quiet.get("others_busy_percent") if isinstance(quiet, dict) and len(quiet) == 1 else None
@@ -142,33 +106,25 @@ def load_budgets(path: str | Path) -> BudgetList:
         out.quiet_percent = float(share)
     for kind, table in data.items():
         if kind not in KINDS or not isinstance(table, dict):
-            raise ConfigError(f"unknown budget table [{kind}]; use [reference], "
+            raise ConfigError(f"unknown budget table [{kind}]; use [quiet], "
                               f"{', '.join(f'[{k}]' for k in KINDS)}", source=path)
         for metric, spec in table.items():
             keys = set(spec) if isinstance(spec, dict) else set()
             ops = keys & {"max", "min"}
-            if len(ops) != 1 or keys - ops - {"scaled_by", "quiet"}:
+            if len(ops) != 1 or keys - ops - {"quiet"}:
                 raise ConfigError(f"[{kind}] {metric}: expected {{ max = X }} or {{ min = X }} "
-                                  f"(max may have scaled_by = \"NAME\"; either may have quiet = true), got {spec!r}",
-                                  source=path)
+                                  f"(either may have quiet = true), got {spec!r}", source=path)
             op = ops.pop()
-            limit, scaled_by = spec[op], spec.get("scaled_by")
+            limit = spec[op]
             if not _number(limit):
                 raise ConfigError(f"[{kind}] {metric}: {op} must be a number, got {limit!r}", source=path)
-            if scaled_by is not None:
-                if op != "max" or not isinstance(scaled_by, str) or not scaled_by:
-                    raise ConfigError(f"[{kind}] {metric}: scaled_by needs a max and a reference name, "
-                                      f"got {spec!r}", source=path)
-                if out.reference is None:
-                    raise ConfigError(f"[{kind}] {metric}: scaled_by needs a [reference] table "
-                                      "(p50_ms) before it", source=path)
             quiet = spec.get("quiet", False)
             if not isinstance(quiet, bool):
                 raise ConfigError(f"[{kind}] {metric}: quiet must be true or false, got {quiet!r}", source=path)
             if quiet and out.quiet_percent is None:
                 raise ConfigError(f"[{kind}] {metric}: quiet = true needs a [quiet] table "
                                   "(others_busy_percent) before it", source=path)
-            out.append(Budget(kind, metric, op, float(limit), scaled_by, quiet))
+            out.append(Budget(kind, metric, op, float(limit), quiet))
     return out
 
 
@@ -178,12 +134,10 @@ def check(results: list[dict], budgets: list[Budget]) -> list[Verdict]:
     A metric the result lacks fails its budget ("not measured"), unless the result names
     it under ``not_applicable`` with the reason (a figure its model does not have, e.g. the
     naive-recompute ratio of a dance_vq model): that verdict is "n/a", neither a pass nor a
-    failure. A scaled budget takes its speed from the result's reference figure (module
-    docstring); a result without one is checked against the budget's own limit. A quiet
+    failure. A quiet
     budget is n/a, with the share measured, for a result whose ``others_busy_percent`` is
     over the ``[quiet]`` figure (a result without that figure is checked).
     """
-    reference = getattr(budgets, "reference", None)
     quiet_percent = getattr(budgets, "quiet_percent", None)
     verdicts = []
     for r in results:
@@ -197,11 +151,8 @@ def check(results: list[dict], budgets: list[Budget]) -> list[Verdict]:
                 if b.quiet and quiet_percent is not None and busy is not None and busy > quiet_percent:
                     reason = (f"other processes held {busy:.0f}% of the CPUs during the run (> {quiet_percent:g}%): "
                               "an absolute wall-clock target needs a quiet machine")
-                speed = 1.0
-                if b.scaled_by is not None and reference is not None:
-                    speed = reference.speed(metrics.get(f"{b.scaled_by}_p50"))
                 verdicts.append(Verdict(r.get("label", "?"), b, None if v is None else float(v),
-                                        None if reason is None else str(reason), speed))
+                                        None if reason is None else str(reason)))
     return verdicts
 
 
@@ -231,8 +182,6 @@ def format_verdicts(verdicts: list[Verdict], only_failures: bool = False) -> str
             shown = "n/a" if v.measured is None else _fmt(v.measured)  # a quiet budget's figure, still shown
             rows.append((v.label, v.budget.metric, f"{sign} {v.budget.limit:g}", shown, "-", "n/a"))
             continue
-        if v.scaled:
-            sign = f"{sign} {v.budget.limit:g} x {v.speed:.2f} ="
         if v.ok:
             over = "-"
         elif v.measured is None or not math.isfinite(v.measured):
@@ -246,7 +195,4 @@ def format_verdicts(verdicts: list[Verdict], only_failures: bool = False) -> str
     table = "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows)
     reasons = [] if only_failures else sorted({(v.budget.metric, v.not_applicable) for v in verdicts
                                                if v.not_applicable is not None})
-    scaled = "" if only_failures or not any(v.scaled for v in verdicts) else (
-        "\nscaled budgets: max x speed, the speed from the reference workload timed in the same run "
-        "([reference] of the budgets file; realtime/bench/budgets.py)")
-    return table + scaled + "".join(f"\nn/a {metric}: {why}" for metric, why in reasons)
+    return table + "".join(f"\nn/a {metric}: {why}" for metric, why in reasons)

@@ -8,10 +8,8 @@ same load as the hops it is compared with, and never overlaps one. Its wall and 
 (p50, p99, ms) go into the run's result: the budgets on ``lane_cycle_over_reference`` divide
 the costliest point of the performers' cost cycle by its CPU median
 (:func:`realtime.bench.suite.lane_cycle_ms`; docs/latency.md, "Budgets on a shared
-machine"), and a budget with ``scaled_by`` is multiplied by ``max(1, reference p50 of the
-run / [reference] p50_ms)`` (:mod:`realtime.bench.budgets`): a machine that is slower today
-(a busy sibling core, a slow CPU) slows the reference too, a slower hop on the same machine
-does not.
+machine"): a machine that is slower today (a busy sibling core, a slow CPU) slows the
+reference too, a slower hop on the same machine does not.
 
 :class:`InjectedWork` is the hidden testing hook: a sink that spins ``ms`` of CPU every
 ``every``-th frame in one performer's lane (``performer bench ensemble --inject-ms 1

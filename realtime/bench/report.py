@@ -70,8 +70,7 @@ def _budget_notes(result: dict, budgets: list[Budget] | None) -> dict[str, str]:
     for v in check([result], budgets or []):
         sign = "≤" if v.budget.op == "max" else "≥"
         status = "n/a" if v.not_applicable is not None else "ok" if v.ok else "**over**"
-        limit = f"{v.budget.limit:g} × {v.speed:.2f} = {v.limit:.3g}" if v.scaled else f"{v.limit:g}"
-        notes[v.budget.metric] = f"{sign} {limit} {status}"
+        notes[v.budget.metric] = f"{sign} {v.limit:g} {status}"
     return notes
 
 
@@ -442,7 +441,7 @@ def plot_streams(r: dict, out: Path) -> Path:
 
 
 def _reference_line(rows: list[dict], settings: dict) -> str:
-    """The reference workload's p50 / p99 per run (what scaled budgets use), and a planted regression if any."""
+    """The reference workload's p50 / p99 per run (how fast the machine ran during each), and a planted regression if any."""
     refs = "; ".join(f"{row['performers']} {row['mode']}: {_f(row.get('reference_ms_p50'))} / "
                      f"{_f(row.get('reference_ms_p99'))}" for row in rows)
     text = (f"Reference workload timed between the hops in the same process (p50 / p99 ms; docs/latency.md, "

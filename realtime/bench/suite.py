@@ -638,7 +638,7 @@ def latency_metrics(r: dict) -> dict[str, float]:
         "cpu_percent": s["cpu_percent"],
         "peak_rss_mb": s["peak_rss_mb"],
         "stream_offline_max_abs": r["stream_vs_offline"]["max_abs"],
-        "reference_ms_p50": s["reference_ms"]["p50"],  # the machine's speed during the run (scaled budgets)
+        "reference_ms_p50": s["reference_ms"]["p50"],  # the machine's speed during the run
         "reference_ms_p99": s["reference_ms"]["p99"],
         "others_busy_percent": r["others_busy_percent"],  # other processes' share of the CPUs (quiet budgets)
         # the costliest point of the model's cost cycle (lane CPU median) over the reference's CPU median
