@@ -88,6 +88,20 @@ def test_a_tracker_reading_a_level_3_to_2_away_now_and_then_does_not_pull_the_te
         assert song_period(logp, c, onset) == pytest.approx(20.0 / rate, rel=0.02)
 
 
+def test_a_3_to_2_reading_in_the_first_seconds_does_not_carry_the_follower_to_that_level():
+    """fishin_karissahobbs at 0.8x: 2.5 s at the song's 96 bpm, then the tracker reads the
+    3:2 level (144) for a second, then the two in turn, 1-s runs each. The follower listens
+    to every reading in its first 3 s; the vote at their end puts it back on the level most
+    of them read, 96 bpm, and it holds it (without the vote it ended at 144, the 3:2 level)."""
+    n = 1200
+    logp = np.full(n, math.log2(1800.0 / 96 / 15.0))
+    t = np.arange(n)
+    other = ((t >= 75) & (t < 105)) | ((t >= 105) & ((t // 30) % 2 == 0))
+    logp[other] += math.log2(96.0 / 144.0)
+    p = track_periods(logp, np.full(n, 0.3), None)
+    assert 1800.0 / np.median(p[300:]) == pytest.approx(96.0, rel=0.03)
+
+
 def test_a_tempo_change_is_followed_through_readings_at_another_level():
     """The music speeds up 25 % over 30 s while the tracker reads a 3:2 level a third of the
     time, in 3-s runs: those readings, moved by 4:3 onto the followed level, keep the

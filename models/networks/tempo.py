@@ -9,7 +9,8 @@ second. :class:`TempoFollower` smooths the log period with an exponential mean (
 constant :data:`TEMPO_TAU` frames, weighted by the clarity) after moving each new estimate
 by whole octaves to the nearest of the running one; an estimate still another level away
 (:data:`LEVEL_JUMP`) is moved by 4:3 onto the running level or left out, until such
-estimates hold for seconds (:data:`AWAY_FRAMES`). So a change of tempo is followed within
+estimates hold for seconds (:data:`AWAY_FRAMES`). The first level is the one most of the
+first 3 s read (:data:`VOTE_WIDTH`). So a change of tempo is followed within
 about a second and a level jump of the tracker is not. The danced period is the octave of it
 in :data:`TEMPO_RANGE` (faster music is danced at half time, slower at double time); where
 two octaves are in the range, the faster when its beat is subdivided (:data:`SUBDIVIDED`
@@ -18,9 +19,8 @@ onsets a beat, :func:`onset_density`, a count stretching does not change), else 
 
 ``DanceStream`` plays each movement of its choreographic memory at the ratio of this tempo
 to the tempo of the song the movement was danced to (``DanceVQ.member_period``, measured on
-the training songs with :func:`track_periods` when the memory is fitted; the shipped
-checkpoint's with the octave rule before the level rule), so the same song faster gives
-the same dance, faster.
+the training songs with :func:`song_period` when the memory is fitted, the shipped
+checkpoint's with this follower), so the same song faster gives the same dance, faster.
 """
 
 from __future__ import annotations
@@ -57,6 +57,12 @@ LEVEL_JUMP: float = 0.3
 THIRD: float = math.log2(4.0 / 3.0)
 THIRD_TOLERANCE: float = 0.1
 SETTLE_FRAMES: int = 90
+#: At the end of :data:`SETTLE_FRAMES`, the running log period moves to the level most of
+#: those frames read (their octave-folded log periods, weighted by clarity: the centre of
+#: the densest cluster within this many octaves): in its first seconds the follower listens
+#: to every reading, and a half second at a 3:2 level could carry it there for the rest of
+#: the song (fishin_karissahobbs at 0.8x: 144 bpm for its 96).
+VOTE_WIDTH: float = 0.1
 AWAY_FRAMES: float = 240.0
 #: The octave: where two octaves of the tempo lie in :data:`TEMPO_RANGE` (a tempo T in
 #: 60-85 bpm and 2T), the faster is danced when its beat is subdivided, at least this many
@@ -101,7 +107,7 @@ class TempoFollower:
     ``confidence`` in [0, 1] (the running mean of the clarity over :data:`FULL_CLARITY`).
     """
 
-    __slots__ = ("log_p", "conf", "score", "slow", "heard", "away", "_a")
+    __slots__ = ("log_p", "conf", "score", "slow", "heard", "away", "votes", "_a")
 
     def __init__(self) -> None:
         self._a = 1.0 / TEMPO_TAU
@@ -114,6 +120,7 @@ class TempoFollower:
         self.slow = False  # where two octaves are in range: the slower one is danced
         self.heard = 0  # frames with a clear pulse
         self.away = 0.0  # weight of frames at another level, less that of frames at this one
+        self.votes: list[tuple[float, float]] = []  # (log period, weight) of the first SETTLE_FRAMES clear frames
 
     def update(self, logp: float, clarity: float, density: float = 0.0) -> None:
         w = min(1.0, max(clarity, 0.0) / FULL_CLARITY)
@@ -138,12 +145,31 @@ class TempoFollower:
                     if abs(r) <= THIRD_TOLERANCE:
                         self.log_p += self._a * w * min(max(r, -OCTAVE_STEP), OCTAVE_STEP)
         self.heard += 1
+        if self.heard <= SETTLE_FRAMES:
+            self.votes.append((logp, w))
+            if self.heard == SETTLE_FRAMES:
+                self._vote()
         if density > 0.0:  # the octave: subdivided beats at the faster one, or the slower
             x = math.log2(max(density * self._fast() / FPS, 1e-3) / SUBDIVIDED)
             first = self.score != self.score
             self.score = x if first else self.score + (x - self.score) / OCTAVE_MEAN
             if first or abs(self.score) > OCTAVE_MARGIN:
                 self.slow = self.score < 0.0
+
+    def _vote(self) -> None:
+        """Move the running log period to the level most of :attr:`votes` read (:data:`VOTE_WIDTH`)."""
+        x = np.array([v[0] for v in self.votes])
+        w = np.array([v[1] for v in self.votes])
+        d = x[:, None] - x[None, :]
+        d -= np.floor(d + 0.5)  # octave-folded differences
+        near = np.abs(d) <= VOTE_WIDTH
+        best = int(np.argmax(near.astype(np.float64) @ w))
+        mine = near[:, best]  # the frames within VOTE_WIDTH of the best-supported one
+        centre = x[best] + float(np.average(d[mine, best], weights=w[mine] + 1e-12))
+        r = centre - self.log_p
+        self.log_p += r - math.floor(r + 0.5)  # the voted level, at the octave nearest the running one
+        self.away = 0.0
+        self.votes = []
 
     def _fast(self) -> float:
         """The fastest octave of the running period in :data:`TEMPO_RANGE` (frames)."""
