@@ -182,12 +182,17 @@ def test_run_on_a_tiny_synthetic_set(tmp_path, shipped):
     sf.write(music / "quiet.wav", np.zeros(8 * SAMPLE_RATE, np.float32), SAMPLE_RATE)  # no tempo: not in the set
     sf.write(speech / "noise.wav", 0.05 * np.random.default_rng(0).normal(size=3 * SAMPLE_RATE), SAMPLE_RATE)
     opts = L.Options(music=music, speech=speech, cache_dir=tmp_path / "cache", excerpt_s=8.0, excerpt_start_s=0.0,
-                     speech_song_s=5.0, sets=("stretch", "presence"), progress=False)
+                     speech_song_s=5.0, sets=("stretch", "presence"), progress=False, seeds=(0, 1))
     res = L.run([shipped.path], opts, log=lambda *_: None)
     (m,) = res["models"].values()
     assert [r["song"] for r in m["stretch"]] == ["clip"]
     row = m["stretch"][0]
     assert set(row["rates"]) == {"0.8", "1", "1.25"} and row["amp_rel"]["1"] == pytest.approx(1.0)
+    # each figure the mean over the seeds, each seed's own kept (two seeds: two performances)
+    seeds = row["by_seed"]
+    assert set(seeds) == {"0", "1"} and seeds["0"]["rates"]["1"]["speed"] != seeds["1"]["rates"]["1"]["speed"]
+    assert row["rates"]["1.25"]["hit"] == pytest.approx(np.mean([x["rates"]["1.25"]["hit"] for x in seeds.values()]))
+    assert L.Options(quick=True).seeds == (0,)
     assert 110 <= row["bpm"] <= 130
     assert [x["recording"] for x in m["presence"]["music"]] == ["clip", "quiet"]
     quiet = m["presence"]["music"][1]
@@ -197,7 +202,7 @@ def test_run_on_a_tiny_synthetic_set(tmp_path, shipped):
     s = m["summary"]
     assert {"speed_ratio", "movement_speed_ratio", "centroid_ratio", "hit_min", "idle_max", "idle_sounding_max", "speech_held"} <= set(s)
     text = L.markdown(res, "cmd")
-    assert "| mean joint speed 1.25x / 0.8x (>= 1.4) |" in text and "clip" in text
+    assert "| mean joint speed 1.25x / 0.8x (>= 1.4) |" in text and "clip" in text and "mean over seeds 0, 1" in text
     assert any(line.startswith(("PASS", "FAIL")) for line in L.verdict_lines(res))
 
 

@@ -373,7 +373,9 @@ def positions(poses: np.ndarray) -> np.ndarray:
 @dataclass
 class Options:
     """What the sets run on. ``dwm``: the DWM dataset (its validation songs join the stretch
-    set); ``music``, ``speech``: the recordings directories; ``quick``: a few songs, shorter."""
+    set); ``music``, ``speech``: the recordings directories; ``seeds``: the sampling seeds the
+    stretch set and the ramp run at, their figures the mean over them (one seed's beat hit
+    rate moves by a few hundredths); ``quick``: a few songs, shorter, one seed."""
 
     dwm: str | Path | None = None
     music: str | Path | None = None
@@ -385,13 +387,17 @@ class Options:
     ramp_song: str | None = None
     presence_max_s: float | None = None
     speech_song_s: float = 20.0
-    seed: int = 0
+    seeds: tuple[int, ...] = (0, 1, 2)
     quick: bool = False
     progress: bool = True
     sets: tuple[str, ...] = ("stretch", "ramp", "presence")
 
     def __post_init__(self) -> None:
+        self.seeds = tuple(int(x) for x in self.seeds)
+        if not self.seeds:
+            raise DataError("at least one seed", source="listening options")
         if self.quick:
+            self.seeds = self.seeds[:1]
             self.max_songs = self.max_songs or 3
             self.excerpt_s = min(self.excerpt_s, 25.0)
             self.presence_max_s = self.presence_max_s or 30.0
@@ -471,28 +477,38 @@ def stretch_set(lm, cache: AudioCache, songs: list[tuple[Path, float]], opts: Op
     82 bpm at 1.0x and 129 at 0.8x, a 106-bpm song), and the hit rate, a share of the motion's
     speed dips, rises and falls with the reference's beats per minute."""
     rows = []
-    jobs = [(p, bpm, r) for p, bpm in songs for r in STRETCH_RATES]
+    jobs = [(p, bpm, r, seed) for p, bpm in songs for r in STRETCH_RATES for seed in opts.seeds]
     by_song: dict[Path, dict] = {}
-    for p, bpm, r in _bar(jobs, f"stretch set {lm.path.name}", opts):
+    for p, bpm, r, seed in _bar(jobs, f"stretch set {lm.path.name}", opts):
         start, seconds = _excerpt_window(cache, p, opts)
         y = cache.excerpt(p, start, seconds, r)
         trace: dict = {}
-        poses, _ = perform(lm, y, opts.seed, trace)
+        poses, _ = perform(lm, y, seed, trace)
         row = by_song.setdefault(p, {"song": song_name(p), "bpm": bpm, "start_s": start, "seconds": seconds,
-                                     "rates": {}})
-        row["rates"][f"{r:g}"] = score_motion(poses, reference_beats(cache, p, start, r, len(poses)))
+                                     "by_seed": {}})
+        got = score_motion(poses, reference_beats(cache, p, start, r, len(poses)))
         # the chosen movements' own speed (m/s, at their own pace), from SETTLE_S on, as score_motion
-        row["rates"][f"{r:g}"]["movement_speed"] = float(trace["movement_speed"][int(SETTLE_S * FPS):].mean())
+        got["movement_speed"] = float(trace["movement_speed"][int(SETTLE_S * FPS):].mean())
+        row["by_seed"].setdefault(str(seed), {"rates": {}})["rates"][f"{r:g}"] = got
     for p, _ in songs:
         row = by_song[p]
-        lo, mid, hi = (row["rates"][f"{r:g}"] for r in STRETCH_RATES)
-        row["speed_ratio"] = hi["speed"] / max(lo["speed"], 1e-12)
-        row["movement_speed_ratio"] = hi["movement_speed"] / max(lo["movement_speed"], 1e-12)
-        row["centroid_ratio"] = hi["centroid_hz"] / max(lo["centroid_hz"], 1e-12)
-        row["kin_bpm_ratio"] = hi["kin_bpm"] / max(lo["kin_bpm"], 1e-12)
-        row["amp_rel"] = {k: v["amp_m"] / max(mid["amp_m"], 1e-12) for k, v in row["rates"].items()}
+        runs = [x["rates"] for x in row["by_seed"].values()]
+        row["rates"] = {k: {f: float(np.mean([x[k][f] for x in runs])) for f in runs[0][k]} for k in runs[0]}
+        row.update(_ratios(row["rates"]))
+        for x in row["by_seed"].values():  # each seed's own ratios, for the spread over seeds
+            x.update(_ratios(x["rates"]))
         rows.append(row)
     return rows
+
+
+def _ratios(rates: dict[str, dict]) -> dict:
+    """A song's 1.25x-over-0.8x ratios, and its band amplitudes over 1.0x's, from its per-rate figures."""
+    lo, mid, hi = (rates[f"{r:g}"] for r in STRETCH_RATES)
+    return {"speed_ratio": hi["speed"] / max(lo["speed"], 1e-12),
+            "movement_speed_ratio": hi["movement_speed"] / max(lo["movement_speed"], 1e-12),
+            "centroid_ratio": hi["centroid_hz"] / max(lo["centroid_hz"], 1e-12),
+            "kin_bpm_ratio": hi["kin_bpm"] / max(lo["kin_bpm"], 1e-12),
+            "amp_rel": {k: rates[k]["amp_m"] / max(mid["amp_m"], 1e-12) for k in rates}}
 
 
 def ramp_song(cache: AudioCache, songs: list[tuple[Path, float]], opts: Options) -> tuple[Path, float] | None:
@@ -517,32 +533,47 @@ def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict
     see where it is lost, the followed tempo's and the playback rate's, ``follower_corr`` and
     ``rate_corr``; ``followed_bpm``, smoothed, is the curve; ``follows_tempo``: False for a
     model that plays every movement at its own pace); the largest bone rotation per
-    frame after :data:`SETTLE_S`."""
+    frame after :data:`SETTLE_S`. At each of ``opts.seeds``: ``corr``, ``corr_lag0`` and the
+    three diagnostics are the means over the seeds of each one's own (``corr_seeds``, one
+    performer's speed each, not the speed averaged over performers), ``lag_s`` the median,
+    ``max_step_deg`` the largest; the curves are the first seed's."""
     path, bpm = song
     hold = RAMP_HOLD_S
     total = hold + 2 * RAMP_S
     source_s = hold * RAMP_RATES[0] + RAMP_S * (RAMP_RATES[0] + RAMP_RATES[1]) + 2.0
     start = min(opts.excerpt_start_s, max(0.0, len(cache.audio(path)) / SAMPLE_RATE - source_s))
     y = cache.ramp(path, start, source_s)[: int(total * SAMPLE_RATE)]
-    trace: dict = {}
-    poses, _ = perform(lm, y, opts.seed, trace)
-    t = (np.arange(len(poses)) + 1) / FPS
-    tempo = smooth(bpm * ramp_rate(t))
-    speed = smooth(motion_speed(positions(poses)))
-    a = int(hold * FPS)
-    corr, lag, corr0 = lagged_correlation(tempo[a:], speed[a:], int(MAX_LAG_S * FPS))
-    # where the speed's correlation is lost: the followed tempo, then the playback rate (best lag each)
-    follower = lagged_correlation(tempo[a:], smooth(trace["tempo_bpm"])[a:], int(MAX_LAG_S * FPS))[0]
-    rate = lagged_correlation(tempo[a:], smooth(trace["rate"])[a:], int(MAX_LAG_S * FPS))[0]
-    own = smooth(trace["movement_speed"])
-    movement = lagged_correlation(tempo[a:], own[a:], int(MAX_LAG_S * FPS))[0]
-    steps = bone_steps_deg(poses[int(SETTLE_S * FPS):])
+    a, lags = int(hold * FPS), int(MAX_LAG_S * FPS)
+    runs = []
+    for seed in opts.seeds:
+        trace: dict = {}
+        poses, _ = perform(lm, y, seed, trace)
+        t = (np.arange(len(poses)) + 1) / FPS
+        tempo = smooth(bpm * ramp_rate(t))
+        speed = smooth(motion_speed(positions(poses)))
+        own = smooth(trace["movement_speed"])
+        corr, lag, corr0 = lagged_correlation(tempo[a:], speed[a:], lags)
+        runs.append({
+            "corr": corr, "lag": lag, "corr_lag0": corr0,
+            # where the speed's correlation is lost: the followed tempo, the playback rate, the choice (best lag each)
+            "follower_corr": lagged_correlation(tempo[a:], smooth(trace["tempo_bpm"])[a:], lags)[0],
+            "rate_corr": lagged_correlation(tempo[a:], smooth(trace["rate"])[a:], lags)[0],
+            "movement_corr": lagged_correlation(tempo[a:], own[a:], lags)[0],
+            "own": own, "step": float(bone_steps_deg(poses[int(SETTLE_S * FPS):]).max()),
+            "t": t, "tempo": tempo, "speed": speed, "trace": trace})
+    first = runs[0]
+    mean = lambda key: float(np.mean([r[key] for r in runs]))  # noqa: E731
+    own = np.concatenate([r["own"][a:] for r in runs])
     check = ramp_audio_check(y, bpm)
-    return {"song": song_name(path), "bpm": bpm, "start_s": start, "corr": corr, "lag_s": lag / FPS,
-            "corr_lag0": corr0, "follower_corr": follower, "rate_corr": rate,
-            "movement_corr": movement, "movement_speed_range": [float(own[a:].min()), float(own[a:].max())], "max_step_deg": float(steps.max()), **check, "time_s": t.tolist(),
-            "tempo_bpm": tempo.tolist(), "speed": speed.tolist(),
-            "followed_bpm": smooth(trace["tempo_bpm"]).tolist(), "follows_tempo": bool(np.ptp(trace["rate"]) > 0)}
+    return {"song": song_name(path), "bpm": bpm, "start_s": start, "corr": mean("corr"),
+            "lag_s": float(np.median([r["lag"] for r in runs])) / FPS, "corr_lag0": mean("corr_lag0"),
+            "corr_seeds": [r["corr"] for r in runs], "follower_corr": mean("follower_corr"),
+            "rate_corr": mean("rate_corr"), "movement_corr": mean("movement_corr"),
+            "movement_speed_range": [float(own.min()), float(own.max())],
+            "max_step_deg": max(r["step"] for r in runs), **check, "time_s": first["t"].tolist(),
+            "tempo_bpm": first["tempo"].tolist(), "speed": first["speed"].tolist(),
+            "followed_bpm": smooth(first["trace"]["tempo_bpm"]).tolist(),
+            "follows_tempo": bool(np.ptp(first["trace"]["rate"]) > 0)}
 
 
 def ramp_audio_check(y: np.ndarray, bpm: float) -> dict[str, float]:
@@ -591,7 +622,7 @@ def presence(lm, cache: AudioCache, speech_song: Path | None, opts: Options) -> 
         a = cache.audio(p)
         if opts.presence_max_s:
             a = a[: int(opts.presence_max_s * SAMPLE_RATE)]
-        _, w = perform(lm, a, opts.seed)
+        _, w = perform(lm, a, opts.seeds[0])
         s = w[int(SETTLE_S * FPS):]
         end = sounding_frames(lm, extract_features(a, lm.features))
         out["music"].append({"recording": p.stem, "seconds": len(a) / SAMPLE_RATE,
@@ -610,7 +641,7 @@ def presence(lm, cache: AudioCache, speech_song: Path | None, opts: Options) -> 
     for p in _bar(music_files(opts.speech), "speech between songs", opts):
         sp = cache.audio(p)
         sp = sp[: len(sp) - len(sp) % HOP] * (level / max(rms(sp), 1e-9))
-        _, w = perform(lm, np.concatenate([first, sp, second]).astype(np.float32), opts.seed)
+        _, w = perform(lm, np.concatenate([first, sp, second]).astype(np.float32), opts.seeds[0])
         a, b = n // HOP, (n + len(sp)) // HOP
         out["speech"].append({"recording": p.stem, "song": song_name(speech_song), "speech_s": len(sp) / SAMPLE_RATE,
                               **settle_back(w, a, b, len(w))})
@@ -765,6 +796,14 @@ def markdown(result: dict, command: str | None = None) -> str:
                          f"{s['kin_bpm_ratio']:.2f} | " + " / ".join(f"{s[f'amp_{k}']:.2f}" for k in rates)
                          + " | " + " / ".join(f"{s[f'hit_{k}']:.2f}" for k in rates) + " | "
                          + " / ".join(f"{s[f'hit_half_{k}']:.2f}" for k in rates) + " |")
+            seeds = list(m["stretch"][0].get("by_seed", {}))
+            if len(seeds) > 1:  # the spread: the same figures at each seed alone
+                per = {sd: summary({"stretch": [{**r, **r["by_seed"][sd]} for r in m["stretch"]]}) for sd in seeds}
+                lines += ["", f"Each figure is the mean over seeds {', '.join(seeds)}; at each seed alone: speed ratio "
+                          + " / ".join(f"{per[sd]['speed_ratio']:.2f}" for sd in seeds) + ", centroid ratio "
+                          + " / ".join(f"{per[sd]['centroid_ratio']:.2f}" for sd in seeds) + ", lowest beat hit rate "
+                          + " / ".join(f"{per[sd]['hit_min']:.2f}" for sd in seeds) + ", lowest hit over half-shifted "
+                          + " / ".join(f"{per[sd]['hit_half_min']:.2f}" for sd in seeds) + "."]
             lines += ["", "The chosen movements' own speed (at their own pace), 1.25x over 0.8x: "
                       + ", ".join(f"{r['song']} {r['movement_speed_ratio']:.2f}" for r in m["stretch"]
                                   if "movement_speed_ratio" in r)
@@ -772,7 +811,9 @@ def markdown(result: dict, command: str | None = None) -> str:
                       "follow the tempo; the speed ratio over it is what the playback rate adds)."]
         if m.get("ramp"):
             r = m["ramp"]
-            lines += ["", f"Ramp on {r['song']} ({r['bpm']:.0f} bpm as recorded): correlation {r['corr']:.2f} at "
+            per_seed = (" (at each seed: " + ", ".join(f"{c:.2f}" for c in r["corr_seeds"]) + ")"
+                        if len(r.get("corr_seeds", [])) > 1 else "")
+            lines += ["", f"Ramp on {r['song']} ({r['bpm']:.0f} bpm as recorded): correlation {r['corr']:.2f}{per_seed} at "
                       f"lag {r['lag_s']:.2f} s ({r['corr_lag0']:.2f} at lag 0), largest bone rotation "
                       f"{r['max_step_deg']:.1f} deg a frame. Against the real tempo, the followed tempo "
                       f"correlates {r.get('follower_corr', float('nan')):.2f}, the playback rate "
