@@ -337,3 +337,13 @@ def test_the_reference_beats_are_at_one_metrical_level_at_every_rate(tmp_path):
         ref[rate] = 60.0 * FPS * (len(b) - 1) / (b[-1] - b[0]) / rate
     assert heard[0.8] / heard[1.0] > 1.5  # the artefact the reference removes
     assert ref[0.8] == pytest.approx(ref[1.0], rel=0.02) and ref[1.0] == pytest.approx(cache.tempo(song), rel=0.03)
+
+
+def test_the_ramps_lag_is_judged_only_where_the_speed_follows_the_tempo():
+    """The best lag of a correlation under its target says nothing of how late the speed
+    follows: n/a there, judged (within 2 s) where the correlation holds."""
+    weak = L.summary({"ramp": {"corr": 0.3, "lag_s": 0.0, "max_step_deg": 30.0}})
+    assert weak["ramp_lag_s"] is None and L.verdict("ramp_lag_s", weak["ramp_lag_s"]) == "n/a"
+    assert "n/a (correlation under 0.7)" in "\n".join(L.verdict_lines({"models": {"m": {"summary": weak}}}))
+    strong = L.summary({"ramp": {"corr": 0.8, "lag_s": 3.0, "max_step_deg": 30.0}})
+    assert strong["ramp_lag_s"] == 3.0 and L.verdict("ramp_lag_s", 3.0) == "FAIL" and L.verdict("ramp_lag_s", 1.0) == "PASS"

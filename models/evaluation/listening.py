@@ -673,7 +673,9 @@ def summary(result: dict) -> dict[str, float | None]:
         s["hit_half_min"] = min(s[f"hit_ratio_{k}"] for k in ks)
     if result.get("ramp"):
         r = result["ramp"]
-        s["ramp_corr"], s["ramp_lag_s"], s["ramp_max_step_deg"] = r["corr"], r["lag_s"], r["max_step_deg"]
+        s["ramp_corr"], s["ramp_max_step_deg"] = r["corr"], r["max_step_deg"]
+        corr_target = next(thr for k, _, _, thr in TARGETS if k == "ramp_corr")
+        s["ramp_lag_s"] = r["lag_s"] if r["corr"] >= corr_target else None  # NOT_APPLICABLE
     pres = result.get("presence") or {}
     if pres.get("music"):
         s["idle_max"] = max(m["idle"] for m in pres["music"])
@@ -688,13 +690,19 @@ def summary(result: dict) -> dict[str, float | None]:
     return s
 
 
+#: Targets whose None means "nothing to judge" (n/a), with why: dancing again when it never
+#: went idle; the lag of a correlation that is not there (the best lag of a correlation under
+#: its target says nothing of how late the speed follows).
+NOT_APPLICABLE: dict[str, str] = {"speech_back_s": "never idle", "ramp_lag_s": "correlation under 0.7"}
+
+
 def verdict(key: str, value: float | None) -> str:
-    """PASS, FAIL (None: the event never happened), "n/a" (dancing again when it never went idle)
-    or "" for a key that is no target."""
+    """PASS, FAIL (None: the event never happened), "n/a" (:data:`NOT_APPLICABLE`) or "" for a
+    key that is no target."""
     for k, _, op, thr in TARGETS:
         if k == key:
             if value is None or (isinstance(value, float) and math.isnan(value)):
-                return "n/a" if key == "speech_back_s" else "FAIL"
+                return "n/a" if key in NOT_APPLICABLE else "FAIL"
             return "PASS" if (value >= thr if op == ">=" else value <= thr) else "FAIL"
     return ""
 
@@ -775,7 +783,7 @@ def markdown(result: dict, command: str | None = None) -> str:
         for n in names:
             s = models[n]["summary"]
             v = verdict(key, s.get(key))
-            cells.append("n/a" if key not in s else "n/a (never idle)" if v == "n/a" else f"{_fmt(s[key])} {v}")
+            cells.append("n/a" if key not in s else f"n/a ({NOT_APPLICABLE[key]})" if v == "n/a" else f"{_fmt(s[key])} {v}")
         lines.append(f"| {desc} ({op} {thr:g}) | " + " | ".join(cells) + " |")
     for n in names:
         m, s = models[n], models[n]["summary"]
@@ -844,6 +852,6 @@ def verdict_lines(result: dict) -> list[str]:
         for key, desc, op, thr in TARGETS:
             if key in m["summary"]:
                 v = m["summary"][key]
-                shown = "n/a (never idle)" if verdict(key, v) == "n/a" else _fmt(v)
+                shown = f"n/a ({NOT_APPLICABLE[key]})" if verdict(key, v) == "n/a" else _fmt(v)
                 out.append(f"{verdict(key, v):4}  {desc} {op} {thr:g}: {shown}  [{n}]")
     return out
