@@ -40,8 +40,8 @@ import numpy as np  # noqa: E402
 
 
 def plot_ramp(result: dict, path: str | Path) -> None:
-    """Real tempo (bpm), each model's mean joint speed (m/s) and the tempo it follows (bpm,
-    dashed) over the ramp, one plot, as PNG."""
+    """Real tempo (bpm), each model's mean joint speed at the first seed (m/s) and the tempo
+    it follows (bpm, dashed) over the ramp, one plot, as PNG."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(10, 4), layout="constrained")
@@ -56,8 +56,11 @@ def plot_ramp(result: dict, path: str | Path) -> None:
         if first:
             ax.plot(t, r["tempo_bpm"], color="k", lw=2, label=f"real tempo ({r['song']}, {r['bpm']:.0f} bpm x rate)")
             first = False
+        seeds = result.get("options", {}).get("seeds") or [0]
+        each = r.get("corr_seeds") or [r["corr"]]
         ax2.plot(t, r["speed"], color=f"C{k}", lw=1.5,
-                 label=f"{name}: speed, corr {r['corr']:.2f} at lag {r['lag_s']:.1f} s")
+                 label=f"{name}: speed at seed {seeds[0]}, corr {each[0]:.2f}"
+                       + (f" (mean over {len(each)} seeds {r['corr']:.2f})" if len(each) > 1 else ""))
         if r.get("follows_tempo"):  # a model that plays its movements at the tempo it follows
             ax.plot(t, r["followed_bpm"], color=f"C{k}", lw=1, ls="--",
                     label=f"{name}: the tempo it follows, corr {r['follower_corr']:.2f}")
