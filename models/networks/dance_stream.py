@@ -12,7 +12,9 @@ the last ``decoder_context`` codes; the shipped memory has exemplars for every c
 
 **At the music's tempo.** A movement's exemplar is read at ``r`` of its frames a frame,
 ``r`` the music's tempo (:class:`models.networks.tempo.TempoFollower`) over the memory's
-mean tempo (:data:`FOLLOW_TEMPO`).
+mean tempo (:data:`FOLLOW_TEMPO`), and the faster the tempo, the livelier the movements
+drawn (:data:`TEMPO_ENERGY`). The memory is read through a light low-pass
+(:data:`MEMBER_SMOOTH`), so a sped-up movement does not speed up its mocap noise.
 
 :func:`generate` pushes a whole song through a fresh stream, so offline and
 live give the same poses for the same seed and style, however the frames are chunked.
@@ -138,6 +140,20 @@ STYLE_MEMBERS: bool = True
 #: (benchmarks/studies/energy_control.py: the validation dances' motion energy 0.67x, 1.0x and 1.5x
 #: the dancers' at 0, 1 and 2, monotone on every song; docs/show.md, "Energy").
 ENERGY_GAIN: float = 3.0
+#: Tempo and liveliness: the code logits also move by ``TEMPO_ENERGY * ln(T / T_ref) * z`` (T the
+#: followed tempo, T_ref the memory's, z :func:`code_energy`), blended out as the pulse fades
+#: like the rate: at a faster tempo livelier movements, at a slower one calmer ones, as the
+#: dancers chose (over the memory's exemplars, their own speed grows with the tempo of the song
+#: they were danced to: as its 0.64th power, correlation 0.25). Without it the choice of
+#: movement ignores the tempo and only the playback rate follows it; the speed caps hold the
+#: rate back at fast tempos (docs/listening.md, "Tempo": stretch-set speed ratio 1.24 at 0,
+#: 1.44 at 4). 0: the choice ignores the tempo.
+TEMPO_ENERGY: float = 4.0
+#: Gaussian sigma (frames) of the low-pass each exemplar window of the memory is read through
+#: (:func:`_cached_members`; per track, then renormalised): the mocap's frame-to-frame noise,
+#: which a movement sped up by the tempo rate r turns into jerk as r cubed, is taken out
+#: (dance-scale motion, up to 3 Hz, keeps 82 % or more of its amplitude). 0: as recorded.
+MEMBER_SMOOTH: float = 1.0
 #: The energy control's range.
 ENERGY_RANGE: tuple[float, float] = (0.0, 2.0)
 #: The lead control's range, ms (:meth:`DanceStream.set_lead`): a display chain's delay
@@ -306,14 +322,32 @@ def _cached_predictor(model: DanceVQ) -> NumpyPredictor:
     return cached[1]
 
 
+def smooth_members(members: np.ndarray, counts: np.ndarray, sigma: float) -> np.ndarray:
+    """Exemplar windows (K, M, F, P), sign-continuous (:func:`sign_continuous`), with each of the
+    ``counts`` (K,) real ones low-passed along its frames by a Gaussian of ``sigma`` frames
+    (edges: the nearest frame) and its quaternions renormalised; empty slots as they are.
+    sigma 0: unchanged (a copy)."""
+    out = members.copy()
+    real = np.arange(members.shape[1])[None, :] < np.asarray(counts)[:, None]
+    if sigma <= 0.0 or not real.any():
+        return out
+    from scipy.ndimage import gaussian_filter1d
+
+    out[real] = _unit(gaussian_filter1d(members[real], sigma, axis=1, mode="nearest").astype(np.float32))
+    return out
+
+
 def _cached_members(model: DanceVQ) -> np.ndarray:
-    """``model``'s exemplars as :func:`sign_continuous` makes them (K, M, 2 seg, P), kept on the
-    model like :func:`_cached_predictor`; streams only read it. (Not flagged read-only: the
-    compiled :func:`match_exemplar` would compile again, in the audio path, for read-only slices.)"""
-    key = _weights_key([model.member_poses])
+    """``model``'s exemplars as :func:`sign_continuous` makes them, low-passed by
+    :func:`smooth_members` (:data:`MEMBER_SMOOTH`), (K, M, 2 seg, P), kept on the model like
+    :func:`_cached_predictor`; streams only read it. (Not flagged read-only: the compiled
+    :func:`match_exemplar` would compile again, in the audio path, for read-only slices.)"""
+    key = (_weights_key([model.member_poses, model.member_count]), MEMBER_SMOOTH)
     cached = getattr(model, "_members_cache", None)
     if cached is None or cached[0] != key:
-        cached = (key, sign_continuous(model.member_poses.float().numpy()))
+        mem = smooth_members(sign_continuous(model.member_poses.float().numpy()), model.member_count.numpy(),
+                             MEMBER_SMOOTH)
+        cached = (key, mem)
         model._members_cache = cached
     return cached[1]
 
@@ -624,6 +658,9 @@ class DanceStream:
             bias = self._energy_bias  # read once: the control thread may swap it
             if bias is not None:  # livelier or calmer codes (set_energy)
                 logits = logits + bias
+            tilt = self._tempo_tilt()
+            if tilt != 0.0:  # livelier codes at a faster tempo, calmer at a slower one (TEMPO_ENERGY)
+                logits = logits + np.float32(tilt) * self._code_energy
             self._tokens.append(token)
             # the next step's window but its newest token is known now: its layers run on the frames between
             nxt = list(self._tokens)[-(pred.window - 1):]
@@ -667,6 +704,14 @@ class DanceStream:
         self._own_speed = float(self._member_speed[pairs[i]])
         self._commit(pairs[i][0])
         self._has_cont = True
+
+    def _tempo_tilt(self) -> float:
+        """:data:`TEMPO_ENERGY` times ln(T / T_ref), blended to 0 as the pulse fades (0 without a tempo)."""
+        period = self._tempo.period
+        if not FOLLOW_TEMPO or TEMPO_ENERGY == 0.0 or self._ref_period <= 0.0 or period <= 0.0:
+            return 0.0
+        w = min(1.0, self._tempo.confidence / RATE_CONFIDENCE)
+        return TEMPO_ENERGY * w * math.log(self._ref_period / period)
 
     def _rate_for(self, code: int, member: int) -> float:
         """The playback rate of exemplar ``member`` of ``code`` now (:data:`FOLLOW_TEMPO`)."""
