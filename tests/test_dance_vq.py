@@ -768,6 +768,26 @@ def test_the_idle_fade_keeps_each_bone_on_one_arc():
     np.testing.assert_allclose(faded[0], fresh[0], atol=1e-6)  # the first frame: the shorter arc
 
 
+def test_a_bone_turning_back_to_the_idle_mid_fade_blends_the_short_way():
+    """A bone 180 degrees from the idle when a fade-in starts, then turning back towards it
+    (the head at a fade-in of DANCE_W_22): each input's sign kept from the start made the two
+    nearly opposite and their blend whipped the bone (91 degrees in a frame); on the last
+    output's hemisphere it turns no faster than the dance and the fade together."""
+    from scipy.spatial.transform import Rotation
+
+    s = DanceStream(tiny_model())
+    n = 21
+    angles = np.linspace(181.0, 10.0, n)  # just past 180 degrees, then back towards the idle's
+    idle = np.zeros(POSE_DIM, np.float32)
+    idle[3:] = np.tile([0.0, 0.0, 0.0, 1.0], len(BONES))
+    dance = np.repeat(idle[None], n, 0)
+    dance[:, 3:7] = Rotation.from_euler("y", angles[:, None], degrees=True).as_quat()
+    weights = np.linspace(0.95, 0.05, n)  # fading in
+    faded = np.stack([s._fade(d, idle, w) for d, w in zip(dance, weights)])
+    dance_step = float(np.diff(angles).__abs__().max())  # 8.45 degrees a frame
+    assert float(quat_angles_deg(faded[1:], faded[:-1]).max()) < dance_step + 180.0 * 0.05 + 1.0
+
+
 def speed_by_beat_phase(p: np.ndarray, period: int = 15, lead: int = 0) -> np.ndarray:
     """Mean bone rotation between frames t-1 and t (degrees) of poses ``p`` (T, P), by the step's
     midpoint's frames after a beat of a ``period``-frame pulse with beats on frames 0, period, ...,

@@ -285,14 +285,20 @@ def test_a_faster_tempo_chooses_livelier_movements(clip_stretched, tilt_on, monk
 
 
 def test_the_memory_is_read_through_a_low_pass():
-    """smooth_members: frame-to-frame noise on an exemplar's tracks is cut (its third difference, the
-    jerk, to under a third), a slow movement (1 Hz) keeps its amplitude, quaternions stay unit and
-    empty slots stay empty; sigma 0 leaves the memory as it is."""
+    """The stream plays the shipped memory low-passed (MEMBER_SMOOTH): its exemplars' third
+    differences (jerk) are about half the recorded ones' (0.53x). smooth_members: frame-to-frame
+    noise on an exemplar's tracks is cut to under a third, a slow movement (1 Hz) keeps its
+    amplitude, quaternions stay unit and empty slots stay empty; sigma 0 leaves the memory as it is."""
     from models.networks.dance_stream import _unit, sign_continuous, smooth_members
 
     rng = np.random.default_rng(3)
     lm = load_model(None)
-    base = ds.DanceStream(lm.model, seed=0)._idle_base
+    stream = ds.DanceStream(lm.model, seed=0)
+    raw = sign_continuous(lm.model.member_poses.float().numpy())
+    real = np.arange(raw.shape[1])[None, :] < lm.model.member_count.numpy()[:, None]
+    third = lambda x: np.abs(np.diff(x[real][:, :, 3:], n=3, axis=1)).mean()  # noqa: E731
+    assert third(stream._members) < 0.7 * third(raw)
+    base = stream._idle_base
     t = np.arange(16)
     slow = _turning_head(base, 16, 0.0)
     slow[:, 0] = 0.1 * np.sin(2 * np.pi * t / FPS)  # the root sways 10 cm at 1 Hz

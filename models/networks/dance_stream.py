@@ -117,7 +117,7 @@ RATE_CONFIDENCE: float = 0.15
 #: tempo the capped livelier movements would otherwise play no faster than energy 1's.
 SPEED_CAP: float = 0.9
 #: Quantile of the memory's per-frame largest bone rotation (over all its exemplars' frames:
-#: 30.5 degrees for the shipped model, the dancers' own 99.9th percentile) that no bone of a
+#: 28.3 degrees for the shipped model, the dancers' own 99.9th percentile) that no bone of a
 #: sped-up movement passes: a movement whose fastest bone, over the frames it is about to
 #: play, would turn faster at the tempo's rate plays slower (at its own pace at least), and
 #: the rate it takes over from the last movement is held to the same bound. The mean-speed
@@ -520,7 +520,7 @@ class DanceStream:
             self._presence.reset()
         self._run = 0  # frames the gate's input has disagreed with its state
         self._w_idle = 1.0  # 1 = idle, 0 = dancing; a stream starts at rest and fades in on music
-        self._fade_prev: tuple[np.ndarray, np.ndarray] | None = None  # last faded frame's signed quaternions
+        self._fade_prev: np.ndarray | None = None  # the last faded frame's quaternions (J, 4)
         self._prev_quat: np.ndarray | None = None
         self.codes_drawn: list[int] = []
         self._lead = self._lead_next  # the lead in frames now (taken up at code steps)
@@ -792,25 +792,29 @@ class DanceStream:
 
     def _fade(self, pose: np.ndarray, idle: np.ndarray, e: float) -> np.ndarray:
         """The dance ``pose`` (P,) -> the ``idle`` pose by weight ``e`` in (0, 1]: :func:`_nlerp`,
-        but with each bone's arc chosen once, when the fade starts (the shorter one), and each
-        quaternion's sign then kept continuous frame to frame. A bone whose dance and idle
-        rotations pass 180 degrees apart mid-fade then keeps blending the way it went; the
-        shorter arc chosen anew each frame flipped to the other side there, a one-frame whip
-        (the head, 99 degrees, early in a validation dance)."""
+        but with each bone's two quaternions put on the hemisphere of the bone's last faded
+        output (when the fade starts: the dance's on the idle's, the shorter arc). A bone whose
+        dance and idle rotations pass 180 degrees apart mid-fade then keeps blending the way it
+        went (the shorter arc chosen anew each frame flipped to the other side there, a one-frame
+        whip: the head, 99 degrees, early in a validation dance); and one whose dance rotation
+        turns back towards the idle after the fade started does not blend the long way round
+        (keeping each input's sign from the start did: the two ended nearly opposite and their
+        nlerp whipped the head 91 degrees in a frame, at a fade-in of DANCE_W_22)."""
         if e >= 1.0:  # fully idle: no fade to follow
             self._fade_prev = None
             return _nlerp(pose, idle, e)
         qa, qb = pose[3:].reshape(-1, 4), idle[3:].reshape(-1, 4)
         if self._fade_prev is None:  # the fade starts: the shorter arc
-            qb = qb * np.where((qa * qb).sum(1, keepdims=True) < 0, -1.0, 1.0)
-        else:  # during it: each track continuous
-            pa, pb = self._fade_prev
-            qa = qa * np.where((qa * pa).sum(1, keepdims=True) < 0, -1.0, 1.0)
-            qb = qb * np.where((qb * pb).sum(1, keepdims=True) < 0, -1.0, 1.0)
-        self._fade_prev = (np.array(qa), qb)  # copies: qa may view the pose
+            qa = qa * np.where((qa * qb).sum(1, keepdims=True) < 0, -1.0, 1.0)
+        else:  # during it: both on the last output's hemisphere
+            o = self._fade_prev
+            qa = qa * np.where((qa * o).sum(1, keepdims=True) < 0, -1.0, 1.0)
+            qb = qb * np.where((qb * o).sum(1, keepdims=True) < 0, -1.0, 1.0)
         out = (1 - e) * pose + e * idle
         q = (1 - e) * qa + e * qb
-        out[3:] = (q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-9)).reshape(-1)
+        q = q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-9)
+        self._fade_prev = q
+        out[3:] = q.reshape(-1)
         return out
 
     def push(self, features: np.ndarray) -> np.ndarray:
