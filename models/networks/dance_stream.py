@@ -51,7 +51,7 @@ from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_bl
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ, style_token
 from models.networks.music_gate import ENERGY_COL, START_FRAMES, MusicGate
 from models.networks.streaming import FEATURE_LIMIT
-from models.networks.tempo import DENSITY_WINDOW, TempoFollower, danced_beat, onset_density
+from models.networks.tempo import DENSITY_WINDOW, TEMPO_RANGE, TempoFollower, danced_beat, onset_density
 from models.rig.humanoid import BONE_INDEX
 from models.rig.kinematics import rotation_jumps_deg
 from models.timebase import FPS
@@ -114,10 +114,18 @@ RATE_CONFIDENCE: float = 0.15
 #: Quantile of the exemplars' mean joint speeds that no movement is sped up past (a movement
 #: already faster plays at rate 1 at most). Above energy 1 (:meth:`DanceStream.set_energy`)
 #: the quantile rises with the energy, to the memory's fastest exemplar at 2: at a fast
-#: tempo the capped livelier movements would otherwise play no faster than energy 1's.
+#: tempo the capped livelier movements would otherwise play no faster than energy 1's. Above
+#: the memory's tempo it rises with the tempo too (:data:`SPEED_CAP_TEMPO`).
 SPEED_CAP: float = 0.9
+#: The speed cap follows the tempo: from :data:`SPEED_CAP` at the memory's tempo T_ref to the
+#: memory's fastest exemplar (quantile 1: never faster than the fastest dancer) at the top of
+#: the danced range (:data:`models.networks.tempo.TEMPO_RANGE`, 170 bpm), linearly in
+#: ln(T / T_ref). Without it the cap held every fast song's movements to one speed: on the
+#: listening ramp (110-155 bpm) the joint speed stopped following the tempo (correlation
+#: 0.32 against 0.79 with it, docs/listening.md). False: :data:`SPEED_CAP` at every tempo.
+SPEED_CAP_TEMPO: bool = True
 #: Quantile of the memory's per-frame largest bone rotation (over all its exemplars' frames:
-#: 28.3 degrees for the shipped model, the dancers' own 99.9th percentile) that no bone of a
+#: 26.7 degrees for the shipped model, the dancers' own 99.9th percentile) that no bone of a
 #: sped-up movement passes: a movement whose fastest bone, over the frames it is about to
 #: play, would turn faster at the tempo's rate plays slower (at its own pace at least), and
 #: the rate it takes over from the last movement is held to the same bound. The mean-speed
@@ -147,13 +155,14 @@ ENERGY_GAIN: float = 3.0
 #: they were danced to: as its 0.64th power, correlation 0.25). Without it the choice of
 #: movement ignores the tempo and only the playback rate follows it; the speed caps hold the
 #: rate back at fast tempos (docs/listening.md, "Tempo": stretch-set speed ratio 1.24 at 0,
-#: 1.44 at 4). 0: the choice ignores the tempo.
-TEMPO_ENERGY: float = 4.0
+#: 1.42 at 3.5 with :data:`SPEED_CAP_TEMPO`). 0: the choice ignores the tempo.
+TEMPO_ENERGY: float = 3.5
 #: Gaussian sigma (frames) of the low-pass each exemplar window of the memory is read through
 #: (:func:`_cached_members`; per track, then renormalised): the mocap's frame-to-frame noise,
 #: which a movement sped up by the tempo rate r turns into jerk as r cubed, is taken out
-#: (dance-scale motion, up to 3 Hz, keeps 82 % or more of its amplitude). 0: as recorded.
-MEMBER_SMOOTH: float = 1.0
+#: (dance-scale motion, up to 2 Hz, keeps 87 % or more of its amplitude; the validation
+#: dances' band amplitude 0.98 and jitter 1.01 of the dancers'). 0: as recorded.
+MEMBER_SMOOTH: float = 1.25
 #: The energy control's range.
 ENERGY_RANGE: tuple[float, float] = (0.0, 2.0)
 #: The lead control's range, ms (:meth:`DanceStream.set_lead`): a display chain's delay
@@ -166,6 +175,10 @@ SWAY: tuple[tuple[str, int, float, float, float], ...] = (
     ("Chest", 0, 1.5, 4.0, 1.0),  # breathing-like forward lean
     ("Head", 2, 2.0, 5.0, 2.0),
 )
+
+
+#: Steps of the tempo's speed-cap table (:data:`SPEED_CAP_TEMPO`).
+_CAP_STEPS = 64
 
 
 class IdleSway:
@@ -461,6 +474,10 @@ class DanceStream:
         # how fast a movement may be sped up to (m/frame), and the memory's mean tempo (frames per beat)
         self._speeds = speed[real]  # every exemplar's mean joint speed (m/frame): the speed cap's quantiles
         self._speed_cap = self._speed_cap_at(1.0)
+        # the speed cap at each step of the tempo's rise above T_ref (SPEED_CAP_TEMPO): quantiles
+        # SPEED_CAP .. 1 of the exemplars' speeds, looked up, not computed, on the audio path
+        self._tempo_caps = (np.quantile(self._speeds, np.linspace(SPEED_CAP, 1.0, _CAP_STEPS + 1))
+                            if len(self._speeds) else np.full(_CAP_STEPS + 1, np.inf))
         self._bone_cap = _cached_bone_cap(model, self._members, self._counts)  # degrees a frame
         self._member_speed = speed
         period = model.member_period.numpy().astype(np.float64)  # (K, M) each exemplar's song; 0 unknown
@@ -722,7 +739,17 @@ class DanceStream:
         lo, hi = RATE_RANGE
         r = min(max(src / period, lo), hi) ** min(1.0, self._tempo.confidence / RATE_CONFIDENCE)  # towards 1 as the pulse fades
         v = self._member_speed[code, member]
-        return min(r, max(1.0, self._speed_cap / v)) if v > 0 else r
+        return min(r, max(1.0, self._cap_now(period) / v)) if v > 0 else r
+
+    def _cap_now(self, period: float) -> float:
+        """The speed cap (m/frame) at the followed tempo's ``period`` (frames): the energy's
+        (:meth:`_speed_cap_at`) or, above the memory's tempo, the tempo's (:data:`SPEED_CAP_TEMPO`), the higher."""
+        cap = self._speed_cap
+        if SPEED_CAP_TEMPO and 0.0 < period < self._ref_period:
+            top = math.log(self._ref_period * TEMPO_RANGE[1] / (60.0 * FPS))  # ln(170 bpm / T_ref)
+            x = min(1.0, math.log(self._ref_period / period) / top) if top > 0.0 else 1.0
+            cap = max(cap, float(self._tempo_caps[int(round(x * _CAP_STEPS))]))
+        return cap
 
     def _bone_limit(self, window: np.ndarray, rate: float) -> float:
         """The fastest rate (>= 1) at which no bone of ``window`` (2 seg, P) turns faster than
