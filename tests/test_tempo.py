@@ -338,3 +338,20 @@ def test_at_a_fast_tempo_lively_movements_are_sped_up_too(cap_on, monkeypatch):
         assert np.all(rates == 1.0)
     s._tempo = _HeldTempo(88.0)  # at the memory's own tempo the cap is the 90th percentile either way
     assert s._cap_now(s._tempo.period) == s._speed_cap
+
+
+def test_a_calm_energy_stays_calm_at_a_fast_tempo():
+    """Energy 0 (the show's "calm") is not livened by a fast tempo: at 150 bpm neither the tilt
+    towards livelier codes nor the tempo's higher speed cap applies; at 0.5 both apply by half
+    (as much of the way from the 90th percentile); at 1 in full. (At full strength at every
+    energy, energy 0 moved as much as energy 1 on DANCE_R_5: benchmarks/studies/energy_control.py.)"""
+    lm = load_model(None)
+    tilt, rise = {}, {}
+    for energy in (0.0, 0.5, 1.0):
+        s = ds.DanceStream(lm.model, seed=0, energy=energy)
+        s._tempo = _HeldTempo(150.0)
+        tilt[energy] = s._tempo_tilt()
+        rise[energy] = s._cap_now(s._tempo.period) - s._speed_cap_at(1.0)
+    assert tilt[0.0] == 0.0 and rise[0.0] == 0.0
+    assert tilt[1.0] > 1.5 and tilt[0.5] == pytest.approx(tilt[1.0] / 2)
+    assert 0.0 < rise[0.5] < rise[1.0]

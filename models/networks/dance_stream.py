@@ -122,7 +122,8 @@ SPEED_CAP: float = 0.9
 #: the danced range (:data:`models.networks.tempo.TEMPO_RANGE`, 170 bpm), linearly in
 #: ln(T / T_ref). Without it the cap held every fast song's movements to one speed: on the
 #: listening ramp (110-155 bpm) the joint speed stopped following the tempo (correlation
-#: 0.32 against 0.79 with it, docs/listening.md). False: :data:`SPEED_CAP` at every tempo.
+#: 0.32 against 0.79 with it, docs/listening.md). Below energy 1 it rises less, not at all at
+#: energy 0. False: :data:`SPEED_CAP` at every tempo.
 SPEED_CAP_TEMPO: bool = True
 #: Quantile of the memory's per-frame largest bone rotation (over all its exemplars' frames:
 #: 26.7 degrees for the shipped model, the dancers' own 99.9th percentile) that no bone of a
@@ -155,7 +156,9 @@ ENERGY_GAIN: float = 3.0
 #: they were danced to: as its 0.64th power, correlation 0.25). Without it the choice of
 #: movement ignores the tempo and only the playback rate follows it; the speed caps hold the
 #: rate back at fast tempos (docs/listening.md, "Tempo": stretch-set speed ratio 1.24 at 0,
-#: 1.42 at 3.5 with :data:`SPEED_CAP_TEMPO`). 0: the choice ignores the tempo.
+#: 1.42 at 3.5 with :data:`SPEED_CAP_TEMPO`). Below energy 1 (:meth:`DanceStream.set_energy`) it
+#: shrinks with the energy, to nothing at 0: a calm dance stays calm at any tempo (at full
+#: strength energy 0 moved as much as energy 1 on DANCE_R_5). 0: the choice ignores the tempo.
 TEMPO_ENERGY: float = 3.5
 #: Gaussian sigma (frames) of the low-pass each exemplar window of the memory is read through
 #: (:func:`_cached_members`; per track, then renormalised): the mocap's frame-to-frame noise,
@@ -723,11 +726,12 @@ class DanceStream:
         self._has_cont = True
 
     def _tempo_tilt(self) -> float:
-        """:data:`TEMPO_ENERGY` times ln(T / T_ref), blended to 0 as the pulse fades (0 without a tempo)."""
+        """:data:`TEMPO_ENERGY` times ln(T / T_ref), blended to 0 as the pulse fades and as the
+        energy control goes from 1 to 0 (0 without a tempo)."""
         period = self._tempo.period
         if not FOLLOW_TEMPO or TEMPO_ENERGY == 0.0 or self._ref_period <= 0.0 or period <= 0.0:
             return 0.0
-        w = min(1.0, self._tempo.confidence / RATE_CONFIDENCE)
+        w = min(1.0, self._tempo.confidence / RATE_CONFIDENCE) * min(1.0, self.energy)  # calmer energies: less
         return TEMPO_ENERGY * w * math.log(self._ref_period / period)
 
     def _rate_for(self, code: int, member: int) -> float:
@@ -748,6 +752,7 @@ class DanceStream:
         if SPEED_CAP_TEMPO and 0.0 < period < self._ref_period:
             top = math.log(self._ref_period * TEMPO_RANGE[1] / (60.0 * FPS))  # ln(170 bpm / T_ref)
             x = min(1.0, math.log(self._ref_period / period) / top) if top > 0.0 else 1.0
+            x *= min(1.0, self.energy)  # below energy 1 the cap rises less: energy 0 stays calm at any tempo
             cap = max(cap, float(self._tempo_caps[int(round(x * _CAP_STEPS))]))
         return cap
 
