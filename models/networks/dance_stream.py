@@ -122,7 +122,7 @@ SPEED_CAP: float = 0.9
 #: the danced range (:data:`models.networks.tempo.TEMPO_RANGE`, 170 bpm), linearly in
 #: ln(T / T_ref). Without it the cap held every fast song's movements to one speed: on the
 #: listening ramp (110-155 bpm) the joint speed stopped following the tempo (correlation
-#: 0.32 against 0.79 with it, docs/listening.md). Below energy 1 it rises less, not at all at
+#: 0.32 against 0.60 with it, docs/listening.md). Below energy 1 it rises less, not at all at
 #: energy 0. False: :data:`SPEED_CAP` at every tempo.
 SPEED_CAP_TEMPO: bool = True
 #: Quantile of the memory's per-frame largest bone rotation (over all its exemplars' frames:
@@ -156,15 +156,14 @@ ENERGY_GAIN: float = 3.0
 #: they were danced to: as its 0.64th power, correlation 0.25). Without it the choice of
 #: movement ignores the tempo and only the playback rate follows it; the speed caps hold the
 #: rate back at fast tempos (docs/listening.md, "Tempo": stretch-set speed ratio 1.24 at 0,
-#: 1.42 at 3.5 with :data:`SPEED_CAP_TEMPO`). Below energy 1 (:meth:`DanceStream.set_energy`) it
+#: 1.44 at 4 with :data:`SPEED_CAP_TEMPO`). Below energy 1 (:meth:`DanceStream.set_energy`) it
 #: shrinks with the energy, to nothing at 0: a calm dance stays calm at any tempo (at full
 #: strength energy 0 moved as much as energy 1 on DANCE_R_5). 0: the choice ignores the tempo.
-TEMPO_ENERGY: float = 3.5
+TEMPO_ENERGY: float = 4.0
 #: Gaussian sigma (frames) of the low-pass each exemplar window of the memory is read through
 #: (:func:`_cached_members`; per track, then renormalised): the mocap's frame-to-frame noise,
 #: which a movement sped up by the tempo rate r turns into jerk as r cubed, is taken out
-#: (dance-scale motion, up to 2 Hz, keeps 87 % or more of its amplitude; the validation
-#: dances' band amplitude 0.98 and jitter 1.01 of the dancers'). 0: as recorded.
+#: (dance-scale motion, up to 2 Hz, keeps 87 % or more of its amplitude). 0: as recorded.
 MEMBER_SMOOTH: float = 1.25
 #: The energy control's range.
 ENERGY_RANGE: tuple[float, float] = (0.0, 2.0)
