@@ -62,6 +62,10 @@ ABSENT_FRAMES: int = 15
 PRESENT_FRAMES: int = 6
 #: Frames of the crossfade between dance and idle (0.67 s), eased with a smoothstep.
 FADE_FRAMES: int = 20
+#: A fade that follows a bone's rotation to the idle the long way round (past 180 degrees,
+#: :meth:`DanceStream._fade`) goes back to the shorter way when that moves the bone by at most
+#: this much (radians: 10 degrees), near the fade's start or end.
+FADE_SWITCH: float = math.radians(10.0)
 #: Time constant (frames) of the music detector's running mean while no music is heard: shorter
 #: than the one it was fitted with (GATE_TAU, 0.5 s), so the dance comes back within a second.
 GATE_TAU_RETURN: float = 5.0
@@ -412,6 +416,14 @@ def _cached_bone_cap(model: DanceVQ, members: np.ndarray, counts: np.ndarray) ->
     return cached[1]
 
 
+def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton products a b of quaternion rows (..., 4), (x, y, z, w) order (SciPy's)."""
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+
+
 def _nlerp(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
     """Pose a -> b by weight w in [0, 1]: root lerped, every quaternion nlerped on b's hemisphere of a."""
     out = (1 - w) * a + w * b
@@ -539,7 +551,7 @@ class DanceStream:
             self._presence.reset()
         self._run = 0  # frames the gate's input has disagreed with its state
         self._w_idle = 1.0  # 1 = idle, 0 = dancing; a stream starts at rest and fades in on music
-        self._fade_prev: np.ndarray | None = None  # the last faded frame's quaternions (J, 4)
+        self._fade_prev: np.ndarray | None = None  # the fade's last rotation vectors, dance -> idle (J, 3)
         self._prev_quat: np.ndarray | None = None
         self.codes_drawn: list[int] = []
         self._lead = self._lead_next  # the lead in frames now (taken up at code steps)
@@ -822,30 +834,44 @@ class DanceStream:
         return warp_pose(self._played, x - self._lag)
 
     def _fade(self, pose: np.ndarray, idle: np.ndarray, e: float) -> np.ndarray:
-        """The dance ``pose`` (P,) -> the ``idle`` pose by weight ``e`` in (0, 1]: :func:`_nlerp`,
-        but with each bone's two quaternions put on the hemisphere of the bone's last faded
-        output (when the fade starts: the dance's on the idle's, the shorter arc). A bone whose
-        dance and idle rotations pass 180 degrees apart mid-fade then keeps blending the way it
-        went (the shorter arc chosen anew each frame flipped to the other side there, a one-frame
-        whip: the head, 99 degrees, early in a validation dance); and one whose dance rotation
-        turns back towards the idle after the fade started does not blend the long way round
-        (keeping each input's sign from the start did: the two ended nearly opposite and their
-        nlerp whipped the head 91 degrees in a frame, at a fade-in of DANCE_W_22)."""
+        """The dance ``pose`` (P,) -> the ``idle`` pose by weight ``e`` in (0, 1]: the root lerped,
+        each bone turned from its dance rotation towards the idle's by ``e`` of the rotation
+        between them, ``qa exp(e w)``, where ``w`` (a rotation vector) is that rotation taken
+        the shorter way when the fade starts and then followed continuously, however far round
+        it goes. Choosing the shorter way anew each frame flips it where the two pass 180
+        degrees apart (the head, 99 degrees in a frame, early in a validation dance); blending
+        the two quaternions (nlerp) with their signs fixed at the start whips a bone that turns
+        back towards the idle (91 degrees, a fade-in of DANCE_W_22), and with their signs put on
+        the last output's hemisphere one that passes 90 degrees from it (107 degrees, the soak).
+        Followed continuously, a bone turns no faster than the dance plus the fade's own step
+        (at most 1.5 / FADE_FRAMES of the rotation between them a frame, a full turn at most);
+        near the fade's ends it goes back to the shorter way (:data:`FADE_SWITCH`)."""
         if e >= 1.0:  # fully idle: no fade to follow
             self._fade_prev = None
             return _nlerp(pose, idle, e)
-        qa, qb = pose[3:].reshape(-1, 4), idle[3:].reshape(-1, 4)
-        if self._fade_prev is None:  # the fade starts: the shorter arc
-            qa = qa * np.where((qa * qb).sum(1, keepdims=True) < 0, -1.0, 1.0)
-        else:  # during it: both on the last output's hemisphere
-            o = self._fade_prev
-            qa = qa * np.where((qa * o).sum(1, keepdims=True) < 0, -1.0, 1.0)
-            qb = qb * np.where((qb * o).sum(1, keepdims=True) < 0, -1.0, 1.0)
+        qa, qb = pose[3:].reshape(-1, 4).astype(np.float64), idle[3:].reshape(-1, 4).astype(np.float64)
+        qa = qa / np.maximum(np.linalg.norm(qa, axis=1, keepdims=True), 1e-12)
+        qb = qb / np.maximum(np.linalg.norm(qb, axis=1, keepdims=True), 1e-12)
+        rel = _qmul(qa * [-1.0, -1.0, -1.0, 1.0], qb)  # qa^-1 qb
+        rel = rel * np.where(rel[:, 3:] < 0, -1.0, 1.0)  # the shorter way: angle <= pi
+        vn = np.linalg.norm(rel[:, :3], axis=1)
+        angle = 2.0 * np.arctan2(vn, rel[:, 3])
+        axis = rel[:, :3] / np.maximum(vn, 1e-12)[:, None]
+        w = angle[:, None] * axis
+        if self._fade_prev is not None:  # the same rotation the long way round, where that is nearer the last
+            other = w - (2.0 * np.pi) * axis
+            far = np.linalg.norm(other - self._fade_prev, axis=1) < np.linalg.norm(w - self._fade_prev, axis=1)
+            w[far] = other[far]
+            if min(e, 1.0 - e) * 2.0 * np.pi <= FADE_SWITCH:  # near either end the shorter way costs a small step
+                long = np.linalg.norm(w, axis=1) > np.pi
+                w[long] = (angle[:, None] * axis)[long]
+        self._fade_prev = w
+        h = 0.5 * e * np.linalg.norm(w, axis=1)
+        turn = np.concatenate([np.sin(h)[:, None] * (w / np.maximum(np.linalg.norm(w, axis=1), 1e-12)[:, None]),
+                               np.cos(h)[:, None]], axis=1)
+        q = _qmul(qa, turn)
         out = (1 - e) * pose + e * idle
-        q = (1 - e) * qa + e * qb
-        q = q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-9)
-        self._fade_prev = q
-        out[3:] = q.reshape(-1)
+        out[3:] = q.reshape(-1).astype(np.float32)
         return out
 
     def push(self, features: np.ndarray) -> np.ndarray:
