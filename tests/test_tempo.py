@@ -343,11 +343,12 @@ def test_at_a_fast_tempo_lively_movements_are_sped_up_too(cap_on, monkeypatch):
 def test_a_calm_energy_stays_calm_at_a_fast_tempo():
     """Energy 0 (the show's "calm") is not livened by a fast tempo: at 150 bpm neither the tilt
     towards livelier codes nor the tempo's higher speed cap applies; at 0.5 both apply by half
-    (as much of the way from the 90th percentile); at 1 in full. (At full strength at every
-    energy, energy 0 moved as much as energy 1 on DANCE_R_5: benchmarks/studies/energy_control.py.)"""
+    (as much of the way from the 90th percentile); at 1 in full; at 2 the energy control's own
+    bias and cap alone. (At full strength at every energy, energy 0 moved as much as energy 1
+    on DANCE_R_5 and energy 2 less than 1 on DANCE_C_2: benchmarks/studies/energy_control.py.)"""
     lm = load_model(None)
     tilt, rise = {}, {}
-    for energy in (0.0, 0.5, 1.0):
+    for energy in (0.0, 0.5, 1.0, 2.0):
         s = ds.DanceStream(lm.model, seed=0, energy=energy)
         s._tempo = _HeldTempo(150.0)
         tilt[energy] = s._tempo_tilt()
@@ -355,3 +356,4 @@ def test_a_calm_energy_stays_calm_at_a_fast_tempo():
     assert tilt[0.0] == 0.0 and rise[0.0] == 0.0
     assert tilt[1.0] > 1.5 and tilt[0.5] == pytest.approx(tilt[1.0] / 2)
     assert 0.0 < rise[0.5] < rise[1.0]
+    assert tilt[2.0] == 0.0

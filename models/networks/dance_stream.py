@@ -127,7 +127,7 @@ SPEED_CAP: float = 0.9
 #: ln(T / T_ref). Without it the cap held every fast song's movements to one speed: on the
 #: listening ramp (110-155 bpm) the joint speed stopped following the tempo (correlation
 #: 0.32 against 0.60 with it, docs/listening.md). Below energy 1 it rises less, not at all at
-#: energy 0. False: :data:`SPEED_CAP` at every tempo.
+#: energy 0 (above 1 the energy's own cap is the higher). False: :data:`SPEED_CAP` at every tempo.
 SPEED_CAP_TEMPO: bool = True
 #: Quantile of the memory's per-frame largest bone rotation (over all its exemplars' frames:
 #: 26.7 degrees for the shipped model, the dancers' own 99.9th percentile) that no bone of a
@@ -150,7 +150,7 @@ STYLE_MEMBERS: bool = True
 #: The energy control (:meth:`DanceStream.set_energy`, 0..2, 1 = as the music asks): the code
 #: logits move by ``ENERGY_GAIN * (energy - 1) * z``, z each code's movement speed
 #: (:func:`code_energy`), so energy 0 favours the calmest movements and 2 the liveliest
-#: (benchmarks/studies/energy_control.py: the validation dances' motion energy 0.67x, 1.0x and 1.5x
+#: (benchmarks/studies/energy_control.py: the validation dances' motion energy 0.82x, 1.21x and 1.62x
 #: the dancers' at 0, 1 and 2, monotone on every song; docs/show.md, "Energy").
 ENERGY_GAIN: float = 3.0
 #: Tempo and liveliness: the code logits also move by ``TEMPO_ENERGY * ln(T / T_ref) * z`` (T the
@@ -160,9 +160,10 @@ ENERGY_GAIN: float = 3.0
 #: they were danced to: as its 0.64th power, correlation 0.25). Without it the choice of
 #: movement ignores the tempo and only the playback rate follows it; the speed caps hold the
 #: rate back at fast tempos (docs/listening.md, "Tempo": stretch-set speed ratio 1.24 at 0,
-#: 1.44 at 4 with :data:`SPEED_CAP_TEMPO`). Below energy 1 (:meth:`DanceStream.set_energy`) it
-#: shrinks with the energy, to nothing at 0: a calm dance stays calm at any tempo (at full
-#: strength energy 0 moved as much as energy 1 on DANCE_R_5). 0: the choice ignores the tempo.
+#: 1.44 at 4 with :data:`SPEED_CAP_TEMPO`). Away from energy 1 (:meth:`DanceStream.set_energy`)
+#: it shrinks, to nothing at 0 and at 2: the show's energy setting takes over (at full
+#: strength energy 0 moved as much as energy 1 on DANCE_R_5, and energy 2 less than 1 on
+#: DANCE_C_2). 0: the choice ignores the tempo.
 TEMPO_ENERGY: float = 4.0
 #: Gaussian sigma (frames) of the low-pass each exemplar window of the memory is read through
 #: (:func:`_cached_members`; per track, then renormalised): the mocap's frame-to-frame noise,
@@ -738,11 +739,11 @@ class DanceStream:
 
     def _tempo_tilt(self) -> float:
         """:data:`TEMPO_ENERGY` times ln(T / T_ref), blended to 0 as the pulse fades and as the
-        energy control goes from 1 to 0 (0 without a tempo)."""
+        energy control goes from 1 to 0 or to 2 (0 without a tempo)."""
         period = self._tempo.period
         if not FOLLOW_TEMPO or TEMPO_ENERGY == 0.0 or self._ref_period <= 0.0 or period <= 0.0:
             return 0.0
-        w = min(1.0, self._tempo.confidence / RATE_CONFIDENCE) * min(1.0, self.energy)  # calmer energies: less
+        w = min(1.0, self._tempo.confidence / RATE_CONFIDENCE) * max(0.0, 1.0 - abs(self.energy - 1.0))  # the energy control set away from 1 takes over
         return TEMPO_ENERGY * w * math.log(self._ref_period / period)
 
     def _rate_for(self, code: int, member: int) -> float:
