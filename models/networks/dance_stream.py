@@ -151,7 +151,7 @@ STYLE_MEMBERS: bool = True
 #: logits move by ``ENERGY_GAIN * (energy - 1) * z``, z each code's movement speed
 #: (:func:`code_energy`), so energy 0 favours the calmest movements and 2 the liveliest
 #: (benchmarks/studies/energy_control.py: the validation dances' motion energy 0.82x, 1.21x and 1.62x
-#: the dancers' at 0, 1 and 2, monotone on every song; docs/show.md, "Energy").
+#: the dancers' at 0, 1 and 2, rising from 0 to 1 to 2 on every song; docs/show.md, "Energy").
 ENERGY_GAIN: float = 3.0
 #: Tempo and liveliness: the code logits also move by ``TEMPO_ENERGY * ln(T / T_ref) * z`` (T the
 #: followed tempo, T_ref the memory's, z :func:`code_energy`), blended out as the pulse fades
