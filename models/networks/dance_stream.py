@@ -104,7 +104,7 @@ WARP_PULL: float = 0.05
 #: :data:`RATE_RANGE`, and no movement is sped up past the memory's 90th-percentile speed
 #: (:data:`SPEED_CAP`; one faster on its own plays at its own pace); the rate moves from the last movement's to the new one's over the
 #: movement, so a change of tempo never jerks. Each exemplar's own song tempo as the
-#: reference (``T / T_src``) was measured too (docs/listening.md): the rate then jumps
+#: reference (``T / T_src``) was measured too (docs/history.md, "Listening"): the rate then jumps
 #: between exemplars of different styles at every handover (jerk 2.1x the dancers',
 #: bone steps up to 49.6 degrees), for no gain in how the pace follows the music. False
 #: plays every movement at its own pace.
@@ -126,7 +126,7 @@ SPEED_CAP: float = 0.9
 #: the danced range (:data:`models.networks.tempo.TEMPO_RANGE`, 170 bpm), linearly in
 #: ln(T / T_ref). Without it the cap held every fast song's movements to one speed: on the
 #: listening ramp (110-155 bpm) the joint speed stopped following the tempo (correlation
-#: 0.32 against 0.60 with it, docs/listening.md). Below energy 1 it rises less, not at all at
+#: 0.32 against 0.60 with it, docs/history.md). Below energy 1 it rises less, not at all at
 #: energy 0 (above 1 the energy's own cap is the higher). False: :data:`SPEED_CAP` at every tempo.
 SPEED_CAP_TEMPO: bool = True
 #: Quantile of the memory's per-frame largest bone rotation (over all its exemplars' frames:
@@ -159,7 +159,7 @@ ENERGY_GAIN: float = 3.0
 #: dancers chose (over the memory's exemplars, their own speed grows with the tempo of the song
 #: they were danced to: as its 0.64th power, correlation 0.25). Without it the choice of
 #: movement ignores the tempo and only the playback rate follows it; the speed caps hold the
-#: rate back at fast tempos (docs/listening.md, "Tempo": stretch-set speed ratio 1.24 at 0,
+#: rate back at fast tempos (docs/history.md, "Listening": stretch-set speed ratio 1.24 at 0,
 #: 1.44 at 4 with :data:`SPEED_CAP_TEMPO`). Away from energy 1 (:meth:`DanceStream.set_energy`)
 #: it shrinks, to nothing at 0 and at 2: the show's energy setting takes over (at full
 #: strength energy 0 moved as much as energy 1 on DANCE_R_5, and energy 2 less than 1 on
@@ -418,7 +418,10 @@ def _cached_bone_cap(model: DanceVQ, members: np.ndarray, counts: np.ndarray) ->
 
 
 def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton products a b of quaternion rows (..., 4), (x, y, z, w) order (SciPy's)."""
+    """Hamilton products a b of quaternion rows (..., 4), (x, y, z, w) order (SciPy's). All of a
+    pose's bones in one NumPy expression for :meth:`DanceStream._fade`, which runs on the audio
+    path while fading: SciPy's ``Rotation`` took 0.2-0.5 ms a frame there (see :class:`IdleSway`),
+    and :func:`models.networks.dance_jit._qmul` is the same product for one quaternion, compiled."""
     ax, ay, az, aw = np.moveaxis(a, -1, 0)
     bx, by, bz, bw = np.moveaxis(b, -1, 0)
     return np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
