@@ -107,9 +107,10 @@ def load_model(checkpoint: str | Path | None = None) -> LoadedModel:
     except CheckpointError as exc:  # one line: torch's messages can span several
         raise CheckpointError(str(exc).splitlines()[0].rstrip()) from None
     cfg = checkpoint_feature_config(meta, path)
-    if net.config.feature_dim != cfg.dim:
+    takes = getattr(net.config, "input_dim", net.config.feature_dim)  # dance_vq: + its gate column
+    if takes != cfg.dim:
         raise CheckpointError(
-            f"model takes {net.config.feature_dim} features per frame but its feature config gives {cfg.dim}",
+            f"model takes {takes} features per frame but its feature config gives {cfg.dim}",
             source=path,
         )
     return LoadedModel(net, meta, cfg, path)

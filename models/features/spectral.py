@@ -59,6 +59,7 @@ from numba import njit
 
 from models.errors import AudioError, ConfigError
 from models.features.context import BEAT_COLUMNS, ContextTracker
+from models.features.steadiness import SteadinessTracker
 from models.timebase import HOP, SAMPLE_RATE
 
 # Bump when the numbers any config produces change (definitions, resampler, framing):
@@ -83,7 +84,10 @@ class FeatureConfig:
         after them; 0 = off (models/features/context.py).
     beat_phase: append the 4 beat-tracker columns (kinds with an onset column:
         ``logmel_onset``, ``mfcc_onset``; context.py).
-    Both are off by default and then left out of :meth:`to_dict`, so configs without
+    steadiness: append one column, last: how still the spectrum's fine structure holds
+        over 67 ms (models/features/steadiness.py). Only the idle gate of a dance_vq model
+        reads it (``DanceVQConfig.gate_col``); the predictor never does.
+    All three are off by default and then left out of :meth:`to_dict`, so configs without
     them keep the fingerprints they had before the options existed.
     """
 
@@ -97,6 +101,7 @@ class FeatureConfig:
     hop: int = HOP
     context_s: float = 0.0
     beat_phase: bool = False
+    steadiness: bool = False
 
     def __post_init__(self) -> None:
         # Canonical types, so that equal configs give equal fingerprints (JSON 0 vs 0.0).
@@ -132,6 +137,9 @@ class FeatureConfig:
         if not isinstance(self.beat_phase, (bool, np.bool_)):
             raise ConfigError(f"feature config beat_phase={self.beat_phase!r} must be true or false")
         object.__setattr__(self, "beat_phase", bool(self.beat_phase))
+        if not isinstance(self.steadiness, (bool, np.bool_)):
+            raise ConfigError(f"feature config steadiness={self.steadiness!r} must be true or false")
+        object.__setattr__(self, "steadiness", bool(self.steadiness))
         if self.beat_phase and self.kind not in ONSET_KINDS:
             raise ConfigError(
                 f"beat_phase needs a kind with an onset column ({', '.join(ONSET_KINDS)}), got {self.kind!r}"
@@ -159,17 +167,19 @@ class FeatureConfig:
 
     @property
     def dim(self) -> int:
-        """Feature dimension D of one frame: base, + base again with context, + 4 with beat phase."""
-        return self.base_dim * (2 if self.context_s > 0 else 1) + (BEAT_COLUMNS if self.beat_phase else 0)
+        """Feature dimension D of one frame: base, + base again with context, + 4 with beat phase,
+        + 1 with steadiness."""
+        return (self.base_dim * (2 if self.context_s > 0 else 1) + (BEAT_COLUMNS if self.beat_phase else 0)
+                + int(self.steadiness))
 
     def base(self) -> FeatureConfig:
-        """This config without the context/beat columns (its columns are a prefix of ours)."""
-        return dataclasses.replace(self, context_s=0.0, beat_phase=False)
+        """This config without the context/beat/steadiness columns (its columns are a prefix of ours)."""
+        return dataclasses.replace(self, context_s=0.0, beat_phase=False, steadiness=False)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict, including the feature code version (options at their off value left out)."""
         d = {"version": FEATURE_VERSION, **dataclasses.asdict(self)}
-        for name in ("context_s", "beat_phase"):
+        for name in ("context_s", "beat_phase", "steadiness"):
             if not d[name]:
                 del d[name]
         return d
@@ -320,6 +330,7 @@ def extract_features(audio: np.ndarray, cfg: FeatureConfig | None = None) -> np.
 
     audio: (n,) float samples at SAMPLE_RATE (load with models.features.audio_io.load_audio).
     Returns (n // HOP, cfg.dim) float32; row t uses only samples < (t + 1) * HOP.
+    Columns ``[base | context | beat | steadiness]`` as the config asks.
     """
     cfg = cfg or FeatureConfig()
     audio = np.asarray(audio)
@@ -330,10 +341,14 @@ def extract_features(audio: np.ndarray, cfg: FeatureConfig | None = None) -> np.
     kernel = SpectralKernel(cfg)
     extra = ContextTracker(cfg.base_dim, cfg.context_s, cfg.beat_phase)
     frames = causal_frames(audio, cfg.n_fft)
+    steady = SteadinessTracker(cfg.n_fft) if cfg.steadiness else None
+    end = cfg.base_dim + extra.extra_dim
     out = np.empty((frames.shape[0], cfg.dim), np.float32)
     prev = None
     for lo in range(0, frames.shape[0], _OFFLINE_CHUNK):
         base, prev = kernel(frames[lo : lo + _OFFLINE_CHUNK], prev)
         out[lo : lo + base.shape[0], : cfg.base_dim] = base
-        out[lo : lo + base.shape[0], cfg.base_dim :] = extra(base)
+        out[lo : lo + base.shape[0], cfg.base_dim : end] = extra(base)
+        if steady is not None:
+            out[lo : lo + base.shape[0], end] = steady(frames[lo : lo + _OFFLINE_CHUNK])
     return out

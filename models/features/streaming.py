@@ -4,7 +4,8 @@
 resample to 22050 Hz -> hop-ending STFT frames -> :class:`SpectralKernel`)
 incrementally: the resampler carries its filter state, the extractor keeps the last
 ``n_fft - HOP`` resampled samples, the previous log-mel row and (when the config adds
-context or beat columns) a :class:`~models.features.context.ContextTracker`, and every
+context or beat columns) a :class:`~models.features.context.ContextTracker` (and, with the
+steadiness column, a :class:`~models.features.steadiness.SteadinessTracker`), and every
 push computes only the frames completed by that push. Streamed frames equal
 :func:`extract_features` on the whole signal (tests/test_features_streaming.py).
 
@@ -28,6 +29,7 @@ from models.features.audio_io import check_finite, to_mono
 from models.features.context import ContextTracker
 from models.features.resample import StreamingResampler, check_rate
 from models.features.spectral import FeatureConfig, SpectralKernel
+from models.features.steadiness import SteadinessTracker
 from models.timebase import HOP, SAMPLE_RATE
 
 COMMON_RATES: tuple[int, ...] = (8000, 16000, 22050, 24000, 32000, 44100, 48000, 96000)
@@ -69,6 +71,7 @@ class StreamingFeatureExtractor:
         self._resampler = StreamingResampler(self.input_sr, SAMPLE_RATE)
         self._kernel = SpectralKernel(self.cfg)
         self._extra = ContextTracker(self.cfg.base_dim, self.cfg.context_s, self.cfg.beat_phase)
+        self._steady = SteadinessTracker(self.cfg.n_fft) if self.cfg.steadiness else None
         self.latency_samples: int = feature_latency_samples(self.input_sr)
         self.reset()
 
@@ -78,6 +81,8 @@ class StreamingFeatureExtractor:
         self._history = np.zeros(self.cfg.n_fft - HOP)  # 22050 Hz samples before the next hop
         self._prev_logmel: np.ndarray | None = None
         self._extra.reset()
+        if self._steady is not None:
+            self._steady.reset()
         self._frames = 0
 
     @property
@@ -120,6 +125,8 @@ class StreamingFeatureExtractor:
         out, self._prev_logmel = self._kernel(frames, self._prev_logmel)
         if self._extra.extra_dim:
             out = np.concatenate([out, self._extra(out)], axis=1)
+        if self._steady is not None:
+            out = np.concatenate([out, self._steady(frames)[:, None]], axis=1)
         self._history = buf[k * HOP :]
         self._frames += k
         return out
@@ -193,6 +200,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--context-s", type=float, default=0.0,
                    help="for --bench: add the running-mean context columns with this time constant (s)")
     p.add_argument("--beat-phase", action="store_true", help="for --bench: add the beat-phase columns")
+    p.add_argument("--steadiness", action="store_true", help="for --bench: add the spectral steadiness column")
     args = p.parse_args(argv)
     if args.compare:
         _compare(args.seconds)
@@ -205,7 +213,8 @@ def main(argv: list[str] | None = None) -> int:
     cfg = {"logmel_onset": FeatureConfig, "linear": FeatureConfig.linear, "mfcc": FeatureConfig.mfcc,
            "mfcc_onset": lambda: FeatureConfig(kind="mfcc_onset", n_mels=128)}[args.kind]()
     try:
-        cfg = dataclasses.replace(cfg, context_s=args.context_s, beat_phase=args.beat_phase)
+        cfg = dataclasses.replace(cfg, context_s=args.context_s, beat_phase=args.beat_phase,
+                                  steadiness=args.steadiness)
     except ConfigError as exc:
         p.error(str(exc))
     _bench(args.rate, args.block, args.seconds, cfg)

@@ -465,7 +465,9 @@ class DanceStream:
         self.model = model.eval()
         c = model.config
         self._predictor = _cached_predictor(model)  # the torch predictor's logits, in NumPy (dance_numpy)
-        self.seg, self.feature_dim, self.pose_dim = c.seg, c.feature_dim, c.pose_dim
+        self.seg, self.pose_dim = c.seg, c.pose_dim
+        self.feature_dim = c.input_dim  # columns push() takes: the predictor's, + the gate's steadiness column
+        self._fd = c.feature_dim  # the predictor's columns, the first of each row
         self.seed = int(seed)
         self.style = style_token(style)
         self._feat_mean = model.feat_mean.numpy().astype(np.float32)
@@ -481,7 +483,7 @@ class DanceStream:
         self._gate_a_return = float(np.exp(-1.0 / GATE_TAU_RETURN))
         fitted = bool(model.presence.abs().sum() > 0) and self._ecol == ENERGY_COL  # else the logistic detector
         self._presence = MusicGate(self._feat_mean, self._feat_std, model.presence.numpy(), self._energy_min,
-                                   c.clarity_col) if fitted else None
+                                   c.clarity_col, c.gate_col, c.gate_tau) if fitted else None
         self._members = _cached_members(model)  # (K, M, 2 seg, P), shared: never written
         self._counts = model.member_count.numpy()
         self._style_prior = model.style_prior.numpy().astype(np.float32)  # (K, 4)
@@ -531,7 +533,7 @@ class DanceStream:
         self.rng = np.random.default_rng(self.seed)
         self.frame = 0
         self.nonfinite_frames = 0
-        self._hist = np.zeros((self.seg, self.feature_dim), np.float32)
+        self._hist = np.zeros((self.seg, self._fd), np.float32)
         self._tokens: deque[np.ndarray] = deque(maxlen=c.window_codes)  # embedded (audio + previous code)
         self._prefix: Prefix | None = None  # the next code step's window but its last token, computed ahead
         self._prefix_auto: Prefix | None = None  # the same with the "auto" style, while a style is guided
@@ -893,7 +895,7 @@ class DanceStream:
             if t % self.seg == 0:
                 self._lead = self._lead_next  # a new lead starts with a movement
             row = self._ahead(x[i]) if self._lead and self._beat_cols is not None else x[i]
-            push_history(self._hist, row, self._feat_mean, self._feat_std)  # (x - mean) / std, the oldest out
+            push_history(self._hist, row, self._feat_mean, self._feat_std)  # its first _fd columns, standardised
             self._raw = row
             if self._beat_cols is not None:  # the tempo (the period is the same ahead or not)
                 if self._onset_col is not None:

@@ -91,6 +91,13 @@ class DanceVQConfig:
     energy and of the beat tracker's pulse clarity, read by the idle gate (-1 = unused).
     onset_col: the onset-strength column, whose onset density picks the octave of the tempo
     the performer follows (models.networks.tempo; -1 = none: the tracker's own octave).
+    gate_col: -1, or ``feature_dim``: the features carry one more column, last, the spectral
+    steadiness (FeatureConfig ``steadiness``, models/features/steadiness.py), which only the
+    idle gate's presence detector reads; the predictor's inputs are the first ``feature_dim``
+    (:attr:`input_dim` columns in all).
+    gate_tau: time constant (frames) of the presence detector's statistics while the performer
+    dances, the one its detector was fitted at (models/networks/music_gate.py; 15 before the
+    steadiness column, 10 with it).
     """
 
     feature_dim: int = 62
@@ -112,6 +119,8 @@ class DanceVQConfig:
     energy_col: int = 13
     clarity_col: int = 60
     onset_col: int = -1
+    gate_col: int = -1
+    gate_tau: float = 15.0
 
     def __post_init__(self) -> None:
         ints = ("feature_dim", "seg", "codebook", "code_dim", "enc_width", "dec_width", "d_model", "layers", "heads",
@@ -124,6 +133,16 @@ class DanceVQConfig:
             raise ConfigError(f"dance_vq needs pose_dim = 3 + 4 J and d_model divisible by heads: {self}")
         if not self.temperature > 0 or self.top_k < 0:
             raise ConfigError(f"dance_vq sampling needs temperature > 0 and top_k >= 0: {self}")
+        if not 1.0 <= self.gate_tau <= 300.0:
+            raise ConfigError(f"dance_vq gate_tau must be in [1, 300] frames, got {self.gate_tau}")
+        if self.gate_col not in (-1, self.feature_dim):
+            raise ConfigError(f"dance_vq gate_col must be -1 (none) or feature_dim = {self.feature_dim} "
+                              f"(the last column), got {self.gate_col}")
+
+    @property
+    def input_dim(self) -> int:
+        """Feature columns the stream takes: ``feature_dim``, + 1 with the gate's column."""
+        return self.feature_dim + (self.gate_col >= 0)
 
     @property
     def causal(self) -> bool:
@@ -358,7 +377,7 @@ class DanceVQ(nn.Module):
         before the first are the mean (0 after standardisation).
         """
         s, d = self.config.seg, self.config.feature_dim
-        x = (np.asarray(features, np.float32) - self.feat_mean.numpy()) / self.feat_std.numpy()
+        x = (np.asarray(features, np.float32)[:, :d] - self.feat_mean.numpy()) / self.feat_std.numpy()
         padded = np.concatenate([np.zeros((s - 1, d), np.float32), x])
         n = len(x) // s
         return padded[: n * s].reshape(n, s * d)

@@ -6,8 +6,13 @@ onset 28, context means 29-57, beat columns c cos, c sin, clarity, log2 period/1
 and keeps :data:`N_STATS` causal running statistics (one compiled call a frame,
 :func:`presence_step`), all exponential means with time constant ``tau`` frames:
 
-* 0, 1: the standardised MFCC 1 and 2 (the spectrum's tilt and curvature, not level; the
-  finer shape follows the recording chain more than the source, and is left out);
+* 0: with the model's steadiness column (``gate_col``, models/features/steadiness.py), its
+  running mean: how still the harmonics hold over 67 ms (music holds notes; a voice glides,
+  noise has none). Without it (checkpoints fitted before it), the standardised MFCC 1, the
+  spectrum's tilt, which follows the microphone and the room as much as the source: it took
+  a close-miked reader for music;
+* 1: the standardised MFCC 2 (the spectrum's curvature; the finer shape follows the recording
+  chain more than the source, and is left out);
 * 2: log of the mean squared standardised MFCC 1-12 difference (cepstral flux: speech
   and applause change shape fast, mixed music slowly);
 * 3: the spread (dB) of the log energy around its running mean;
@@ -25,8 +30,9 @@ A small network (:data:`N_STATS` -> :data:`HIDDEN` tanh -> 1) turns them into a 
 buffer (:func:`pack` / :func:`unpack`; all zeros: not fitted, the stream keeps the older
 logistic detector). Fitted by :mod:`models.training.music_gate` on the training songs
 and on synthetic electronic music, espeak-ng speech, crowd babble, applause and room
-noise. While music is playing the statistics run with ``tau =`` :data:`TAU_MUSIC` and
-the performer stops only below ``-``:data:`MARGIN_STOP`; while it is not, with
+noise. While music is playing the statistics run with the time constant the detector was
+fitted at (the model's ``gate_tau``: :data:`TAU_MUSIC`, 15 frames, or 10 with the steadiness
+column) and the performer stops only below ``-``:data:`MARGIN_STOP`; while it is not, with
 :data:`TAU_IDLE` (so they forget the gap quickly) and it starts again above
 :data:`MARGIN_START`. In silence (log energy at most the model's threshold) the
 statistics are frozen and the gate says "no music".
@@ -43,7 +49,9 @@ from numba import njit
 N_STATS: int = 12
 #: Hidden units of the detector's network.
 HIDDEN: int = 16
-#: Time constant (frames) of the statistics while the performer dances (0.5 s).
+#: Time constant (frames) of the statistics while the performer dances (0.5 s), the default:
+#: a model's detector runs at the one it was fitted at (``DanceVQConfig.gate_tau``; the
+#: shipped one, with the steadiness column, at 10).
 TAU_MUSIC: float = 15.0
 #: Time constant (frames) while it is idle (0.2 s): the dance comes back within a second.
 TAU_IDLE: float = 6.0
@@ -94,10 +102,11 @@ def unpack(p: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 @njit(cache=True, nogil=True)
-def presence_step(row, mfcc_mean, mfcc_std, dmfcc_std, ccol, state, stats, a):  # pragma: no cover - compiled
+def presence_step(row, mfcc_mean, mfcc_std, dmfcc_std, ccol, scol, state, stats, a):  # pragma: no cover - compiled
     """Advance the statistics by one feature frame ``row`` (D,) with EMA coefficient ``a``
-    (``ccol``: the pulse clarity's column), in place: ``state`` (N_STATE,) float64, ``stats``
-    (N_STATS,) float64 (module docstring). The first frame starts the means at its values."""
+    (``ccol``: the pulse clarity's column; ``scol``: the steadiness column, -1: none, MFCC 1
+    instead), in place: ``state`` (N_STATE,) float64, ``stats`` (N_STATS,) float64 (module
+    docstring). The first frame starts the means at its values."""
     b = 1.0 - a
     first = state[9] == 0.0
     flux = 0.0
@@ -107,15 +116,16 @@ def presence_step(row, mfcc_mean, mfcc_std, dmfcc_std, ccol, state, stats, a):  
     flux /= 12.0
     e = np.float64(row[13])
     o = np.float64(row[28])
+    s0 = np.float64(row[scol]) if scol >= 0 else (np.float64(row[1]) - mfcc_mean[0]) / mfcc_std[0]
     if first:
-        for k in range(2):
-            state[k] = (np.float64(row[1 + k]) - mfcc_mean[k]) / mfcc_std[k]
+        state[0] = s0
+        state[1] = (np.float64(row[2]) - mfcc_mean[1]) / mfcc_std[1]
         state[2] = flux
         state[3] = e
         state[6] = o
     else:
-        for k in range(2):
-            state[k] = a * state[k] + b * (np.float64(row[1 + k]) - mfcc_mean[k]) / mfcc_std[k]
+        state[0] = a * state[0] + b * s0
+        state[1] = a * state[1] + b * (np.float64(row[2]) - mfcc_mean[1]) / mfcc_std[1]
         state[2] = a * state[2] + b * flux
         state[3] = a * state[3] + b * e
         state[6] = a * state[6] + b * o
@@ -172,12 +182,15 @@ class MusicGate:
 
     feat_mean, feat_std: the model's feature standardisation (D,); params: the packed
     detector (:func:`pack`); energy_min: the silence threshold (log energy, dB); clarity_col:
-    the pulse clarity's column (-1: none).
+    the pulse clarity's column (-1: none); steadiness_col: the steadiness column (the model's
+    ``gate_col``; -1: none, statistic 0 is MFCC 1's mean); tau_music: the statistics' time
+    constant (frames) while dancing (the model's ``gate_tau``).
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
-                 clarity_col: int) -> None:
+                 clarity_col: int, steadiness_col: int = -1, tau_music: float = TAU_MUSIC) -> None:
         self._ccol = int(clarity_col)
+        self._scol = int(steadiness_col)
         self._mfcc_mean = np.asarray(feat_mean, np.float64)[list(MFCC_COLS)]
         self._mfcc_std = np.asarray(feat_std, np.float64)[list(MFCC_COLS)]
         self._dmfcc_std = np.asarray(feat_std, np.float64)[list(DMFCC_COLS)]
@@ -185,7 +198,7 @@ class MusicGate:
         self._std = np.maximum(self._std, 1e-6)
         self._b2 = float(b2[0])
         self.energy_min = float(energy_min)
-        self._a_music = math.exp(-1.0 / TAU_MUSIC)
+        self._a_music = math.exp(-1.0 / tau_music)
         self._a_idle = math.exp(-1.0 / TAU_IDLE)
         self._a_logit = math.exp(-1.0 / LOGIT_TAU) if LOGIT_TAU > 0 else 0.0
         self.reset()
@@ -199,8 +212,8 @@ class MusicGate:
         """True when frame ``row`` (D,) sounds like music to a performer that is ``dancing``."""
         if float(row[ENERGY_COL]) <= self.energy_min:
             return False  # silence: the statistics wait for sound
-        presence_step(row, self._mfcc_mean, self._mfcc_std, self._dmfcc_std, self._ccol, self._state, self.stats,
-                      self._a_music if dancing else self._a_idle)
+        presence_step(row, self._mfcc_mean, self._mfcc_std, self._dmfcc_std, self._ccol, self._scol, self._state,
+                      self.stats, self._a_music if dancing else self._a_idle)
         z = presence_logit(self.stats, self._mean, self._std, self._w1, self._b1, self._w2, self._b2)
         a = self._a_logit if dancing else 0.0  # idle: the music's return is heard at once
         self.logit = a * self.logit + (1.0 - a) * z
@@ -208,12 +221,12 @@ class MusicGate:
 
 
 def stats_trace(feats: np.ndarray, feat_mean: np.ndarray, feat_std: np.ndarray, clarity_col: int,
-                tau: float) -> np.ndarray:
+                tau: float, steadiness_col: int = -1) -> np.ndarray:
     """The statistics (T, N_STATS) of a feature sequence (T, D) at one time constant
     ``tau`` (frames), silence frames included (for fitting; the gate freezes on silence)."""
-    g = MusicGate(feat_mean, feat_std, np.zeros(N_PARAMS, np.float32), -np.inf, clarity_col)
+    g = MusicGate(feat_mean, feat_std, np.zeros(N_PARAMS, np.float32), -np.inf, clarity_col, steadiness_col)
     a = math.exp(-1.0 / tau)
     out = np.empty((len(feats), N_STATS))
     for t in range(len(feats)):
-        presence_step(feats[t], g._mfcc_mean, g._mfcc_std, g._dmfcc_std, g._ccol, g._state, out[t], a)
+        presence_step(feats[t], g._mfcc_mean, g._mfcc_std, g._dmfcc_std, g._ccol, g._scol, g._state, out[t], a)
     return out

@@ -124,6 +124,9 @@ class TrainConfig:
             raise ConfigError(f"segment must be a multiple of 16 frames, got {cfg.segment}", source=source)
         if not all(0.5 <= t <= 2.0 for t in cfg.tempos) or not cfg.tempos:
             raise ConfigError(f"tempos must be factors in [0.5, 2], got {cfg.tempos}", source=source)
+        if cfg.features.get("steadiness"):  # a column for the idle gate alone, added to a trained dance_vq checkpoint
+            raise ConfigError("features.steadiness is not for training: add the steadiness column to a trained "
+                              "dance_vq checkpoint (python -m models.training.music_gate --steadiness)", source=source)
         return cfg
 
     @classmethod
