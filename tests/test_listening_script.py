@@ -126,7 +126,7 @@ def test_settle_back_counts_as_idle_gate_does():
     never = L.settle_back(np.zeros(100), 30, 60, 100)
     assert never == {"settle_s": None, "held": 0.0, "back_s": None}
     assert L.verdict("speech_settle_s", None) == "FAIL" and L.verdict("speech_back_s", None) == "n/a"
-    assert L.verdict("speed_ratio", 1.56) == "PASS" and L.verdict("idle_max", 0.05) == "FAIL"
+    assert L.verdict("speed_ratio", 1.56) == "PASS" and L.verdict("idle_sounding_max", 0.05) == "FAIL"
 
 
 def test_bone_steps():
@@ -169,7 +169,7 @@ def test_perform_is_generate_and_reads_the_idle_weight(shipped):
     assert rate[0] == 1.0 and np.mean(rate[3 * FPS: 6 * FPS] != 1.0) > 0.5  # the movements follow the heard tempo
 
 
-def test_run_on_a_tiny_synthetic_set(tmp_path, shipped):
+def test_run_on_a_tiny_synthetic_set(tmp_path, shipped, monkeypatch):
     import soundfile as sf
 
     from models.features.audio_io import bundled_clip_path, load_audio
@@ -183,6 +183,7 @@ def test_run_on_a_tiny_synthetic_set(tmp_path, shipped):
     sf.write(speech / "noise.wav", 0.05 * np.random.default_rng(0).normal(size=3 * SAMPLE_RATE), SAMPLE_RATE)
     opts = L.Options(music=music, speech=speech, cache_dir=tmp_path / "cache", excerpt_s=8.0, excerpt_start_s=0.0,
                      speech_song_s=5.0, sets=("stretch", "presence"), progress=False, seeds=(0, 1))
+    monkeypatch.setitem(L.MUSIC_ENDS_S, "clip", 9.0)  # as if applause followed the music from 9 s
     res = L.run([shipped.path], opts, log=lambda *_: None)
     (m,) = res["models"].values()
     assert [r["song"] for r in m["stretch"]] == ["clip"]
@@ -195,6 +196,9 @@ def test_run_on_a_tiny_synthetic_set(tmp_path, shipped):
     assert L.Options(quick=True).seeds == (0,)
     assert 110 <= row["bpm"] <= 130
     assert [x["recording"] for x in m["presence"]["music"]] == ["clip", "quiet"]
+    clip = m["presence"]["music"][0]
+    assert clip["after_music_s"] == pytest.approx(14.0 - 9.0, abs=0.2)  # counted to the music's end, 9 s, not 14
+    assert clip["silent_tail_s"] < 0.2
     quiet = m["presence"]["music"][1]
     assert quiet["silent_tail_s"] == pytest.approx(8.0) and quiet["idle"] == 1.0 and quiet["idle_sounding"] == 0.0
     assert len(m["presence"]["speech"]) == 1

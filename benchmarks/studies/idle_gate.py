@@ -6,8 +6,10 @@ features as the engine computes them):
 * **Recordings** (``--music``, default ../shared/data/music, and the validation songs of
   ``--data``): each whole recording alone; ``idle``: the share of its frames after the first
   3 s in which the performer is not fully dancing (idle weight above 0; target at most 0.02);
-  ``idle_sounding``: the same up to the recording's last sound (many end in 1-6 s of
-  silence, where the performer is to idle: ``models.evaluation.listening.sounding_frames``).
+  ``idle_sounding``: the same up to the end of its music: its last sound (many end in 1-6 s
+  of silence, where the performer is to idle: ``models.evaluation.listening.sounding_frames``)
+  or, for a live recording that goes on with applause, where the music stops
+  (``models.evaluation.listening.MUSIC_ENDS_S``).
   Only the gate runs here (:meth:`DanceStream.listen`: the idle weight depends on the
   features alone).
 * **Between songs**: validation song, gap, the next validation song (20 s of each, from a
@@ -40,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from models.data.split import VAL_DANCES
-from models.evaluation.listening import bone_steps_deg, sounding_frames
+from models.evaluation.listening import MUSIC_ENDS_S, bone_steps_deg, sounding_frames
 
 #: (label, kind, dBFS) of the gaps; dBFS None: speech at the level of the song before it.
 GAPS: tuple[tuple[str, str, float | None], ...] = (
@@ -160,17 +162,21 @@ def main(argv: list[str] | None = None) -> int:
         idle = w[90:] > 0
         runs = np.diff(np.r_[0, idle.astype(int), 0])
         longest = int((np.flatnonzero(runs < 0) - np.flatnonzero(runs > 0)).max()) if idle.any() else 0
-        end = sounding_frames(lm, feats)
+        sound = sounding_frames(lm, feats)
+        stem = Path(name).stem
+        end = min(sound, int(round(MUSIC_ENDS_S[stem] * 30))) if stem in MUSIC_ENDS_S else sound  # applause after it
         rec_rows.append({"recording": name, "s": len(audio) / SR, "idle": float(idle.mean()), "longest_idle_s": longest / 30,
-                         "silent_tail_s": (len(feats) - end) / 30, "idle_sounding": float((w[90:end] > 0).mean()) if end > 90 else 0.0})
+                         "silent_tail_s": (len(feats) - sound) / 30, "after_music_s": (sound - end) / 30,
+                         "idle_sounding": float((w[90:end] > 0).mean()) if end > 90 else 0.0})
     cost_us = np.array(cost) * 1e6
     print(f"the gate's cost per frame (DanceStream.listen of one frame): median {np.median(cost_us):.1f} us, "
           f"p99 {np.percentile(cost_us, 99):.1f} us over {len(cost_us)} frames")
-    print("\n| recording | s | idle after 3 s ≤ 0.02 | longest idle (s) | silent end (s) | idle to the last sound ≤ 0.02 |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+    print("\n| recording | s | idle after 3 s, to the file's end | longest idle (s) | silent end (s) | applause before it (s) "
+          "| idle to the end of the music ≤ 0.02 |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     for r in rec_rows:
         print(f"| {r['recording']} | {r['s']:.0f} | {r['idle']:.3f} | {r['longest_idle_s']:.1f} | {r['silent_tail_s']:.1f} | "
-              f"{r['idle_sounding']:.3f} |")
+              f"{r['after_music_s']:.1f} | {r['idle_sounding']:.3f} |")
 
     rng = np.random.default_rng(1000 + args.seed)
     pool = [mg.utterance(rng) for _ in range(24)] if mg.espeak_available() else []

@@ -17,9 +17,10 @@ run them.
 2. **Ramp**: one song played at a rate that rises linearly from :data:`RAMP_RATES` [0] to [1]
    and back (:func:`vary_rate`, a phase vocoder with a time step per frame); the performer's
    joint speed against the real tempo, both smoothed over :data:`SMOOTH_S`.
-3. **Presence**: the idle fraction of whole music recordings after their first
-   :data:`SETTLE_S` (also only up to the recording's last sound, :func:`sounding_frames`),
-   and a song interrupted by read speech at the music's RMS level.
+3. **Presence**: the idle fraction of music recordings after their first :data:`SETTLE_S`,
+   up to the end of their music (the last sound, :func:`sounding_frames`, or where applause
+   takes over, :data:`MUSIC_ENDS_S`) and, for information, to the file's end; and a song
+   interrupted by read speech at the music's RMS level.
 
 Times are counted in motion frames at :data:`FPS` (30); pose ``t`` ends at audio sample
 ``(t + 1) * HOP`` of the signal the performer hears.
@@ -61,6 +62,12 @@ RAMP_HOLD_S: float = 6.0
 MAX_LAG_S: float = 5.0
 #: Idle weight above which a frame counts as idle.
 IDLE_THRESHOLD: float = 0.5
+#: Recordings whose music ends before their last sound (seconds from the file's start): a
+#: live recording that goes on with its audience's applause, where the performer is to idle
+#: as it does between songs. brahms_hungarian5_usarmystrings (US Army Strings, live): the
+#: orchestra's harmonics stop at 39.3 s, broadband applause follows until 43.5 s (its
+#: spectrogram: docs/img/brahms_end.png; spectral flatness 0.001-0.006 before, 0.08-0.12 after).
+MUSIC_ENDS_S: dict[str, float] = {"brahms_hungarian5_usarmystrings": 39.3}
 
 #: (key, description, comparison, threshold) of every target; ``key`` names a figure of :func:`summary`.
 TARGETS: tuple[tuple[str, str, str, float], ...] = (
@@ -73,8 +80,7 @@ TARGETS: tuple[tuple[str, str, str, float], ...] = (
     ("ramp_corr", "ramp: speed-tempo correlation at best lag", ">=", 0.7),
     ("ramp_lag_s", "ramp: lag of best correlation (s)", "<=", 2.0),
     ("ramp_max_step_deg", "ramp: largest bone rotation per frame (deg)", "<=", 50.0),
-    ("idle_max", "music: largest idle fraction of a recording", "<=", 0.02),
-    ("idle_sounding_max", "music: largest idle fraction up to a recording's last sound", "<=", 0.02),
+    ("idle_sounding_max", "music: largest idle fraction of a recording, to the end of its music", "<=", 0.02),
     ("speech_settle_s", "speech: seconds to idle, worst case", "<=", 2.0),
     ("speech_held", "speech: idle fraction held after settling, worst case", ">=", 0.95),
     ("speech_back_s", "speech: seconds to dance again, worst case", "<=", 1.0),
@@ -624,12 +630,15 @@ def presence(lm, cache: AudioCache, speech_song: Path | None, opts: Options) -> 
             a = a[: int(opts.presence_max_s * SAMPLE_RATE)]
         _, w = perform(lm, a, opts.seeds[0])
         s = w[int(SETTLE_S * FPS):]
-        end = sounding_frames(lm, extract_features(a, lm.features))
+        sound = sounding_frames(lm, extract_features(a, lm.features))
+        end = sound
+        if p.stem in MUSIC_ENDS_S:  # applause after the music
+            end = min(sound, int(round(MUSIC_ENDS_S[p.stem] * FPS)))
         out["music"].append({"recording": p.stem, "seconds": len(a) / SAMPLE_RATE,
                              "idle": float(np.mean(s > IDLE_THRESHOLD)),
                              "idle_sounding": float(np.mean(w[int(SETTLE_S * FPS): end] > IDLE_THRESHOLD))
-                             if end > int(SETTLE_S * FPS) else 0.0,  # nothing sounds after the first 3 s
-                             "silent_tail_s": (len(w) - end) / FPS})
+                             if end > int(SETTLE_S * FPS) else 0.0,  # no music after the first 3 s
+                             "silent_tail_s": (len(w) - sound) / FPS, "after_music_s": (sound - end) / FPS})
     if opts.speech is None or speech_song is None:
         return out
     song = cache.audio(speech_song)
@@ -833,11 +842,12 @@ def markdown(result: dict, command: str | None = None) -> str:
                       f"{100 * r['audio_tempo_err']:.1f} %."]
         pres = m.get("presence") or {}
         if pres.get("music"):
-            lines += ["", "| recording | s | idle after 3 s | silent end (s) | idle after 3 s, to the last sound |",
-                      "| --- | ---: | ---: | ---: | ---: |"]
+            lines += ["", "| recording | s | idle after 3 s, to the file's end | silent end (s) | applause before it (s) "
+                          "| idle after 3 s, to the end of the music |",
+                      "| --- | ---: | ---: | ---: | ---: | ---: |"]
             lines += [f"| {x['recording']} | {x['seconds']:.0f} | {100 * x['idle']:.1f} % | "
-                      f"{x.get('silent_tail_s', math.nan):.1f} | {100 * x.get('idle_sounding', math.nan):.1f} % |"
-                      for x in pres["music"]]
+                      f"{x.get('silent_tail_s', math.nan):.1f} | {x.get('after_music_s', 0.0):.1f} | "
+                      f"{100 * x.get('idle_sounding', math.nan):.1f} % |" for x in pres["music"]]
         if pres.get("speech"):
             lines += ["", "| speech between songs | settle (s) | idle held | back (s) |", "| --- | ---: | ---: | ---: |"]
             lines += [f"| {x['recording']} ({x['speech_s']:.0f} s) in {x['song']} | {_fmt(x['settle_s'])} | "
