@@ -122,6 +122,49 @@ def test_crowd_between_songs_idles_only_thanks_to_the_detector(lm) -> None:
     assert between(off, a, crowd, b)[0] is None  # without it: dancing through the crowd
 
 
+def test_a_reader_between_songs_idles_and_holds_thanks_to_the_steadiness(lm, dwm_root) -> None:
+    """A person reading aloud (../shared/data/speech, LibriSpeech 5703: the recording the
+    detector took for music before the steadiness column) between two parts of a validation
+    song, at the song's level, as benchmarks/listening.py plays it: the performer idles, holds
+    the idle through the reading and dances again within 1 s. With the steadiness column
+    overwritten by a music-like constant (0.45, the music recordings' median) it dances
+    through most of the reading: the column is what tells the voice from music."""
+    from models.data.dwm import load_dance
+    from models.features.audio_io import load_audio
+    from models.features.spectral import extract_features
+    from models.networks.dance_stream import DanceStream
+
+    if lm.model.config.gate_col < 0:
+        pytest.skip(f"{lm.path} has no steadiness column (refit: {REFIT} --steadiness)")
+    reader = dwm_root.parent / "speech" / "librispeech_5703-47212-0000.ogg"
+    if not reader.is_file():
+        pytest.skip(f"read-speech recording not found at {reader}")
+    song = load_audio(load_dance(dwm_root / "DANCE_C_2").audio_path, 22050)[0]
+    n = 20 * 22050 // HOP * HOP
+    a, b = song[10 * 22050: 10 * 22050 + n], song[10 * 22050 + n: 10 * 22050 + 2 * n]
+    talk = load_audio(reader, 22050)[0]
+    talk = talk[: len(talk) // HOP * HOP] * np.sqrt(np.mean(np.r_[a, b].astype(np.float64) ** 2)
+                                                   / np.mean(talk.astype(np.float64) ** 2))
+    feats = extract_features(np.concatenate([a, talk, b]).astype(np.float32), lm.features)
+    g0, g1 = len(a) // HOP, (len(a) + len(talk)) // HOP
+
+    def held_and_back(f: np.ndarray) -> tuple[float | None, float, float | None]:
+        w = DanceStream(lm.model, seed=0).listen(f)
+        if not (w[g0:g1] >= 1).any():
+            return None, 0.0, None
+        at = g0 + int(np.argmax(w[g0:g1] >= 1))
+        back = (int(np.argmax(w[g1:] <= 0)) + 1) / 30 if (w[g1:] <= 0).any() else None
+        return (at - g0 + 1) / 30, float((w[at:g1] > 0.5).mean()), back
+
+    settle, held, back = held_and_back(feats)
+    assert settle is not None and settle <= 3.0  # 2.4 s measured; the target's 2 s is not met (docs/listening.md)
+    assert held >= 0.95 and back is not None and back <= 1.0
+    blind = feats.copy()
+    blind[:, lm.model.config.gate_col] = 0.45
+    settle_b, held_b, _ = held_and_back(blind)
+    assert settle_b is None or held_b < 0.5, (settle_b, held_b)
+
+
 def test_stream_equals_offline_with_the_detector_in_any_chunking(lm) -> None:
     from models.features.spectral import extract_features
     from models.networks.dance_stream import DanceStream
