@@ -62,6 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
 
     import models.features.context as context
+    import models.features.steadiness as steadiness
     import models.features.spectral as spectral
     import models.features.streaming as streaming
     import models.networks.dance_numpy as dance_numpy
@@ -81,6 +82,7 @@ def main(argv: list[str] | None = None) -> int:
         (spectral.SpectralKernel, "__call__", "features: spectral kernel"),
         (context.ContextTracker, "__call__", "features: context + beat columns"),
         (context.ContextTracker, "_beat", "features: beat tracker"),
+        (steadiness.SteadinessTracker, "__call__", "features: steadiness column"),
         (dance_stream.DanceStream, "_next_code", "dance_vq: code step"),
         (dance_stream.DanceStream, "_gate", "dance_vq: idle gate"),
         (dance_numpy.NumpyPredictor, "embed", "dance_vq: code step: embedding"),

@@ -1,7 +1,8 @@
 """The live path's numba kernels: compiled, or loaded from numba's cache, before the first frame.
 
 The kernels (the banded log-mel in :mod:`models.features.spectral`, the beat tracker in
-:mod:`models.features.context`, the dance_vq code step in :mod:`models.networks.dance_jit`,
+:mod:`models.features.context`, the steadiness column in :mod:`models.features.steadiness`,
+the dance_vq code step in :mod:`models.networks.dance_jit`,
 the engine's pose guard in :mod:`realtime.pose_jit`) compile on their first call and keep
 the machine code in numba's cache (``__pycache__`` beside each module, or
 ``$NUMBA_CACHE_DIR``): a later process loads it in milliseconds. The engine's warm-up
