@@ -21,10 +21,14 @@ cross every kind of boundary; features are computed on the whole programme (the 
 tracker too), and the statistics at both of the gate's time constants. ``dBFS`` here is
 the RMS level of the signal, ``20 log10(rms)``.
 
-Refit a checkpoint's detector (the rest of the checkpoint is copied unchanged)::
+Refit a checkpoint's detector (the rest of the checkpoint is copied unchanged); with
+``--steadiness`` it also adds the spectral steadiness column (models/features/steadiness.py)
+to the checkpoint's features, which the detector then reads in place of MFCC 1, at a
+10-frame time constant and with music frames weighted 2 (:data:`STEADY_TAU`,
+:data:`STEADY_MUSIC_WEIGHT`; the shipped default was made so)::
 
     .venv/bin/python -m models.training.music_gate --checkpoint models/assets/default.pt \\
-        --data ../shared/data/dwm --out /tmp/default_gate.pt
+        --data ../shared/data/dwm --out /tmp/default_gate.pt --steadiness
 
 ``performer train`` fits it too (:func:`models.training.dance_vq.set_statistics`). Exit
 status 2 on a missing input, a checkpoint that is not dance_vq, or no espeak-ng.
