@@ -24,8 +24,9 @@ every beat the causal beat tracker expects, faster between them (:data:`BEAT_WAR
 between frames about :data:`WARP_LAG` frames late, so its speed dips land on the beats.
 
 **Idle between songs.** A gate decides whether music is playing. A model with a fitted
-presence detector (:mod:`models.networks.music_gate`, the shipped one) asks it; an older
-one: the log frame energy must be above a threshold (silence), and a logistic music detector on a 0.5-s running
+presence detector (:mod:`models.networks.music_gate`, the shipped one) asks it (the shipped
+one also reads the features' last column, the spectral steadiness, which the predictor
+never sees: ``DanceVQConfig.gate_col``); an older one: the log frame energy must be above a threshold (silence), and a logistic music detector on a 0.5-s running
 mean of the spectral shape (MFCC 1-12) and the beat tracker's pulse clarity must say
 music (applause, crowd, room noise: energy without music). Both are fitted on the
 training songs against synthetic noise (:func:`models.training.dance_vq.fit_music_gate`). After
