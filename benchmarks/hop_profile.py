@@ -79,10 +79,11 @@ def main(argv: list[str] | None = None) -> int:
     t: dict[str, list[float]] = defaultdict(list)
     for owner, name, label in (
         (streaming.StreamingFeatureExtractor, "push", "features: push (every block)"),
+        (spectral.SpectralKernel, "spectrum", "features: FFT (spectral kernel and steadiness column)"),
         (spectral.SpectralKernel, "__call__", "features: spectral kernel"),
         (context.ContextTracker, "__call__", "features: context + beat columns"),
         (context.ContextTracker, "_beat", "features: beat tracker"),
-        (steadiness.SteadinessTracker, "__call__", "features: steadiness column"),
+        (steadiness.SteadinessTracker, "from_spectrum", "features: steadiness column"),
         (dance_stream.DanceStream, "_next_code", "dance_vq: code step"),
         (dance_stream.DanceStream, "_gate", "dance_vq: idle gate"),
         (dance_numpy.NumpyPredictor, "embed", "dance_vq: code step: embedding"),

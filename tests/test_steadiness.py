@@ -68,6 +68,10 @@ def test_streaming_equals_offline_in_any_chunking() -> None:
     frames = np.lib.stride_tricks.sliding_window_view(np.concatenate([np.zeros(2048 - 735), y]), 2048)[::735]
     tr = SteadinessTracker(2048)
     np.testing.assert_array_equal(np.concatenate([tr(frames[:7]), tr(frames[7:])]), steadiness(frames, 2048))
+    from models.features.spectral import SpectralKernel  # the extractors hand it the spectral kernel's FFT
+
+    np.testing.assert_array_equal(SteadinessTracker(2048).from_spectrum(SpectralKernel(cfg).spectrum(frames)),
+                                  steadiness(frames, 2048))
 
 
 def test_a_config_without_it_keeps_its_fingerprint_and_one_with_it_has_one_more_column() -> None:

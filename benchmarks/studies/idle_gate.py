@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from models.data.split import VAL_DANCES
-from models.evaluation.listening import MUSIC_ENDS_S, bone_steps_deg, sounding_frames
+from models.evaluation.listening import bone_steps_deg, music_end
 
 #: (label, kind, dBFS) of the gaps; dBFS None: speech at the level of the song before it.
 GAPS: tuple[tuple[str, str, float | None], ...] = (
@@ -162,9 +162,7 @@ def main(argv: list[str] | None = None) -> int:
         idle = w[90:] > 0
         runs = np.diff(np.r_[0, idle.astype(int), 0])
         longest = int((np.flatnonzero(runs < 0) - np.flatnonzero(runs > 0)).max()) if idle.any() else 0
-        sound = sounding_frames(lm, feats)
-        stem = Path(name).stem
-        end = min(sound, int(round(MUSIC_ENDS_S[stem] * 30))) if stem in MUSIC_ENDS_S else sound  # applause after it
+        sound, end = music_end(lm, feats, Path(name).stem)  # the end of its music: applause after it is not music
         rec_rows.append({"recording": name, "s": len(audio) / SR, "idle": float(idle.mean()), "longest_idle_s": longest / 30,
                          "silent_tail_s": (len(feats) - sound) / 30, "after_music_s": (sound - end) / 30,
                          "idle_sounding": float((w[90:end] > 0).mean()) if end > 90 else 0.0})

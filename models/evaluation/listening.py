@@ -367,6 +367,15 @@ def sounding_frames(lm, feats: np.ndarray) -> int:
     return int(loud[-1]) + 1 if loud.size else 0
 
 
+def music_end(lm, feats: np.ndarray, name: str) -> tuple[int, int]:
+    """(last sound, end of the music): frames of recording ``name`` (its stem) with features
+    ``feats`` (T, D) up to its last sound (:func:`sounding_frames`) and up to where its music
+    ends, the earlier of that and :data:`MUSIC_ENDS_S` (applause after the music)."""
+    sound = sounding_frames(lm, feats)
+    end = min(sound, int(round(MUSIC_ENDS_S[name] * FPS))) if name in MUSIC_ENDS_S else sound
+    return sound, end
+
+
 def positions(poses: np.ndarray) -> np.ndarray:
     from models.evaluation.evaluate import positions as fk_positions
 
@@ -630,10 +639,7 @@ def presence(lm, cache: AudioCache, speech_song: Path | None, opts: Options) -> 
             a = a[: int(opts.presence_max_s * SAMPLE_RATE)]
         _, w = perform(lm, a, opts.seeds[0])
         s = w[int(SETTLE_S * FPS):]
-        sound = sounding_frames(lm, extract_features(a, lm.features))
-        end = sound
-        if p.stem in MUSIC_ENDS_S:  # applause after the music
-            end = min(sound, int(round(MUSIC_ENDS_S[p.stem] * FPS)))
+        sound, end = music_end(lm, extract_features(a, lm.features), p.stem)
         out["music"].append({"recording": p.stem, "seconds": len(a) / SAMPLE_RATE,
                              "idle": float(np.mean(s > IDLE_THRESHOLD)),
                              "idle_sounding": float(np.mean(w[int(SETTLE_S * FPS): end] > IDLE_THRESHOLD))

@@ -265,16 +265,24 @@ class SpectralKernel:
             # Columns of the orthonormal DCT-II (librosa.feature.mfcc's dct_type=2, norm="ortho").
             self.dct_t = np.ascontiguousarray(dct(np.eye(cfg.n_mels), type=2, norm="ortho", axis=-1)[:, :N_MFCC])
 
-    def __call__(self, frames: np.ndarray, prev_logmel: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+    def spectrum(self, frames: np.ndarray) -> np.ndarray:
+        """The Hann-windowed FFT (k, n_fft // 2 + 1) complex128 of frames (k, n_fft): what
+        :meth:`__call__` reads, computed once when another column needs it too."""
+        return np.fft.rfft(frames * self.window, axis=-1)
+
+    def __call__(self, frames: np.ndarray, prev_logmel: np.ndarray | None,
+                 spec: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """Features of consecutive frames.
 
         frames: (k, n_fft) float64 windows of 22050 Hz audio (frame t = hop-ending window).
         prev_logmel: the state row of the frame before ``frames[0]``, None at stream start:
         its log-mel (n_mels,) for "logmel_onset", its 13 MFCC + log energy (14,) for "mfcc",
         both of those (14 + n_mels,) for "mfcc_onset".
+        spec: the frames' :meth:`spectrum`, if already computed.
         Returns ((k, base_dim) float32 base features, last state row to pass as the next prev_logmel).
         """
-        spec = np.fft.rfft(frames * self.window, axis=-1)
+        if spec is None:
+            spec = self.spectrum(frames)
         amin = self.cfg.amin
         if self.mel_w is None:
             power = spec.real**2 + spec.imag**2  # (k, n_fft//2+1)
@@ -346,9 +354,10 @@ def extract_features(audio: np.ndarray, cfg: FeatureConfig | None = None) -> np.
     out = np.empty((frames.shape[0], cfg.dim), np.float32)
     prev = None
     for lo in range(0, frames.shape[0], _OFFLINE_CHUNK):
-        base, prev = kernel(frames[lo : lo + _OFFLINE_CHUNK], prev)
+        spec = kernel.spectrum(frames[lo : lo + _OFFLINE_CHUNK])
+        base, prev = kernel(frames[lo : lo + _OFFLINE_CHUNK], prev, spec)
         out[lo : lo + base.shape[0], : cfg.base_dim] = base
         out[lo : lo + base.shape[0], cfg.base_dim : end] = extra(base)
         if steady is not None:
-            out[lo : lo + base.shape[0], end] = steady(frames[lo : lo + _OFFLINE_CHUNK])
+            out[lo : lo + base.shape[0], end] = steady.from_spectrum(spec)
     return out

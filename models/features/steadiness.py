@@ -20,9 +20,9 @@ speech 0.02-0.06, applause 0.10, room tone 0.00, crowd babble 0.20, espeak-ng sp
 synthesizers hold no fine structure; the detector's other statistics call it music). The detector reads the
 column's running mean; the predictor never reads it (``DanceVQConfig.gate_col``).
 
-It costs one real FFT of ``n_fft`` samples (NumPy's) and one compiled pass over 260 bins a
-frame (:func:`_steady_rows`; it does not reuse the spectral kernel's FFT, so that the
-spectral columns stay one compiled call); docs/features.md gives the figures. The tracker keeps the last
+It reads the spectral kernel's FFT of the frame (the same Hann window and ``n_fft``) and
+costs one compiled pass over 260 bins a frame (:func:`_steady_rows`); docs/features.md
+gives the figures. The tracker keeps the last
 :data:`LAG` rows ``F``; streamed in any chunking it equals the offline column
 (tests/test_steadiness.py).
 """
@@ -93,7 +93,10 @@ class SteadinessTracker:
     """The steadiness column, frame by frame, for hop-ending windows of ``n_fft`` samples.
 
     ``__call__(frames)``: frames (k, n_fft) float64 -> (k,) float32, in stream order;
-    ``reset()`` starts a new stream. The FFT is NumPy's; the rest one compiled call
+    ``from_spectrum(spec)`` the same from their Hann-windowed FFT (k, n_fft // 2 + 1), as the
+    spectral kernel computes it (``models.features.spectral.SpectralKernel.spectrum``: the extractors
+    pass theirs, so the column costs no second FFT); ``reset()`` starts a new stream. The
+    FFT is NumPy's; the rest one compiled call
     (:func:`_steady_rows`: as a dozen NumPy calls it took 0.1 ms a frame on the live path,
     where caches are cold after each wait for audio).
     """
@@ -113,11 +116,12 @@ class SteadinessTracker:
         self._norm = np.zeros(LAG)  # their norms
 
     def __call__(self, frames: np.ndarray) -> np.ndarray:
-        k = len(frames)
-        out = np.zeros(k)
-        if k:
-            spec = np.fft.rfft(frames * self.window, axis=-1)[:, self.lo: self.hi]
-            _steady_rows(np.ascontiguousarray(spec), SMOOTH_BINS, self._prev, self._norm, out)
+        return self.from_spectrum(np.fft.rfft(np.asarray(frames, np.float64) * self.window, axis=-1))
+
+    def from_spectrum(self, spec: np.ndarray) -> np.ndarray:
+        out = np.zeros(len(spec))
+        if len(spec):
+            _steady_rows(np.ascontiguousarray(spec[:, self.lo: self.hi]), SMOOTH_BINS, self._prev, self._norm, out)
         return out.astype(np.float32)
 
 

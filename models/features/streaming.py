@@ -122,11 +122,12 @@ class StreamingFeatureExtractor:
             self._history = buf
             return np.zeros((0, self.cfg.dim), np.float32)
         frames = np.lib.stride_tricks.sliding_window_view(buf, self.cfg.n_fft)[::HOP][:k]
-        out, self._prev_logmel = self._kernel(frames, self._prev_logmel)
+        spec = self._kernel.spectrum(frames)
+        out, self._prev_logmel = self._kernel(frames, self._prev_logmel, spec)
         if self._extra.extra_dim:
             out = np.concatenate([out, self._extra(out)], axis=1)
-        if self._steady is not None:
-            out = np.concatenate([out, self._steady(frames)[:, None]], axis=1)
+        if self._steady is not None:  # the same spectrum, not a second FFT
+            out = np.concatenate([out, self._steady.from_spectrum(spec)[:, None]], axis=1)
         self._history = buf[k * HOP :]
         self._frames += k
         return out

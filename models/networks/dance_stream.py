@@ -151,7 +151,7 @@ STYLE_MEMBERS: bool = True
 #: The energy control (:meth:`DanceStream.set_energy`, 0..2, 1 = as the music asks): the code
 #: logits move by ``ENERGY_GAIN * (energy - 1) * z``, z each code's movement speed
 #: (:func:`code_energy`), so energy 0 favours the calmest movements and 2 the liveliest
-#: (benchmarks/studies/energy_control.py: the validation dances' motion energy 0.82x, 1.21x and 1.62x
+#: (benchmarks/studies/energy_control.py: the validation dances' motion energy 0.82x, 1.21x and 1.61x
 #: the dancers' at 0, 1 and 2, rising from 0 to 1 to 2 on every song; docs/show.md, "Energy").
 ENERGY_GAIN: float = 3.0
 #: Tempo and liveliness: the code logits also move by ``TEMPO_ENERGY * ln(T / T_ref) * z`` (T the
@@ -161,7 +161,7 @@ ENERGY_GAIN: float = 3.0
 #: they were danced to: as its 0.64th power, correlation 0.25). Without it the choice of
 #: movement ignores the tempo and only the playback rate follows it; the speed caps hold the
 #: rate back at fast tempos (docs/history.md, "Listening": stretch-set speed ratio 1.24 at 0,
-#: 1.44 at 4 with :data:`SPEED_CAP_TEMPO`). Away from energy 1 (:meth:`DanceStream.set_energy`)
+#: 1.42 at 4 with :data:`SPEED_CAP_TEMPO`). Away from energy 1 (:meth:`DanceStream.set_energy`)
 #: it shrinks, to nothing at 0 and at 2: the show's energy setting takes over (at full
 #: strength energy 0 moved as much as energy 1 on DANCE_R_5, and energy 2 less than 1 on
 #: DANCE_C_2). 0: the choice ignores the tempo.
@@ -873,9 +873,9 @@ class DanceStream:
                 long = np.linalg.norm(w, axis=1) > np.pi
                 w[long] = (angle[:, None] * axis)[long]
         self._fade_prev = w
-        h = 0.5 * e * np.linalg.norm(w, axis=1)
-        turn = np.concatenate([np.sin(h)[:, None] * (w / np.maximum(np.linalg.norm(w, axis=1), 1e-12)[:, None]),
-                               np.cos(h)[:, None]], axis=1)
+        wn = np.linalg.norm(w, axis=1)
+        h = 0.5 * e * wn
+        turn = np.concatenate([np.sin(h)[:, None] * (w / np.maximum(wn, 1e-12)[:, None]), np.cos(h)[:, None]], axis=1)
         q = _qmul(qa, turn)
         out = (1 - e) * pose + e * idle
         out[3:] = q.reshape(-1).astype(np.float32)
