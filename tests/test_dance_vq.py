@@ -433,6 +433,45 @@ def test_choreographic_memory_plays_real_movements_at_their_scale_and_hands_over
     assert seam_ratio(out, cfg.seg, cfg.seg, radius=1) < 1.5
 
 
+def test_no_movement_is_drawn_over_and_over(monkeypatch):
+    """A code drawn n >= 4 times among the last 8 draws has its logit lowered by n - 3 (scaled
+    down to none for calm codes, energy z -1 or less), no other code's. On the bundled clip (shipped performer, seeds 0-7) that keeps the movements in runs
+    of 6 or more of one code to 25 of 960 (longest 7); without the penalty the predictor, its
+    window full of one code, keeps drawing it: 83 (longest 10)."""
+    import models.networks.dance_stream as ds
+    from models.features.audio_io import load_audio
+    from models.features.spectral import extract_features
+    from models.generate import load_model
+
+    lm = load_model(None)
+    s = ds.DanceStream(lm.model, seed=0)
+    z = s._code_energy
+    lively, calm, other = int(np.argmax(z)), int(np.argmin(z)), int(np.argsort(z)[len(z) // 2 + 50])
+    logits = np.zeros(lm.model.config.codebook, np.float32)
+    s._recent.extend([lively, lively, other, lively, lively, lively, other, other])  # 5 and 3 times
+    out = s._repeat_penalty(logits)
+    assert out[lively] == -2.0 and np.count_nonzero(out) == 1 and not logits.any()
+    s._recent.extend([calm] * 5)  # a calm code (energy z <= -1) repeats freely: holding still is no shuffle
+    assert z[calm] <= -1.0 and not s._repeat_penalty(logits).any()
+
+    feats = extract_features(load_audio("models/assets/clip.ogg")[0], lm.features)
+
+    def runs() -> np.ndarray:
+        out = []
+        for seed in range(8):
+            st = ds.DanceStream(lm.model, seed=seed)
+            st.push(feats)
+            c = np.asarray(st.codes_drawn)
+            out.append(np.diff(np.concatenate(([0], np.flatnonzero(np.diff(c) != 0) + 1, [c.size]))))
+        return np.concatenate(out)
+
+    r = runs()
+    assert r[r >= 6].sum() <= 30 and r.max() <= 7
+    monkeypatch.setattr(ds, "REPEAT_PENALTY", 0.0)
+    r = runs()
+    assert r[r >= 6].sum() >= 60 and r.max() >= 9  # the clip asks for long runs: the limit above is the penalty's
+
+
 def _inertialize_reference(window: np.ndarray, cont: np.ndarray, decay: np.ndarray, cap: float) -> np.ndarray:
     """Rotation-space inertialization with SciPy's Rotation: per bone, offset = rotvec(cont0 w0^-1),
     velocity gap = rotvec(cont1 cont0^-1) - rotvec(w1 w0^-1) (capped), applied as

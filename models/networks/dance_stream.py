@@ -171,6 +171,26 @@ TEMPO_ENERGY: float = 4.0
 #: which a movement sped up by the tempo rate r turns into jerk as r cubed, is taken out
 #: (dance-scale motion, up to 2 Hz, keeps 87 % or more of its amplitude). 0: as recorded.
 MEMBER_SMOOTH: float = 1.25
+#: Repeats: a code drawn n >= :data:`REPEAT_FREE` times among the last :data:`REPEAT_WINDOW`
+#: draws has its logit lowered by ``REPEAT_PENALTY * (n - REPEAT_FREE + 1)`` (a 5th time in
+#: 8 draws 1 lower, a 6th 2, ...). Without it the predictor, its window (16 codes) full of
+#: one code, kept drawing it: runs of 16-36 movements (4-10 s), where the dancers' longest
+#: is 22 and 0.5 % of their movements are in runs of 12 or more (1.8 % of the performer's).
+#: Each repeat restarts a movement of that kind near where the last one started and the
+#: inertialization cancels most of it: the performer shuffled in place at a third of its
+#: speed, for up to 9 s in loud music (2.8 % of the dancing frames on the listening
+#: recordings and validation songs, DANCE_W_5 14 %; benchmarks/studies/repeats.py). A run
+#: broken by one other code (354 354 354 139 354 354 354) shuffles as much, hence a window,
+#: not only a run. Calm codes repeat freely: the penalty is scaled by ``z + REPEAT_CALM``
+#: within [0, 1], z each code's liveliness (:func:`code_energy`'s z-score): none at z <= -1,
+#: full at z >= 0. Holding still is no shuffle, and at energy 0 (only the calmest codes
+#: drawn) the penalty moved the calm performer between still poses: DANCE_W_5 at energy 0
+#: moved more than at 1 (1.64 against 1.47, benchmarks/studies/energy_control.py).
+#: REPEAT_PENALTY 0: no limit.
+REPEAT_FREE: int = 4
+REPEAT_WINDOW: int = 8
+REPEAT_PENALTY: float = 1.0
+REPEAT_CALM: float = 1.0
 #: The energy control's range.
 ENERGY_RANGE: tuple[float, float] = (0.0, 2.0)
 #: The lead control's range, ms (:meth:`DanceStream.set_lead`): a display chain's delay
@@ -501,6 +521,8 @@ class DanceStream:
                             if len(self._speeds) else np.full(_CAP_STEPS + 1, np.inf))
         self._bone_cap = _cached_bone_cap(model, self._members, self._counts)  # degrees a frame
         self._member_speed = speed
+        # how much a repeat of each code is penalised (REPEAT_PENALTY): calm codes repeat freely
+        self._repeat_weight = np.clip(self._code_energy + REPEAT_CALM, 0.0, 1.0).astype(np.float32)
         period = model.member_period.numpy().astype(np.float64)  # (K, M) each exemplar's song; 0 unknown
         known = period[real & (period > 0)]
         self._ref_period = float(np.exp(np.log(known).mean())) if len(known) else 0.0
@@ -561,6 +583,7 @@ class DanceStream:
         self._fade_prev: np.ndarray | None = None  # the fade's last rotation vectors, dance -> idle (J, 3)
         self._prev_quat: np.ndarray | None = None
         self.codes_drawn: list[int] = []
+        self._recent: deque[int] = deque(maxlen=max(REPEAT_WINDOW, 1))  # the last codes drawn (repeats)
         self._lead = self._lead_next  # the lead in frames now (taken up at code steps)
 
     def set_style(self, style: str | None) -> None:
@@ -699,6 +722,8 @@ class DanceStream:
             tilt = self._tempo_tilt()
             if tilt != 0.0:  # livelier codes at a faster tempo, calmer at a slower one (TEMPO_ENERGY)
                 logits = logits + np.float32(tilt) * self._code_energy
+            if REPEAT_PENALTY > 0.0 and len(self._recent) >= REPEAT_FREE:
+                logits = self._repeat_penalty(logits)
             self._tokens.append(token)
             # the next step's window but its newest token is known now: its layers run on the frames between
             nxt = list(self._tokens)[-(pred.window - 1):]
@@ -742,6 +767,18 @@ class DanceStream:
         self._own_speed = float(self._member_speed[pairs[i]])
         self._commit(pairs[i][0])
         self._has_cont = True
+
+    def _repeat_penalty(self, logits: np.ndarray) -> np.ndarray:
+        """``logits`` with each code drawn n >= :data:`REPEAT_FREE` times among the last
+        :data:`REPEAT_WINDOW` lowered by ``REPEAT_PENALTY * (n - REPEAT_FREE + 1)``."""
+        recent = list(self._recent)
+        out = None
+        for c in set(recent):
+            n = recent.count(c)
+            if n >= REPEAT_FREE:
+                out = logits.copy() if out is None else out
+                out[c] -= np.float32(REPEAT_PENALTY * (n - REPEAT_FREE + 1) * self._repeat_weight[c])
+        return logits if out is None else out
 
     def _tempo_tilt(self) -> float:
         """:data:`TEMPO_ENERGY` times ln(T / T_ref), blended to 0 as the pulse fades and as the
@@ -807,6 +844,7 @@ class DanceStream:
     def _commit(self, code: int) -> None:
         """Record ``code`` as played (``self._play`` has started its movement)."""
         self._codes.append(code)
+        self._recent.append(code)
         self._last = code
         self.codes_drawn.append(code)
 
