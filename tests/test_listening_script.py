@@ -351,3 +351,19 @@ def test_the_ramps_lag_is_judged_only_where_the_speed_follows_the_tempo():
     assert "n/a (correlation under 0.7)" in "\n".join(L.verdict_lines({"models": {"m": {"summary": weak}}}))
     strong = L.summary({"ramp": {"corr": 0.8, "lag_s": 3.0, "max_step_deg": 30.0}})
     assert strong["ramp_lag_s"] == 3.0 and L.verdict("ramp_lag_s", 3.0) == "FAIL" and L.verdict("ramp_lag_s", 1.0) == "PASS"
+
+
+def test_the_ramp_reports_how_late_the_followed_tempo_is(tmp_path, shipped):
+    """The bundled clip (120 bpm) looped and ramped: the tempo the performer follows tracks the
+    ramp (correlation over 0.9) and is reported with its lag, the beat tracker's 6-s window
+    making it late (between 1 and 5 s; 3.2 s on the benchmark's ramp)."""
+    import soundfile as sf
+
+    from models.features.audio_io import bundled_clip_path, load_audio
+
+    song, _ = load_audio(bundled_clip_path(), SAMPLE_RATE)
+    path = tmp_path / "loop.wav"
+    sf.write(path, np.tile(song, 3), SAMPLE_RATE)
+    opts = L.Options(cache_dir=tmp_path / "cache", excerpt_start_s=0.0, progress=False, seeds=(0,))
+    r = L.ramp(shipped, L.AudioCache(opts.cache_dir), (path, 120.0), opts)
+    assert r["follower_corr"] > 0.9 and 1.0 <= r["follower_lag_s"] <= L.MAX_LAG_S, r["follower_lag_s"]

@@ -550,8 +550,10 @@ def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict
     model that plays every movement at its own pace); the largest bone rotation per
     frame after :data:`SETTLE_S`. At each of ``opts.seeds``: ``corr``, ``corr_lag0`` and the
     three diagnostics are the means over the seeds of each one's own (``corr_seeds``, one
-    performer's speed each, not the speed averaged over performers), ``lag_s`` the median,
-    ``max_step_deg`` the largest; the curves are the first seed's."""
+    performer's speed each, not the speed averaged over performers), ``lag_s`` and
+    ``follower_lag_s`` (the followed tempo's lag behind the real one at its best correlation:
+    how late a tempo change is followed) the medians, ``max_step_deg`` the largest; the
+    curves are the first seed's."""
     path, bpm = song
     hold = RAMP_HOLD_S
     total = hold + 2 * RAMP_S
@@ -571,11 +573,13 @@ def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict
         runs.append({
             "corr": corr, "lag": lag, "corr_lag0": corr0,
             # where the speed's correlation is lost: the followed tempo, the playback rate, the choice (best lag each)
-            "follower_corr": lagged_correlation(tempo[a:], smooth(trace["tempo_bpm"])[a:], lags)[0],
+            "follower": lagged_correlation(tempo[a:], smooth(trace["tempo_bpm"])[a:], lags),
             "rate_corr": lagged_correlation(tempo[a:], smooth(trace["rate"])[a:], lags)[0],
             "movement_corr": lagged_correlation(tempo[a:], own[a:], lags)[0],
             "own": own, "step": float(bone_steps_deg(poses[int(SETTLE_S * FPS):]).max()),
             "t": t, "tempo": tempo, "speed": speed, "trace": trace})
+    for r in runs:
+        r["follower_corr"], r["follower_lag"] = r["follower"][:2]
     first = runs[0]
     mean = lambda key: float(np.mean([r[key] for r in runs]))  # noqa: E731
     own = np.concatenate([r["own"][a:] for r in runs])
@@ -583,6 +587,7 @@ def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict
     return {"song": song_name(path), "bpm": bpm, "start_s": start, "corr": mean("corr"),
             "lag_s": float(np.median([r["lag"] for r in runs])) / FPS, "corr_lag0": mean("corr_lag0"),
             "corr_seeds": [r["corr"] for r in runs], "follower_corr": mean("follower_corr"),
+            "follower_lag_s": float(np.median([r["follower_lag"] for r in runs])) / FPS,
             "rate_corr": mean("rate_corr"), "movement_corr": mean("movement_corr"),
             "movement_speed_range": [float(own.min()), float(own.max())],
             "max_step_deg": max(r["step"] for r in runs), **check, "time_s": first["t"].tolist(),
@@ -839,7 +844,8 @@ def markdown(result: dict, command: str | None = None) -> str:
             lines += ["", f"Ramp on {r['song']} ({r['bpm']:.0f} bpm as recorded): correlation {r['corr']:.2f}{per_seed} at "
                       f"lag {r['lag_s']:.2f} s ({r['corr_lag0']:.2f} at lag 0), largest bone rotation "
                       f"{r['max_step_deg']:.1f} deg a frame. Against the real tempo, the followed tempo "
-                      f"correlates {r.get('follower_corr', float('nan')):.2f}, the playback rate "
+                      f"correlates {r.get('follower_corr', float('nan')):.2f} at a lag of {r.get('follower_lag_s', float('nan')):.2f} s "
+                      "(the tempo changes, followed that much later), the playback rate "
                       f"{r.get('rate_corr', float('nan')):.2f}, and the chosen movements' own speed "
                       f"{r.get('movement_corr', float('nan')):.2f} ("
                       + " to ".join(f"{v:.2f}" for v in r.get("movement_speed_range", [float("nan")] * 2))
