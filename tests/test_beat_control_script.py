@@ -43,3 +43,13 @@ def test_a_motion_locked_to_the_beat_hits_the_beats_and_misses_the_control() -> 
     on = pooled_beats([pos], [beats])["beat_hit_rate"]
     off = pooled_beats([pos], [beat_control.half_beats(beats)])["beat_hit_rate"]
     assert on > 0.9 and off < 0.1, (on, off)
+
+
+def test_dip_offsets_are_signed_frames_from_the_nearest_beat() -> None:
+    """Speed dips 2 frames after every beat read +2; before it, negative."""
+    beats = np.arange(10, 300, 15)
+    late = beat_control.dip_offsets([_motion(beats + 2, 300)], [beats])
+    assert len(late) >= 15 and np.median(late) == 2
+    early = beat_control.dip_offsets([_motion(beats - 1, 300)], [beats])
+    assert np.median(early) == -1
+    assert beat_control.dip_offsets([_motion(beats, 300)], [np.array([5])]).size == 0  # fewer than 2 beats

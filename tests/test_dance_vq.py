@@ -856,6 +856,24 @@ def test_a_lead_puts_the_beat_moves_that_many_frames_earlier():
         assert int(np.argmin(v)) in {(15 - frames - 1) % 15, 15 - frames}  # but L frames before it
 
 
+def test_the_speed_dips_fall_beat_delay_frames_after_the_trackers_beat(monkeypatch):
+    """BEAT_DELAY (1 frame: the chain put the dips a frame early against the music's beats on
+    the training dances, beat_control.py --split train) moves where the warp slows and where the matching places a dip, and
+    nothing else: the speed profile over the beat is the one on the tracker's beat (BEAT_DELAY
+    0), one frame later."""
+    import models.networks.dance_stream as ds
+
+    m = DanceVQ(BEAT).eval()
+    turning_exemplars(m)
+    x = beat_music(900)
+    assert ds.BEAT_DELAY == 1.0
+    v1 = speed_by_beat_phase(generate(m, x, seed=2))
+    monkeypatch.setattr(ds, "BEAT_DELAY", 0.0)
+    v0 = speed_by_beat_phase(generate(m, x, seed=2))
+    np.testing.assert_allclose(v1, np.roll(v0, 1), atol=0.1)
+    assert int(np.argmin(v1)) == (int(np.argmin(v0)) + 1) % 15 and int(np.argmin(v0)) == 14
+
+
 def test_a_lead_streams_like_the_whole_song_reads_no_audio_ahead_and_changes_at_a_code_step():
     from models.networks.dance_stream import LEAD_RANGE_MS
 

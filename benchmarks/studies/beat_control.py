@@ -14,7 +14,15 @@ the real dances and each checkpoint generated as ``performer evaluate`` generate
         --checkpoint models/assets/default.pt
 
 Prints one Markdown row per motion: hit rate on the beats, on the half-beat-shifted beats,
-and the chance rate of each (``models.evaluation.beats``).
+and the chance rate of each (``models.evaluation.beats``); then where the speed dips fall:
+each dip's signed distance to the nearest music beat (frames, + after it), median, mean of
+those within 4 frames, and their histogram. ``--split train --max-frames 1800`` scores the
+first minute of every training dance instead (motion never judged: where the dips fall
+there is what ``BEAT_DELAY`` in models/networks/dance_stream.py was set from), and
+``--beat-delay D ...`` scores the shipped checkpoint at each of those delays::
+
+    .venv/bin/python benchmarks/studies/beat_control.py --data ../shared/data/dwm --split train \
+        --max-frames 1800 --beat-delay 0 1
 """
 
 from __future__ import annotations
@@ -34,13 +42,37 @@ def half_beats(beats: np.ndarray) -> np.ndarray:
     return np.round((b[:-1] + b[1:]) / 2).astype(np.int64)
 
 
+def dip_offsets(positions: list[np.ndarray], beats: list[np.ndarray]) -> np.ndarray:
+    """Signed frames from each kinematic beat (speed dip) of every motion in ``positions``
+    (each (T, J, 3) m) to the nearest of its music ``beats`` (sorted frames; + after the beat),
+    pooled; motions with fewer than 2 beats are left out."""
+    from models.evaluation.beats import kinematic_beats
+
+    out = []
+    for pos, b in zip(positions, beats):
+        b = np.asarray(b)
+        b = b[b < len(pos)]
+        if len(b) < 2:
+            continue
+        k = np.asarray(kinematic_beats(pos), dtype=np.int64)
+        if k.size:
+            near = b[np.argmin(np.abs(k[:, None] - b[None, :]), axis=1)]
+            out.append(k - near)
+    return np.concatenate(out) if out else np.zeros(0, np.int64)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--data", required=True, help="the DWM dataset directory")
     p.add_argument("--checkpoint", nargs="*", default=["models/assets/default.pt"],
                    help="checkpoints to score beside the real dances (default: the shipped one)")
     p.add_argument("--cache", default=".cache/corpus", help="corpus cache (as performer evaluate)")
+    p.add_argument("--split", default="val", choices=("val", "train"), help="the dances scored (default val)")
+    p.add_argument("--max-frames", type=int, default=None, metavar="N", help="only the first N frames of each dance")
+    p.add_argument("--beat-delay", type=float, nargs="+", default=None, metavar="D",
+                   help="score the checkpoints at each of these BEAT_DELAY values (frames; default: as shipped)")
     a = p.parse_args(argv)
+    import models.networks.dance_stream as ds
     import torch
 
     from models.evaluation.evaluate import (EvalOptions, _audio_kw, clip_music_beats, load_clips, pooled_beats,
@@ -48,17 +80,24 @@ def main(argv: list[str] | None = None) -> int:
     from models.generate import load_model, run_model
 
     torch.set_num_threads(1)
-    opts = EvalOptions(cache_dir=Path(a.cache), progress=False)
+    opts = EvalOptions(cache_dir=Path(a.cache), progress=False, split=a.split, max_frames=a.max_frames)
     _, val_names = split_dances(a.data, opts)
     models = [load_model(c) for c in a.checkpoint]
     rows: list[tuple[str, list[np.ndarray], list]] = []
     clips = None
+    shipped = ds.BEAT_DELAY
     for lm in models:
         clips = load_clips(a.data, val_names, lm.features, opts)
-        with torch.no_grad():
-            gen = [positions(run_model(lm.model, c.features, opts.window, opts.hop, **_audio_kw(lm.model, a.data, c)))
-                   for c in clips]
-        rows.append((f"{lm.name} ({lm.path.name})", gen, clips))
+        for delay in a.beat_delay or [shipped]:
+            ds.BEAT_DELAY = delay
+            try:
+                with torch.no_grad():
+                    gen = [positions(run_model(lm.model, c.features, opts.window, opts.hop,
+                                               **_audio_kw(lm.model, a.data, c))) for c in clips]
+            finally:
+                ds.BEAT_DELAY = shipped
+            label = f"{lm.name} ({lm.path.name})" + (f", BEAT_DELAY {delay:g}" if a.beat_delay else "")
+            rows.append((label, gen, clips))
     if clips is None:
         from models.features.spectral import FeatureConfig
         clips = load_clips(a.data, val_names, FeatureConfig(), opts)
@@ -72,6 +111,15 @@ def main(argv: list[str] | None = None) -> int:
         on, off = pooled_beats(pos, beats), pooled_beats(pos, shifted)
         print(f"| {label} | {on['beat_hit_rate']:.3f} | {on['beat_hit_chance']:.3f} | "
               f"{off['beat_hit_rate']:.3f} | {off['beat_hit_chance']:.3f} |")
+    print(f"\nWhere the speed dips fall ({len(clips)} {a.split} dances): frames from the nearest music beat, + after it\n")
+    print("| motion | dips | median | mean within 4 | -4 | -3 | -2 | -1 | 0 | +1 | +2 | +3 | +4 |")
+    print("| --- | ---: | ---: | ---: |" + " ---: |" * 9)
+    for label, pos, _ in rows:
+        d = dip_offsets(pos, beats)
+        near = d[np.abs(d) <= 4]
+        hist = np.bincount(near + 4, minlength=9) / max(len(d), 1)
+        print(f"| {label} | {len(d)} | {np.median(d) if len(d) else float('nan'):+.1f} | "
+              f"{near.mean() if len(near) else float('nan'):+.2f} | " + " | ".join(f"{h:.2f}" for h in hist) + " |")
     return 0
 
 

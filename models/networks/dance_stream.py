@@ -89,6 +89,15 @@ BEAT_WEIGHT: float = 1.0
 #: catches up between them: speed dips (kinematic beats) move onto the music's beats, as
 #: Dancing to Music warps its dance units to the beat. 0 plays every movement at its own pace.
 BEAT_WARP: float = 0.45
+#: Frames after the tracker's beat that the warp slows into and the motion matching places a
+#: movement's speed dip on. The whole chain (the tracker's phase, the warp, the movements'
+#: own dips) put the dips early: over the first minute of the 34 training dances, whose
+#: motion no target judges, most fell 1 frame before the music's beat (librosa's, as the
+#: evaluation scores them; mean -0.49 frames within +-4), on the waltzes of the listening
+#: set 2-3 frames at 0.8x. 1 centres them (mean +0.12; the training dances' hit rate 0.498
+#: -> 0.522; benchmarks/studies/beat_control.py --split train --max-frames 1800
+#: --beat-delay 0 1). 0: on the tracker's beat.
+BEAT_DELAY: float = 1.0
 #: Pulse clarity at which the beat warp is at full depth (a clean click track gives about 0.5).
 WARP_CLARITY: float = 0.3
 #: The warp plays the movement this many frames late on average (the slack it slows into
@@ -858,6 +867,7 @@ class DanceStream:
         if clarity <= 0.0:
             return None
         theta, period = danced_beat(math.atan2(csin, ccos) % (2 * math.pi), 15.0 * 2.0 ** logp, self._tempo.period)
+        theta = (theta - 2.0 * math.pi * BEAT_DELAY / period) % (2 * math.pi)
         ahead = int(round(rate * (period * (1 - theta / (2 * np.pi)) % max(period, 1.0))))
         return (ahead, clarity) if ahead < self.seg else None
 
@@ -871,7 +881,8 @@ class DanceStream:
             return warp_pose(self._played, x)
         ccos, csin, clarity, logp = (float(self._raw[c]) for c in self._beat_cols)
         depth = BEAT_WARP * min(1.0, max(clarity, 0.0) / WARP_CLARITY)
-        theta, _ = danced_beat(math.atan2(csin, ccos), 15.0 * 2.0 ** logp, self._tempo.period)  # 0 on a danced beat
+        theta, per = danced_beat(math.atan2(csin, ccos), 15.0 * 2.0 ** logp, self._tempo.period)  # 0 on a danced beat
+        theta -= 2.0 * math.pi * BEAT_DELAY / per
         cos = math.cos(theta) if clarity > 1e-9 else 0.0
         rate = self._advance(j + 1) - self._advance(j)  # exemplar frames this frame plays
         lag = self._lag + rate * depth * cos - WARP_PULL * (self._lag - WARP_LAG)
