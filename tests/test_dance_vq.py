@@ -448,10 +448,10 @@ def test_no_movement_is_drawn_over_and_over(monkeypatch):
     z = s._code_energy
     lively, calm, other = int(np.argmax(z)), int(np.argmin(z)), int(np.argsort(z)[len(z) // 2 + 50])
     logits = np.zeros(lm.model.config.codebook, np.float32)
-    s._recent.extend([lively, lively, other, lively, lively, lively, other, other])  # 5 and 3 times
+    s.codes_drawn = [calm] * 3 + [lively, lively, other, lively, lively, lively, other, other]  # the last 8: 5 and 3
     out = s._repeat_penalty(logits)
     assert out[lively] == -2.0 and np.count_nonzero(out) == 1 and not logits.any()
-    s._recent.extend([calm] * 5)  # a calm code (energy z <= -1) repeats freely: holding still is no shuffle
+    s.codes_drawn += [calm] * 5  # a calm code (energy z <= -1) repeats freely: holding still is no shuffle
     assert z[calm] <= -1.0 and not s._repeat_penalty(logits).any()
 
     feats = extract_features(load_audio("models/assets/clip.ogg")[0], lm.features)

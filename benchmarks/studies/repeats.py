@@ -82,27 +82,22 @@ def dancers_runs(checkpoint, config: str, dwm: str, cache: str) -> np.ndarray:
     return np.concatenate(out)
 
 
-def perform(lm, feats: np.ndarray, seed: int) -> dict:
-    """The live stream on ``feats``: its codes' run lengths and its shuffling frames."""
+def perform(lm, audio: np.ndarray, seed: int) -> dict:
+    """The live stream on ``audio`` (n,) at 22050 Hz (``listening.perform``): its codes' run
+    lengths and its shuffling frames."""
     from scipy.ndimage import uniform_filter1d
 
     from models.evaluation import listening as L
-    from models.networks.dance_stream import DanceStream
     from models.timebase import FPS
 
-    s = DanceStream(lm.model, seed=seed)
-    n = len(feats)
-    poses = np.empty((n, lm.model.config.pose_dim), np.float32)
-    w, own, rate = np.empty(n), np.empty(n), np.empty(n)
-    for t in range(n):
-        poses[t] = s.push(feats[t: t + 1])[0]
-        w[t], own[t], rate[t] = s.idle_weight, s.movement_speed, s.playback_rate
+    trace: dict = {}
+    poses, w = L.perform(lm, audio, seed, trace)
     win = int(WINDOW_S * FPS)
     speed = uniform_filter1d(L.motion_speed(L.positions(poses)), win)
-    played = uniform_filter1d(own * rate, win)  # m/s
+    played = uniform_filter1d(trace["movement_speed"] * trace["rate"], win)  # m/s
     dancing = uniform_filter1d((w <= 0.0).astype(float), win) >= 1.0 - 1e-9
     shuffle = dancing & (speed < SHUFFLE_RATIO * played)
-    return {"runs": run_lengths(s.codes_drawn), "dancing": int(dancing.sum()), "shuffle": int(shuffle.sum())}
+    return {"runs": run_lengths(trace["codes"]), "dancing": int(dancing.sum()), "shuffle": int(shuffle.sum())}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -123,7 +118,6 @@ def main(argv: list[str] | None = None) -> int:
     import models.networks.dance_stream as ds
     from models.errors import PerformerError
     from models.evaluation import listening as L
-    from models.features.spectral import extract_features
     from models.generate import load_model
     from models.networks.dance_vq import DanceVQ
     from models.timebase import SAMPLE_RATE
@@ -135,10 +129,9 @@ def main(argv: list[str] | None = None) -> int:
             raise PerformerError(f"{lm.path} is a {lm.name!r} model; repeats are dance_vq's")
         dancers = dancers_runs(a.checkpoint, a.config, str(data / "dwm"), a.cache)
         opts = L.Options(dwm=data / "dwm", music=data / "music", progress=False)
-        recordings = L.candidates(opts)
         cache = L.AudioCache(None)
-        feats = {L.song_name(r): extract_features(cache.audio(r)[: int(a.seconds * SAMPLE_RATE)], lm.features)
-                 for r in tqdm(recordings, desc="features", leave=False)}
+        audio = {L.song_name(r): cache.audio(r)[: int(a.seconds * SAMPLE_RATE)]
+                 for r in tqdm(L.candidates(opts), desc="recordings", leave=False)}
     except (PerformerError, OSError) as e:
         print(f"repeats: {e}", file=sys.stderr)
         return 2
@@ -151,9 +144,9 @@ def main(argv: list[str] | None = None) -> int:
         for label, penalty in variants.items():
             ds.REPEAT_PENALTY = penalty
             runs, dancing, shuffle = [], 0, 0
-            for name, f in tqdm(feats.items(), desc=label, leave=False):
+            for name, y in tqdm(audio.items(), desc=label, leave=False):
                 for seed in a.seeds:
-                    got = perform(lm, f, seed)
+                    got = perform(lm, y, seed)
                     runs.append(got["runs"])
                     dancing += got["dancing"]
                     shuffle += got["shuffle"]
@@ -165,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         ds.REPEAT_PENALTY = shipped
 
-    print(f"Runs of one code (8-frame movements), {lm.path}; the performer on {len(feats)} recordings "
+    print(f"Runs of one code (8-frame movements), {lm.path}; the performer on {len(audio)} recordings "
           f"(first {a.seconds:g} s), seeds {' '.join(map(str, a.seeds))}\n")
     head = " | ".join(f"in runs >= {n}" for n in RUN_LENGTHS)
     print(f"| | longest run | {head} | shuffling share of the dancing frames |")

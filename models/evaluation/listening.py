@@ -341,7 +341,8 @@ def perform(lm, audio: np.ndarray, seed: int = 0, trace: dict | None = None) -> 
     (the same poses as :func:`models.networks.dance_stream.generate` with ``seed``). A
     ``trace`` dict receives ``tempo_bpm``, ``rate`` and ``movement_speed`` (T,): the stream's
     followed tempo, playback rate and the playing movement's own mean joint speed (m/s at its
-    own pace: what the choice of movement sets) after every frame."""
+    own pace: what the choice of movement sets) after every frame, and ``codes``: the codes
+    drawn, one per movement."""
     from models.features.spectral import extract_features
     from models.networks.dance_stream import DanceStream
 
@@ -354,7 +355,7 @@ def perform(lm, audio: np.ndarray, seed: int = 0, trace: dict | None = None) -> 
         w[t], tempo[t], rate[t], own[t] = (stream.idle_weight, stream.tempo_bpm, stream.playback_rate,
                                            stream.movement_speed)
     if trace is not None:
-        trace.update(tempo_bpm=tempo, rate=rate, movement_speed=own)
+        trace.update(tempo_bpm=tempo, rate=rate, movement_speed=own, codes=list(stream.codes_drawn))
     return poses, w
 
 

@@ -186,8 +186,8 @@ MEMBER_SMOOTH: float = 1.25
 #: one code, kept drawing it: runs of 16-36 movements (4-10 s), where the dancers' longest
 #: is 22 and 0.5 % of their movements are in runs of 12 or more (1.8 % of the performer's).
 #: Each repeat restarts a movement of that kind near where the last one started and the
-#: inertialization cancels most of it: the performer shuffled in place at a third of its
-#: speed, for up to 9 s in loud music (2.8 % of the dancing frames on the listening
+#: inertialization cancels most of it: the performer shuffled in place, at under half the
+#: speed of the movements it played, in loud music (2.8 % of the dancing frames on the listening
 #: recordings and validation songs, DANCE_W_5 14 %; benchmarks/studies/repeats.py). A run
 #: broken by one other code (354 354 354 139 354 354 354) shuffles as much, hence a window,
 #: not only a run. Calm codes repeat freely: the penalty is scaled by ``z + REPEAT_CALM``
@@ -592,7 +592,6 @@ class DanceStream:
         self._fade_prev: np.ndarray | None = None  # the fade's last rotation vectors, dance -> idle (J, 3)
         self._prev_quat: np.ndarray | None = None
         self.codes_drawn: list[int] = []
-        self._recent: deque[int] = deque(maxlen=max(REPEAT_WINDOW, 1))  # the last codes drawn (repeats)
         self._lead = self._lead_next  # the lead in frames now (taken up at code steps)
 
     def set_style(self, style: str | None) -> None:
@@ -731,7 +730,7 @@ class DanceStream:
             tilt = self._tempo_tilt()
             if tilt != 0.0:  # livelier codes at a faster tempo, calmer at a slower one (TEMPO_ENERGY)
                 logits = logits + np.float32(tilt) * self._code_energy
-            if REPEAT_PENALTY > 0.0 and len(self._recent) >= REPEAT_FREE:
+            if REPEAT_PENALTY > 0.0 and len(self.codes_drawn) >= REPEAT_FREE:
                 logits = self._repeat_penalty(logits)
             self._tokens.append(token)
             # the next step's window but its newest token is known now: its layers run on the frames between
@@ -781,8 +780,8 @@ class DanceStream:
         """``logits`` (K,) with each code drawn n >= :data:`REPEAT_FREE` times among the last
         :data:`REPEAT_WINDOW` lowered by ``REPEAT_PENALTY * (n - REPEAT_FREE + 1)``, times its
         liveliness weight (:data:`REPEAT_CALM`); a copy where any is lowered. Once per code
-        step (every 8 frames): 1-2 us."""
-        recent = list(self._recent)
+        step (every 8 frames)."""
+        recent = self.codes_drawn[-REPEAT_WINDOW:]
         out = None
         for c in set(recent):
             n = recent.count(c)
@@ -855,9 +854,14 @@ class DanceStream:
     def _commit(self, code: int) -> None:
         """Record ``code`` as played (``self._play`` has started its movement)."""
         self._codes.append(code)
-        self._recent.append(code)
         self._last = code
         self.codes_drawn.append(code)
+
+    def _danced_phase(self, ccos: float, csin: float, logp: float) -> tuple[float, float]:
+        """(phase in [0, 2 pi), 0 :data:`BEAT_DELAY` frames after a danced beat; the danced period,
+        frames) from the beat tracker's columns (``c cos``, ``c sin``, ``log2 P/15``) and the tempo followed."""
+        theta, period = danced_beat(math.atan2(csin, ccos) % (2 * math.pi), 15.0 * 2.0 ** logp, self._tempo.period)
+        return (theta - 2.0 * math.pi * BEAT_DELAY / period) % (2 * math.pi), period
 
     def _next_beat(self, rate: float = 1.0) -> tuple[int, float] | None:
         """(frame of the coming movement's exemplar, 0..seg-1, that plays when the beat tracker
@@ -868,8 +872,7 @@ class DanceStream:
         ccos, csin, clarity, logp = (float(self._raw[j]) for j in self._beat_cols)
         if clarity <= 0.0:
             return None
-        theta, period = danced_beat(math.atan2(csin, ccos) % (2 * math.pi), 15.0 * 2.0 ** logp, self._tempo.period)
-        theta = (theta - 2.0 * math.pi * BEAT_DELAY / period) % (2 * math.pi)
+        theta, period = self._danced_phase(ccos, csin, logp)
         ahead = int(round(rate * (period * (1 - theta / (2 * np.pi)) % max(period, 1.0))))
         return (ahead, clarity) if ahead < self.seg else None
 
@@ -883,8 +886,7 @@ class DanceStream:
             return warp_pose(self._played, x)
         ccos, csin, clarity, logp = (float(self._raw[c]) for c in self._beat_cols)
         depth = BEAT_WARP * min(1.0, max(clarity, 0.0) / WARP_CLARITY)
-        theta, per = danced_beat(math.atan2(csin, ccos), 15.0 * 2.0 ** logp, self._tempo.period)  # 0 on a danced beat
-        theta -= 2.0 * math.pi * BEAT_DELAY / per
+        theta, _ = self._danced_phase(ccos, csin, logp)  # 0 BEAT_DELAY frames after a danced beat
         cos = math.cos(theta) if clarity > 1e-9 else 0.0
         rate = self._advance(j + 1) - self._advance(j)  # exemplar frames this frame plays
         lag = self._lag + rate * depth * cos - WARP_PULL * (self._lag - WARP_LAG)
