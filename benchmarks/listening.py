@@ -76,6 +76,8 @@ def plot_ramp(result: dict, path: str | Path) -> None:
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    from models.evaluation.listening import SEEDS
+
     p = argparse.ArgumentParser(description=__doc__.split("\nExit status")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="Exit status 2 on a missing or unreadable checkpoint or data directory.")
@@ -89,9 +91,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--excerpt-s", type=float, default=45.0, help="seconds of each stretch-set excerpt (default 45)")
     p.add_argument("--ramp-song", metavar="NAME", help="the ramp's recording (file stem or DANCE_* name; "
                    "default: the first stretch-set song long enough)")
-    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], metavar="SEED",
+    p.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS), metavar="SEED",
                    help="sampling seeds of the stretch set and the ramp, figures the mean over them "
-                        "(default 0 1 2: one seed's beat hit rate moves by a few hundredths; --quick: the first)")
+                        f"(default {' '.join(map(str, SEEDS))}: one seed's ramp correlation moves by up to 0.15; "
+                        "--quick: the first)")
     p.add_argument("--cache", default=".cache/listening", metavar="DIR", help="audio cache (default .cache/listening)")
     p.add_argument("--out", default="runs/listening", metavar="DIR", help="report directory (default runs/listening)")
     p.add_argument("--plot", metavar="PNG", help="the ramp plot (default OUT/listening_ramp.png)")

@@ -14,7 +14,7 @@ and each lead's ratio to lead 0's hit rate with no delay (issue 25, target 5: at
 
     .venv/bin/python benchmarks/studies/lead.py --data ../shared/data/dwm
 
-Each song is danced with seeds 0, 1 and 2 (``--seeds``) at every lead. Hit rates are pooled
+Each song is danced with seeds 0 to 5 (``--seeds``, as benchmarks/listening.py) at every lead. Hit rates are pooled
 over songs and seeds (every kinematic beat counts once), with the smallest and largest song
 in brackets. Exit status 2 on a missing or unreadable
 checkpoint or dataset, or a checkpoint whose model has no lead control.
@@ -146,8 +146,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--leads", type=float, nargs="+", default=list(LEADS_MS), metavar="MS",
                    help=f"leads, ms, each in [0, 200], the first 0 (default {' '.join(f'{x:g}' for x in LEADS_MS)})")
     p.add_argument("--songs", nargs="+", metavar="NAME", help="only these validation dances (default: all)")
-    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2], metavar="N",
-                   help="generation seeds, each run at every lead, counts summed (default 0 1 2)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4, 5], metavar="N",
+                   help="generation seeds, each run at every lead, counts summed (default 0 1 2 3 4 5)")
     p.add_argument("--json", metavar="OUT", help="also write every song's counts as JSON")
     a = p.parse_args(argv)
     if any(not 0.0 <= x <= 200.0 for x in a.leads) or a.leads[0] != 0.0:
