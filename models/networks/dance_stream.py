@@ -61,8 +61,8 @@ from models.timebase import FPS
 ABSENT_FRAMES: int = 15
 #: Frames of music before it starts to dance again (0.2 s).
 PRESENT_FRAMES: int = 6
-#: Frames of the crossfade between dance and idle (0.67 s), eased with a smoothstep.
-FADE_FRAMES: int = 20
+#: Frames of the crossfade between dance and idle (0.53 s), eased with a smoothstep.
+FADE_FRAMES: int = 16
 #: A fade that follows a bone's rotation to the idle the long way round (past 180 degrees,
 #: :meth:`DanceStream._fade`) goes back to the shorter way when that moves the bone by at most
 #: this much (radians: 10 degrees), near the fade's start or end.
@@ -513,7 +513,7 @@ class DanceStream:
         self._gate_a_return = float(np.exp(-1.0 / GATE_TAU_RETURN))
         fitted = bool(model.presence.abs().sum() > 0) and self._ecol == ENERGY_COL  # else the logistic detector
         self._presence = MusicGate(self._feat_mean, self._feat_std, model.presence.numpy(), self._energy_min,
-                                   c.clarity_col, c.gate_col, c.gate_tau) if fitted else None
+                                   c.clarity_col, c.gate_col, c.gate_tau, model.presence_stop.numpy()) if fitted else None
         self._members = _cached_members(model)  # (K, M, 2 seg, P), shared: never written
         self._counts = model.member_count.numpy()
         self._style_prior = model.style_prior.numpy().astype(np.float32)  # (K, 4)

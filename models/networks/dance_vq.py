@@ -312,6 +312,9 @@ class DanceVQ(nn.Module):
         # music presence detector (models.networks.music_gate, fitted by models.training.music_gate);
         # all zeros (checkpoints from before it): the stream uses the logistic detector above
         self.register_buffer("presence", torch.zeros(PRESENCE_PARAMS))
+        # its stop network (models.networks.music_gate: judges while the performer dances, without
+        # the beat statistics); all zeros (checkpoints from before it): `presence` in both states
+        self.register_buffer("presence_stop", torch.zeros(PRESENCE_PARAMS))
         # choreographic memory (models.training.dance_vq.fit_members): for each code, up to
         # `members` real 2 * seg-frame windows of the dancers' poses whose encoding is nearest the
         # code (the first seg frames are the movement, the rest its natural continuation, float16),
@@ -336,7 +339,7 @@ class DanceVQ(nn.Module):
                               error_msgs) -> None:
         """Checkpoints saved before the style or tempo memory or the presence detector existed
         load without them (zeros: unknown, not fitted)."""
-        for name in ("member_style", "style_prior", "member_period", "presence"):
+        for name in ("member_style", "style_prior", "member_period", "presence", "presence_stop"):
             state_dict.setdefault(prefix + name, torch.zeros_like(getattr(self, name)))
         super()._load_from_state_dict(state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys,
                                       error_msgs)

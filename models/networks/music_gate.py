@@ -28,7 +28,12 @@ and keeps :data:`N_STATS` causal running statistics (one compiled call a frame,
 A small network (:data:`N_STATS` -> :data:`HIDDEN` tanh -> 1) turns them into a logit
 (music > 0), its weights and the statistics' standardisation in the model's ``presence``
 buffer (:func:`pack` / :func:`unpack`; all zeros: not fitted, the stream keeps the older
-logistic detector). Fitted by :mod:`models.training.music_gate` on the training songs
+logistic detector). A model may carry a second one for the dancing performer, the **stop
+network** (``presence_stop``; all zeros: none, the one network in both states): it gives no
+weight to the beat statistics 7, 10 and 11 (:data:`BEAT_STATS`), which remember the song
+for seconds (the beat tracker's 6-s window, the 1.5-s coherence) and so held the logit up
+for about 1.3 s after a host started talking; the idle performer keeps the network with
+them, whose "no steady pulse" holds the idle through a reading. Fitted by :mod:`models.training.music_gate` on the training songs
 and on synthetic electronic music, espeak-ng speech, crowd babble, applause and room
 noise. While music is playing the statistics run with the time constant the detector was
 fitted at (the model's ``gate_tau``: :data:`TAU_MUSIC`, 15 frames, or 10 with the steadiness
@@ -64,10 +69,13 @@ BEAT_A: float = math.exp(-1.0 / TAU_BEAT)
 LOGIT_TAU: float = 4.0
 #: Logit below which a dancing performer hears no music.
 MARGIN_STOP: float = 2.0
+#: Statistics the stop network gives no weight (the pulse clarity, the beat phase's coherence,
+#: the period's jitter: module docstring).
+BEAT_STATS: tuple[int, ...] = (7, 10, 11)
 #: Logit above which an idle performer hears music again.
 MARGIN_START: float = 1.5
 #: Frames of music an idle performer must hear before it dances again (0.1 s; the fade
-#: after it takes 0.67 s: back within a second).
+#: after it takes 0.53 s: back within a second).
 START_FRAMES: int = 3
 #: Feature columns read: MFCC 1-2, log energy, MFCC 1-12 differences, energy difference, onset
 #: (and the beat columns: the model's ``clarity_col`` and its neighbours).
@@ -184,24 +192,33 @@ class MusicGate:
     detector (:func:`pack`); energy_min: the silence threshold (log energy, dB); clarity_col:
     the pulse clarity's column (-1: none); steadiness_col: the steadiness column (the model's
     ``gate_col``; -1: none, statistic 0 is MFCC 1's mean); tau_music: the statistics' time
-    constant (frames) while dancing (the model's ``gate_tau``).
+    constant (frames) while dancing (the model's ``gate_tau``); stop_params: the packed stop
+    network that judges while dancing (the model's ``presence_stop``; None or all zeros:
+    ``params`` in both states).
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
-                 clarity_col: int, steadiness_col: int = -1, tau_music: float = TAU_MUSIC) -> None:
+                 clarity_col: int, steadiness_col: int = -1, tau_music: float = TAU_MUSIC,
+                 stop_params: np.ndarray | None = None) -> None:
         self._ccol = int(clarity_col)
         self._scol = int(steadiness_col)
         self._mfcc_mean = np.asarray(feat_mean, np.float64)[list(MFCC_COLS)]
         self._mfcc_std = np.asarray(feat_std, np.float64)[list(MFCC_COLS)]
         self._dmfcc_std = np.asarray(feat_std, np.float64)[list(DMFCC_COLS)]
-        self._mean, self._std, self._w1, self._b1, self._w2, b2 = unpack(params)
-        self._std = np.maximum(self._std, 1e-6)
-        self._b2 = float(b2[0])
+        self._start = self._network(params)
+        self.has_stop = stop_params is not None and bool(np.any(np.asarray(stop_params) != 0))
+        self._stop = self._network(stop_params) if self.has_stop else self._start
         self.energy_min = float(energy_min)
         self._a_music = math.exp(-1.0 / tau_music)
         self._a_idle = math.exp(-1.0 / TAU_IDLE)
         self._a_logit = math.exp(-1.0 / LOGIT_TAU) if LOGIT_TAU > 0 else 0.0
         self.reset()
+
+    @staticmethod
+    def _network(params: np.ndarray) -> tuple:
+        """(mean, std, W1, b1, w2, b2) of packed parameters, as :func:`presence_logit` takes them."""
+        mean, std, w1, b1, w2, b2 = unpack(params)
+        return mean, np.maximum(std, 1e-6), w1, b1, w2, float(b2[0])
 
     def reset(self) -> None:
         self._state = np.zeros(N_STATE)
@@ -214,7 +231,7 @@ class MusicGate:
             return False  # silence: the statistics wait for sound
         presence_step(row, self._mfcc_mean, self._mfcc_std, self._dmfcc_std, self._ccol, self._scol, self._state,
                       self.stats, self._a_music if dancing else self._a_idle)
-        z = presence_logit(self.stats, self._mean, self._std, self._w1, self._b1, self._w2, self._b2)
+        z = presence_logit(self.stats, *(self._stop if dancing else self._start))
         a = self._a_logit if dancing else 0.0  # idle: the music's return is heard at once
         self.logit = a * self.logit + (1.0 - a) * z
         return self.logit > (-MARGIN_STOP if dancing else MARGIN_START)

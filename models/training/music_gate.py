@@ -21,6 +21,11 @@ cross every kind of boundary; features are computed on the whole programme (the 
 tracker too), and the statistics at both of the gate's time constants. ``dBFS`` here is
 the RMS level of the signal, ``20 log10(rms)``.
 
+Two networks are fitted on the same programmes: the detector (both time constants, all 12
+statistics), which the idle performer judges by, and the **stop network** the dancing one
+judges by (``presence_stop``: the dancing time constant only, the beat statistics
+``BEAT_STATS`` left out; ``--no-stop-network``: none, as before it).
+
 Refit a checkpoint's detector (the rest of the checkpoint is copied unchanged); with
 ``--steadiness`` it also adds the spectral steadiness column (models/features/steadiness.py)
 to the checkpoint's features, which the detector then reads in place of MFCC 1, at a
@@ -448,10 +453,12 @@ def programme_features(fcfg, songs: list[np.ndarray], rng: np.random.Generator, 
     return out
 
 
-def training_rows(model, progs: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Statistics (N, N_STATS) and labels (N,) of programmes (:func:`programme_features`), at both
-    of the gate's time constants; the first 3 s, frames up to 4 after a change of label and
-    silence (log energy at most the model's threshold) left out."""
+def training_rows(model, progs: list[tuple[np.ndarray, np.ndarray]],
+                  taus: tuple[float, ...] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Statistics (N, N_STATS) and labels (N,) of programmes (:func:`programme_features`), at each
+    time constant of ``taus`` (frames; default both of the gate's, the model's ``gate_tau`` and
+    ``TAU_IDLE``); the first 3 s, frames up to 4 after a change of label and silence (log energy
+    at most the model's threshold) left out."""
     fm, fs = model.feat_mean.numpy(), model.feat_std.numpy()
     energy_min = float(model.gate[0])
     xs, ys = [], []
@@ -461,19 +468,26 @@ def training_rows(model, progs: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np
             keep[c: c + 5] = False
         keep &= feats[:, mg.ENERGY_COL] > energy_min
         keep[:90] = False  # the start of a stream: the beat tracker's window is empty
-        for tau in (model.config.gate_tau, mg.TAU_IDLE):
+        for tau in taus or (model.config.gate_tau, mg.TAU_IDLE):
             xs.append(mg.stats_trace(feats, fm, fs, model.config.clarity_col, tau, model.config.gate_col)[keep])
             ys.append(lab[keep])
     return np.concatenate(xs), np.concatenate(ys).astype(np.float32)
 
 
-def fit_network(x: np.ndarray, y: np.ndarray, seed: int = 0, steps: int = 400, music_weight: float = 1.0) -> np.ndarray:
+def fit_network(x: np.ndarray, y: np.ndarray, seed: int = 0, steps: int = 400, music_weight: float = 1.0,
+                drop: tuple[int, ...] = ()) -> np.ndarray:
     """The detector's packed parameters (:func:`models.networks.music_gate.pack`) fitted on
     statistics ``x`` (N, N_STATS) and labels ``y`` (N,) by weighted cross-entropy (classes equal,
-    then music frames ``music_weight`` times the others), L-BFGS for ``steps`` iterations."""
+    then music frames ``music_weight`` times the others), L-BFGS for ``steps`` iterations. The
+    statistics in ``drop`` are left out: they read 0 in the fit and get no weight (mean 0, std 1,
+    zero columns of W1), whatever their values at run time."""
     torch.manual_seed(seed)
     mean, std = x.mean(0), np.maximum(x.std(0), 1e-3)
-    xt = torch.from_numpy(((x - mean) / std).astype(np.float32))
+    cols = list(drop)
+    mean[cols], std[cols] = 0.0, 1.0
+    z = (x - mean) / std
+    z[:, cols] = 0.0
+    xt = torch.from_numpy(z.astype(np.float32))
     yt = torch.from_numpy(y)
     pos = float(y.mean())
     wt = torch.where(yt > 0.5, 0.5 / max(pos, 1e-6), 0.5 / max(1 - pos, 1e-6))
@@ -491,28 +505,43 @@ def fit_network(x: np.ndarray, y: np.ndarray, seed: int = 0, steps: int = 400, m
         return loss
 
     opt.step(closure)
-    w1, b1 = net[0].weight.detach().numpy(), net[0].bias.detach().numpy()
+    w1, b1 = net[0].weight.detach().numpy().copy(), net[0].bias.detach().numpy()
+    w1[:, cols] = 0.0
     w2, b2 = net[2].weight.detach().numpy()[0], float(net[2].bias.detach()[0])
     return mg.pack(mean, std, w1, b1, w2, b2)
 
 
 def fit_presence(model, fcfg, songs: list[np.ndarray], rng: np.random.Generator, minutes: float = 60.0,
-                 progress: bool = False, music_weight: float = 1.0) -> dict[str, float]:
+                 progress: bool = False, music_weight: float = 1.0, stop: bool = True) -> dict[str, float]:
     """Fit ``model``'s presence detector (its ``presence`` buffer) on ``songs`` (training songs'
-    audio, (n,) at 22050 Hz) and the synthetic material (:func:`fit_network`'s ``music_weight``);
-    returns the training accuracy per class."""
-    x, y = training_rows(model, programme_features(fcfg, songs, rng, minutes, progress=progress))
+    audio, (n,) at 22050 Hz) and the synthetic material (:func:`fit_network`'s ``music_weight``),
+    and with ``stop`` its stop network (``presence_stop``: the same programmes' statistics at
+    the dancing time constant only, the beat statistics ``BEAT_STATS`` left out; else zeros);
+    returns the training accuracy per class (``stop_`` keys: the stop network's)."""
+    progs = programme_features(fcfg, songs, rng, minutes, progress=progress)
+    x, y = training_rows(model, progs)
     p = fit_network(x, y, int(rng.integers(1 << 30)), music_weight=music_weight)
+    acc = {**_accuracy(p, x, y), "frames": float(len(y))}
+    ps = np.zeros_like(p)
+    if stop:
+        xs, ys = training_rows(model, progs, taus=(model.config.gate_tau,))
+        ps = fit_network(xs, ys, int(rng.integers(1 << 30)), music_weight=music_weight, drop=mg.BEAT_STATS)
+        acc.update({f"stop_{k}": v for k, v in _accuracy(ps, xs, ys).items()})
     with torch.no_grad():
         model.presence.copy_(torch.from_numpy(p))
-    mean, std, w1, b1, w2, b2 = mg.unpack(p)
-    logit = np.tanh(((x - mean) / np.maximum(std, 1e-6)) @ w1.T + b1) @ w2 + b2[0]
-    acc = {"music_acc": float((logit[y > 0.5] > 0).mean()), "other_acc": float((logit[y < 0.5] <= 0).mean()),
-           "frames": float(len(y))}
+        model.presence_stop.copy_(torch.from_numpy(ps))
     if progress:
         print(f"music gate: {acc['music_acc']:.3f} of music frames, {acc['other_acc']:.3f} of other frames right "
-              f"({len(y)} rows)")
+              f"({len(y)} rows)" + (f"; stop network (dancing, no beat statistics): {acc['stop_music_acc']:.3f}, "
+                                    f"{acc['stop_other_acc']:.3f}" if stop else ""))
     return acc
+
+
+def _accuracy(p: np.ndarray, x: np.ndarray, y: np.ndarray) -> dict[str, float]:
+    """Share of music rows (``y`` 1) with a positive logit and of the others with a non-positive one."""
+    mean, std, w1, b1, w2, b2 = mg.unpack(p)
+    logit = np.tanh(((x - mean) / np.maximum(std, 1e-6)) @ w1.T + b1) @ w2 + b2[0]
+    return {"music_acc": float((logit[y > 0.5] > 0).mean()), "other_acc": float((logit[y < 0.5] <= 0).mean())}
 
 
 def training_songs(data_root: str | Path) -> list[str]:
@@ -538,6 +567,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", required=True, metavar="CKPT", help="where to write the checkpoint with the fitted detector")
     p.add_argument("--minutes", type=float, default=60.0, help="minutes of training programmes (default 60)")
     p.add_argument("--seed", type=int, default=0, help="seed of the synthetic material and the fit (default 0)")
+    p.add_argument("--no-stop-network", action="store_true",
+                   help="fit only the one network for both states, as checkpoints before the stop network "
+                        "(default: also the stop network the dancing performer judges by)")
     p.add_argument("--steadiness", action="store_true",
                    help="add the spectral steadiness column to the checkpoint's features (models/features/steadiness.py): "
                         "the detector reads it instead of MFCC 1, the predictor never does")
@@ -562,6 +594,7 @@ def main(argv: list[str] | None = None) -> int:
             feature_config = fcfg.to_dict()
         songs = song_audio(a.data, training_songs(a.data))
         fit_presence(lm.model, fcfg, songs, np.random.default_rng(a.seed), a.minutes, progress=True,
+                     stop=not a.no_stop_network,
                      music_weight=STEADY_MUSIC_WEIGHT if fcfg.steadiness else 1.0)
         save_checkpoint(a.out, lm.model, model_name=meta["model_name"], generator_config=lm.model.config,
                         feature_config=feature_config, rig=meta["rig"], extra=meta.get("extra"))
