@@ -2,18 +2,15 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from models.evaluation.evaluate import pooled_beats
 
-_path = Path(__file__).resolve().parents[1] / "benchmarks" / "studies" / "beat_control.py"
-_spec = importlib.util.spec_from_file_location("beat_control", _path)
-beat_control = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(beat_control)
+from script_loader import load_script
+
+beat_control = load_script("benchmarks/studies/beat_control.py")
 
 
 def test_half_beats_are_the_midpoints_of_consecutive_beats() -> None:

@@ -2,18 +2,16 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from script_loader import load_script
+
 REPO = Path(__file__).resolve().parents[1]
-_path = REPO / "benchmarks" / "studies" / "energy_control.py"
-_spec = importlib.util.spec_from_file_location("energy_control", _path)
-ec = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(ec)
+ec = load_script("benchmarks/studies/energy_control.py")
 
 
 def test_measure_song_tracks_the_control_on_a_model_whose_codes_differ_in_speed(tmp_path):

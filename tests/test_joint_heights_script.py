@@ -2,16 +2,13 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-_path = Path(__file__).resolve().parents[1] / "benchmarks" / "studies" / "joint_heights.py"
-_spec = importlib.util.spec_from_file_location("joint_heights", _path)
-jh = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(jh)
+from script_loader import load_script
+
+jh = load_script("benchmarks/studies/joint_heights.py")
 
 
 def test_plot_writes_one_panel_per_joint(tmp_path):

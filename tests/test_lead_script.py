@@ -2,18 +2,16 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from script_loader import load_script
+
 REPO = Path(__file__).resolve().parents[1]
-_path = REPO / "benchmarks" / "studies" / "lead.py"
-_spec = importlib.util.spec_from_file_location("lead_bench", _path)
-lb = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(lb)
+lb = load_script("benchmarks/studies/lead.py")
 
 
 def test_a_lead_keeps_the_beat_hits_behind_the_delay_and_lead_0_loses_them():

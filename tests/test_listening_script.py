@@ -3,7 +3,6 @@ presence figures on signals whose answer is known (issue 25)."""
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -14,10 +13,10 @@ import pytest
 from models.evaluation import listening as L
 from models.timebase import FPS, HOP, SAMPLE_RATE
 
+from script_loader import load_script
+
 REPO = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("listening_script", REPO / "benchmarks" / "listening.py")
-script = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(script)
+script = load_script("benchmarks/listening.py")
 
 
 def dance(t: np.ndarray) -> np.ndarray:

@@ -2,18 +2,15 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from models.rig.humanoid import NUM_BONES
 
-_path = Path(__file__).resolve().parents[1] / "benchmarks" / "studies" / "paired_floor.py"
-_spec = importlib.util.spec_from_file_location("paired_floor", _path)
-paired_floor = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(paired_floor)
+from script_loader import load_script
+
+paired_floor = load_script("benchmarks/studies/paired_floor.py")
 
 
 def test_mean_pose_ignores_quaternion_signs_and_averages_the_root():

@@ -11,7 +11,6 @@ fault. docs/reliability.md lists what each test proves.
 
 from __future__ import annotations
 
-import importlib.util
 import itertools
 import json
 import logging
@@ -28,13 +27,13 @@ from _proc import default_sigint
 from test_run_cli import PERFORMER, REPO, drain, one_line_error, run_main, tiny_checkpoint  # noqa: F401 (fixture)
 
 from models.errors import ConfigError
-from models.timebase import FPS, HOP, SAMPLE_RATE
+from models.timebase import HOP, SAMPLE_RATE
 from realtime.audio_input import FileSource
 from realtime.engine import Engine, EngineConfig
 
-_spec = importlib.util.spec_from_file_location("soak", REPO / "benchmarks" / "soak.py")
-soak = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(soak)
+from script_loader import load_script
+
+soak = load_script("benchmarks/soak.py")
 
 MAX_STEP_DEG = 60.0  # largest rotation change per frame (any bone) accepted across a fault
 

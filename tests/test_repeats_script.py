@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 
+from script_loader import load_script
+
 REPO = Path(__file__).resolve().parents[1]
-_path = REPO / "benchmarks" / "studies" / "repeats.py"
-_spec = importlib.util.spec_from_file_location("repeats_study", _path)
-rs = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(rs)
+rs = load_script("benchmarks/studies/repeats.py")
 
 
 def test_runs_are_counted_in_order_and_summarised_as_shares_of_movements():

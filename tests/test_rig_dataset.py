@@ -9,10 +9,6 @@ measured offsets), because the mocap itself does not keep its bones rigid.
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -22,6 +18,8 @@ from models.rig.joint_map import POINT_OF_JOINT, dwm_targets, left_right_evidenc
 from models.rig.kinematics import fk, rotation_jumps_deg
 from models.rig.retarget import fit_skeleton, retarget
 from models.rig.skeleton import POINT_INDEX, POINT_PARENT_INDEX, Skeleton, load_default_skeleton
+
+from script_loader import load_script
 
 pytestmark = pytest.mark.data
 
@@ -45,12 +43,7 @@ FINGERPRINTS = {
 
 
 def _benchmark():
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "studies" / "retarget_accuracy.py"
-    spec = importlib.util.spec_from_file_location("retarget_accuracy", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up there
-    spec.loader.exec_module(module)  # type: ignore[union-attr]
-    return module
+    return load_script("benchmarks/studies/retarget_accuracy.py")
 
 
 def per_frame_errors_cm(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

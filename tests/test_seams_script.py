@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 from models.generate import default_checkpoint_path
 
-_path = Path(__file__).resolve().parents[1] / "benchmarks" / "studies" / "seams.py"
-_spec = importlib.util.spec_from_file_location("seams", _path)
-seams = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(seams)
+from script_loader import load_script
+
+seams = load_script("benchmarks/studies/seams.py")
 
 
 def _ratios(out: str) -> list[float]:

@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
 
-_path = Path(__file__).resolve().parents[1] / "benchmarks" / "studies" / "seed_spread.py"
-_spec = importlib.util.spec_from_file_location("seed_spread", _path)
-seed_spread = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(seed_spread)
+from script_loader import load_script
+
+seed_spread = load_script("benchmarks/studies/seed_spread.py")
 
 
 def _write_eval(d: Path, rows: dict[str, tuple[str, float]]) -> Path:

@@ -4,7 +4,6 @@ run is ``make soak``, its figures are in docs/reliability.md)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
 import sys
@@ -14,10 +13,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from script_loader import load_script
+
 REPO = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("soak", REPO / "benchmarks" / "soak.py")
-soak = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(soak)
+soak = load_script("benchmarks/soak.py")
 
 
 @pytest.mark.slow

@@ -2,16 +2,13 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("speech_vad", REPO / "benchmarks" / "studies" / "speech_vad.py")
-study = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(study)
+from script_loader import load_script
+
+study = load_script("benchmarks/studies/speech_vad.py")
 
 
 def test_shares_count_chunks_and_one_second_windows():

@@ -2,17 +2,15 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from script_loader import load_script
+
 REPO = Path(__file__).resolve().parents[1]
-_path = REPO / "benchmarks" / "studies" / "style_control.py"
-_spec = importlib.util.spec_from_file_location("style_control", _path)
-sc = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(sc)
+sc = load_script("benchmarks/studies/style_control.py")
 
 
 def _motion(freq: float, frames: int = 256) -> np.ndarray:

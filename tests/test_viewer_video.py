@@ -6,8 +6,6 @@ and the shared dataset; skips with the reason when one is absent.
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -15,12 +13,10 @@ import pytest
 
 from models.generate import default_checkpoint_path
 
+from script_loader import load_script
+
 REPO = Path(__file__).resolve().parents[1]
-_path = REPO / "benchmarks" / "studies" / "viewer_video.py"
-_spec = importlib.util.spec_from_file_location("viewer_video", _path)
-vv = importlib.util.module_from_spec(_spec)
-sys.modules[_spec.name] = vv  # its dataclass looks its module up there
-_spec.loader.exec_module(vv)
+vv = load_script("benchmarks/studies/viewer_video.py")
 
 
 @pytest.fixture
