@@ -93,7 +93,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                    "default: the first stretch-set song long enough)")
     p.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS), metavar="SEED",
                    help="sampling seeds of the stretch set and the ramp, figures the mean over them "
-                        f"(default {' '.join(map(str, SEEDS))}: one seed's ramp correlation moves by up to 0.15; "
+                        f"(default {' '.join(map(str, SEEDS))}: one seed's ramp correlation moves by up to 0.2; "
                         "--quick: the first)")
     p.add_argument("--cache", default=".cache/listening", metavar="DIR", help="audio cache (default .cache/listening)")
     p.add_argument("--out", default="runs/listening", metavar="DIR", help="report directory (default runs/listening)")

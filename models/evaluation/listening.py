@@ -52,7 +52,7 @@ CENTROID_BAND: tuple[float, float] = (0.25, 6.0)
 #: and fades in once it hears music).
 SETTLE_S: float = 3.0
 #: Sampling seeds of the stretch set and the ramp; each figure is the mean over them. One
-#: seed's beat hit rate moves by a few hundredths, its ramp correlation by up to 0.15: over
+#: seed's beat hit rate moves by a few hundredths, its ramp correlation by up to 0.2: over
 #: seeds 0-2 and over 3-5 the speed ratio differed by 0.06 and the ramp correlation by 0.13
 #: (stop 33's model), so three seeds could pass or fail a target by the draw alone.
 SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4, 5)

@@ -35,9 +35,10 @@ for seconds (the beat tracker's 6-s window, the 1.5-s coherence) and so held the
 for about 1.3 s after a host started talking; the idle performer keeps the network with
 them, whose "no steady pulse" holds the idle through a reading. Both are fitted by
 :mod:`models.training.music_gate` on the training songs and on synthetic electronic music,
-espeak-ng speech, crowd babble, applause and room noise. While music is playing the statistics run with the time constant the detector was
-fitted at (the model's ``gate_tau``: :data:`TAU_MUSIC`, 15 frames, or 10 with the steadiness
-column) and the performer stops only below ``-``:data:`MARGIN_STOP`; while it is not, with
+espeak-ng speech, crowd babble, applause and room noise. While music is playing the
+statistics run with the time constant the detector was fitted at (the model's ``gate_tau``:
+:data:`TAU_MUSIC`, 15 frames, or 10 with the steadiness column) and the performer stops only
+below ``-``:data:`MARGIN_STOP`; while it is not, with
 :data:`TAU_IDLE` (so they forget the gap quickly) and it starts again above
 :data:`MARGIN_START`. In silence (log energy at most the model's threshold) the
 statistics are frozen and the gate says "no music".
