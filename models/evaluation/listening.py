@@ -576,16 +576,15 @@ def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict
         speed = smooth(motion_speed(positions(poses)))
         own = smooth(trace["movement_speed"])
         corr, lag, corr0 = lagged_correlation(tempo[a:], speed[a:], lags)
+        follower_corr, follower_lag, _ = lagged_correlation(tempo[a:], smooth(trace["tempo_bpm"])[a:], lags)
         runs.append({
             "corr": corr, "lag": lag, "corr_lag0": corr0,
             # where the speed's correlation is lost: the followed tempo, the playback rate, the choice (best lag each)
-            "follower": lagged_correlation(tempo[a:], smooth(trace["tempo_bpm"])[a:], lags),
+            "follower_corr": follower_corr, "follower_lag": follower_lag,
             "rate_corr": lagged_correlation(tempo[a:], smooth(trace["rate"])[a:], lags)[0],
             "movement_corr": lagged_correlation(tempo[a:], own[a:], lags)[0],
             "own": own, "step": float(bone_steps_deg(poses[int(SETTLE_S * FPS):]).max()),
             "t": t, "tempo": tempo, "speed": speed, "trace": trace})
-    for r in runs:
-        r["follower_corr"], r["follower_lag"] = r["follower"][:2]
     first = runs[0]
     mean = lambda key: float(np.mean([r[key] for r in runs]))  # noqa: E731
     own = np.concatenate([r["own"][a:] for r in runs])
