@@ -135,6 +135,8 @@ def run(checkpoint: str, data_root: str | Path, cache_dir: str | Path | None, le
 
 
 def main(argv: list[str] | None = None) -> int:
+    from models.evaluation.listening import SEEDS
+
     p = argparse.ArgumentParser(description=__doc__.split("\nHit rates")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="Exit status 2 on a missing or unreadable checkpoint or dataset, "
@@ -146,8 +148,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--leads", type=float, nargs="+", default=list(LEADS_MS), metavar="MS",
                    help=f"leads, ms, each in [0, 200], the first 0 (default {' '.join(f'{x:g}' for x in LEADS_MS)})")
     p.add_argument("--songs", nargs="+", metavar="NAME", help="only these validation dances (default: all)")
-    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4, 5], metavar="N",
-                   help="generation seeds, each run at every lead, counts summed (default 0 1 2 3 4 5)")
+    p.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS), metavar="N",
+                   help="generation seeds, each run at every lead, counts summed "
+                        f"(default {' '.join(map(str, SEEDS))}, as benchmarks/listening.py)")
     p.add_argument("--json", metavar="OUT", help="also write every song's counts as JSON")
     a = p.parse_args(argv)
     if any(not 0.0 <= x <= 200.0 for x in a.leads) or a.leads[0] != 0.0:
