@@ -17,6 +17,7 @@ import torch
 
 from models.networks import music_gate as mg
 from models.training import music_gate as tm
+from script_loader import load_script
 
 HOP = 735
 REFIT = ("python -m models.training.music_gate --checkpoint models/assets/default.pt "
@@ -189,6 +190,24 @@ def test_a_reader_after_a_song_idles_within_2_s_thanks_to_the_stop_network(lm, r
         off.model.presence_stop.zero_()
     settle_off, _, _ = settle_held_back(off.model, feats, g0, g1)
     assert settle_off is None or settle_off > 2.0, settle_off
+
+
+def test_loud_applause_after_a_song_idles_within_2_s_thanks_to_the_sure_count(lm, dwm_root, monkeypatch) -> None:
+    """Applause at -20 dBFS right after DANCE_R_5 (benchmarks/studies/idle_gate.py's case, its
+    seed): fully idle within 2 s, because frames the stop network is sure of count up to twice
+    towards the stop (``music_gate.SURE_COUNT``). Counting each frame once, it takes longer
+    than 2 s."""
+    needs_espeak()
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    rng = np.random.default_rng(1000 + 7)
+    pool = [tm.utterance(rng) for _ in range(24)]
+    applause = ig.gap_audio("applause", 10.0, -20.0, rng, pool)
+    a, b = ig.excerpt(dwm_root, "DANCE_R_5", 20.0), ig.excerpt(dwm_root, "DANCE_W_5", 20.0)
+    settle, held, back = between(lm, a, applause, b)
+    assert settle is not None and settle <= 2.0 and held >= 0.98, (settle, held)
+    monkeypatch.setattr(mg, "SURE_COUNT", 1.0)
+    settle_once, _, _ = between(lm, a, applause, b)
+    assert settle_once is not None and settle_once > 2.0, settle_once
 
 
 def test_the_dancing_performer_judges_by_the_stop_network_the_idle_one_by_the_detector() -> None:

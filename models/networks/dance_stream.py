@@ -57,7 +57,8 @@ from models.rig.humanoid import BONE_INDEX
 from models.rig.kinematics import rotation_jumps_deg
 from models.timebase import FPS
 
-#: Frames without music before the performer starts to settle (0.5 s).
+#: Frames without music before the performer starts to settle (0.5 s; with the presence
+#: detector a frame it is sure of counts up to twice, ``music_gate.SURE_COUNT``: 0.27 s).
 ABSENT_FRAMES: int = 15
 #: Frames of music before it starts to dance again (0.2 s).
 PRESENT_FRAMES: int = 6
@@ -587,7 +588,7 @@ class DanceStream:
         self._ema = np.zeros(len(self._gcols))  # the music detector's running mean
         if self._presence is not None:
             self._presence.reset()
-        self._run = 0  # frames the gate's input has disagreed with its state
+        self._run = 0.0  # frames the gate's input has disagreed with its state (weighted: SURE_COUNT)
         self._w_idle = 1.0  # 1 = idle, 0 = dancing; a stream starts at rest and fades in on music
         self._fade_prev: np.ndarray | None = None  # the fade's last rotation vectors, dance -> idle (J, 3)
         self._prev_quat: np.ndarray | None = None
@@ -690,7 +691,10 @@ class DanceStream:
             # hysteresis: while dancing, noise must be clearly noise (logit below -GATE_MARGIN)
             if float(self._ema @ self._gate_w) + self._gate_b <= (-GATE_MARGIN if self._music else 0.0):
                 present = False
-        self._run = self._run + 1 if present != self._music else 0
+        count = 1.0  # a sure detector counts a frame as more than one (music_gate.SURE_COUNT)
+        if self._music and not present and self._presence is not None:
+            count = self._presence.stop_count()
+        self._run = self._run + count if present != self._music else 0
         start = PRESENT_FRAMES if self._presence is None else START_FRAMES  # the presence detector's own
         if self._run >= (start if present else ABSENT_FRAMES):
             self._music, self._run = present, 0

@@ -70,6 +70,12 @@ BEAT_A: float = math.exp(-1.0 / TAU_BEAT)
 LOGIT_TAU: float = 4.0
 #: Logit below which a dancing performer hears no music.
 MARGIN_STOP: float = 2.0
+#: A dancing performer's frame whose logit (the running mean) lies ``k`` times
+#: :data:`MARGIN_STOP` below 0 counts ``k`` frames, from 1 up to this many, towards the stop
+#: (``dance_stream.ABSENT_FRAMES``, :meth:`MusicGate.stop_count`): a detector that is sure
+#: stops in 8 frames, one near its margin still waits 15 (loud applause right after a song:
+#: fully idle at 1.93 s instead of 2.10; the song's own dips below the margin stay shallow).
+SURE_COUNT: float = 2.0
 #: Statistics the stop network gives no weight (the pulse clarity, the beat phase's coherence,
 #: the period's jitter: module docstring).
 BEAT_STATS: tuple[int, ...] = (7, 10, 11)
@@ -236,6 +242,12 @@ class MusicGate:
         a = self._a_logit if dancing else 0.0  # idle: the music's return is heard at once
         self.logit = a * self.logit + (1.0 - a) * z
         return self.logit > (-MARGIN_STOP if dancing else MARGIN_START)
+
+    def stop_count(self) -> float:
+        """Frames a dancing performer's frame that :meth:`step` heard as no music counts towards
+        the stop: ``-logit / MARGIN_STOP`` within [1, :data:`SURE_COUNT`] (1 in silence,
+        where the logit waits with the statistics)."""
+        return min(SURE_COUNT, max(1.0, -self.logit / MARGIN_STOP))
 
 
 def stats_trace(feats: np.ndarray, feat_mean: np.ndarray, feat_std: np.ndarray, clarity_col: int,
