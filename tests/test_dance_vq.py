@@ -917,3 +917,26 @@ def test_a_lead_streams_like_the_whole_song_reads_no_audio_ahead_and_changes_at_
         with pytest.raises(ConfigError, match="lead must be"):
             s.set_lead(bad)
     assert s.lead_ms == 133.0  # a refused value changes nothing
+
+
+def test_a_long_stream_keeps_a_bounded_code_history_and_dances_the_same(monkeypatch):
+    """``codes_drawn`` keeps only the newest ``CODES_KEPT`` codes (dropping ``CODES_TRIM`` at a
+    time), so a stream running for days does not grow; what it dances does not change (the
+    repeat limit reads only the last few codes)."""
+    import models.networks.dance_stream as ds
+
+    m = DanceVQ(BEAT).eval()
+    turning_exemplars(m)
+    x = beat_music(400)  # 50 code steps
+    full = DanceStream(m, seed=4)
+    whole = full.push(x)
+    monkeypatch.setattr(ds, "CODES_KEPT", 16)
+    monkeypatch.setattr(ds, "CODES_TRIM", 4)
+    s = DanceStream(m, seed=4)
+    lengths = []
+    for i in range(0, 400, 8):
+        s.push(x[i: i + 8])
+        lengths.append(len(s.codes_drawn))
+    assert max(lengths) == 20 and lengths[-1] <= 20  # never more than CODES_KEPT + CODES_TRIM
+    assert s.codes_drawn == full.codes_drawn[-len(s.codes_drawn):]  # the newest, in order
+    np.testing.assert_array_equal(DanceStream(m, seed=4).push(x), whole)  # the same dance

@@ -215,6 +215,11 @@ SWAY: tuple[tuple[str, int, float, float, float], ...] = (
 )
 
 
+#: Codes :attr:`DanceStream.codes_drawn` keeps, the newest (65,536: 4.9 hours at 8 frames a
+#: code); past that it drops the oldest :data:`CODES_TRIM` at once, so a stream that runs for
+#: days holds at most 2.4 MB of history (one trim moves 0.5 MB in memory, every 4.5 minutes).
+CODES_KEPT: int = 65536
+CODES_TRIM: int = 1024
 #: Steps of the tempo's speed-cap table (:data:`SPEED_CAP_TEMPO`).
 _CAP_STEPS = 64
 
@@ -476,7 +481,8 @@ class DanceStream:
     (the music decides), "chacha", "rumba" or "waltz"; ``set_style`` changes it from the
     next code (within 267 ms). energy: 0..2, 1 = as the music asks; ``set_energy`` changes
     it the same way. lead_ms: 0..200, the display chain's delay the poses are sent ahead of
-    (``set_lead``, from the next code step on).
+    (``set_lead``, from the next code step on). ``codes_drawn``: the codes played, oldest
+    first (the newest :data:`CODES_KEPT` of a long stream).
 
     **Lead.** With a lead of L frames (``round(lead_ms * 30 / 1000)``, 0..6) the pose sent
     at audio frame t is the one the performer takes at t + L: every beat-tracker phase
@@ -860,6 +866,8 @@ class DanceStream:
         self._codes.append(code)
         self._last = code
         self.codes_drawn.append(code)
+        if len(self.codes_drawn) > CODES_KEPT + CODES_TRIM:  # bounded history (CODES_KEPT)
+            del self.codes_drawn[:CODES_TRIM]
 
     def _danced_phase(self, ccos: float, csin: float, logp: float) -> tuple[float, float]:
         """(phase in [0, 2 pi), 0 :data:`BEAT_DELAY` frames after a danced beat; the danced period,
