@@ -46,17 +46,29 @@ def idle_weights(lm, audio: np.ndarray) -> np.ndarray:
     return DanceStream(lm.model, seed=3).listen(extract_features(audio, lm.features))
 
 
-def between(lm, a: np.ndarray, gap: np.ndarray, b: np.ndarray) -> tuple[float | None, float, float | None]:
-    """(seconds to fully idle after the gap starts, share of the rest of the gap held idle,
-    seconds to fully dancing after the music returns) for song a, gap, song b."""
-    a, gap = a[: len(a) // HOP * HOP], gap[: len(gap) // HOP * HOP]
-    w = idle_weights(lm, np.concatenate([a, gap, b]).astype(np.float32))
-    g0, g1 = len(a) // HOP, (len(a) + len(gap)) // HOP
+def settle_held_back(model, feats: np.ndarray, g0: int, g1: int,
+                     fully: bool = True) -> tuple[float | None, float, float | None]:
+    """``model``'s idle gate on ``feats`` with a non-music part at frames [g0, g1): (seconds from
+    g0 to fully idle, share of the frames from then to g1 held idle, seconds from g1 to fully
+    dancing). Held: fully idle (``fully``), or more idle than not (idle weight over 0.5)."""
+    from models.networks.dance_stream import DanceStream
+
+    w = DanceStream(model, seed=0).listen(feats)
     if not (w[g0:g1] >= 1).any():
         return None, 0.0, None
-    idle_at = g0 + int(np.argmax(w[g0:g1] >= 1))
+    at = g0 + int(np.argmax(w[g0:g1] >= 1))
+    held = w[at:g1] >= 1 if fully else w[at:g1] > 0.5
     back = (int(np.argmax(w[g1:] <= 0)) + 1) / 30 if (w[g1:] <= 0).any() else None
-    return (idle_at - g0 + 1) / 30, float((w[idle_at:g1] >= 1).mean()), back
+    return (at - g0 + 1) / 30, float(held.mean()), back
+
+
+def between(lm, a: np.ndarray, gap: np.ndarray, b: np.ndarray) -> tuple[float | None, float, float | None]:
+    """:func:`settle_held_back` (held fully idle) for song a, gap, song b."""
+    from models.features.spectral import extract_features
+
+    a, gap = a[: len(a) // HOP * HOP], gap[: len(gap) // HOP * HOP]
+    feats = extract_features(np.concatenate([a, gap, b]).astype(np.float32), lm.features)
+    return settle_held_back(lm.model, feats, len(a) // HOP, (len(a) + len(gap)) // HOP)
 
 
 def test_packing_round_trips_and_names_a_bad_shape() -> None:
@@ -147,30 +159,17 @@ def reader_between(lm, dwm_root):
     return feats, len(a) // HOP, (len(a) + len(talk)) // HOP
 
 
-def settle_held_back(model, feats: np.ndarray, g0: int, g1: int) -> tuple[float | None, float, float | None]:
-    """(seconds from frame g0 to fully idle, share of the frames after that up to g1 more idle
-    than not, seconds from g1 to fully dancing) of ``model``'s idle gate on ``feats``."""
-    from models.networks.dance_stream import DanceStream
-
-    w = DanceStream(model, seed=0).listen(feats)
-    if not (w[g0:g1] >= 1).any():
-        return None, 0.0, None
-    at = g0 + int(np.argmax(w[g0:g1] >= 1))
-    back = (int(np.argmax(w[g1:] <= 0)) + 1) / 30 if (w[g1:] <= 0).any() else None
-    return (at - g0 + 1) / 30, float((w[at:g1] > 0.5).mean()), back
-
-
 def test_a_reader_between_songs_idles_and_holds_thanks_to_the_steadiness(lm, reader_between) -> None:
     """The reader between two parts of a song: the performer idles, holds the idle through the
     reading and dances again within 1 s. With the steadiness column overwritten by a
     music-like constant (0.45, the music recordings' median) it dances through most of the
     reading: the column is what tells the voice from music."""
     feats, g0, g1 = reader_between
-    settle, held, back = settle_held_back(lm.model, feats, g0, g1)
+    settle, held, back = settle_held_back(lm.model, feats, g0, g1, fully=False)
     assert settle is not None and held >= 0.95 and back is not None and back <= 1.0
     blind = feats.copy()
     blind[:, lm.model.config.gate_col] = 0.45
-    settle_b, held_b, _ = settle_held_back(lm.model, blind, g0, g1)
+    settle_b, held_b, _ = settle_held_back(lm.model, blind, g0, g1, fully=False)
     assert settle_b is None or held_b < 0.5, (settle_b, held_b)
 
 
@@ -183,7 +182,7 @@ def test_a_reader_after_a_song_idles_within_2_s_thanks_to_the_stop_network(lm, r
     if float(lm.model.presence_stop.abs().sum()) == 0:
         pytest.skip(f"{lm.path} has no stop network (refit: {REFIT})")
     feats, g0, g1 = reader_between
-    settle, held, _ = settle_held_back(lm.model, feats, g0, g1)
+    settle, held, _ = settle_held_back(lm.model, feats, g0, g1, fully=False)
     assert settle is not None and settle <= 2.0 and held >= 0.95, (settle, held)
     off = load_model(lm.path)
     with torch.no_grad():
