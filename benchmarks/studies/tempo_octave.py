@@ -9,6 +9,11 @@ value is the same (within 4 %) at all three rates; a reading is *accurate* when 
 4 % of the song's ground truth (``librosa.beat.beat_track`` on the whole recording, times
 the rate, which stretching makes exact) at some octave (x 2 ** k).
 
+A second table gives the onsets a beat the follower's octave rule counts
+(:func:`models.networks.tempo.onset_density` over 8 s, every 8 frames, median after the first
+6 s, per beat of the ground truth's tempo at that rate): stretching keeps the music's onsets
+a beat, so any difference between the rates is the counter's (or the stretch's) doing.
+
 Trackers: ``follower`` (:func:`models.networks.tempo.song_period`, the shipped rule),
 ``tracker`` (the feature extractor's causal beat tracker, its own octave, folded like the
 follower) and, with ``--madmom PYTHON``, madmom's online RNN + DBN beat tracker (the median
@@ -98,6 +103,19 @@ def beats_bpm(times: list[float]) -> float:
     return 60.0 * FPS / fold_period(float(np.median(np.diff(t))) * FPS)
 
 
+def onsets_a_beat(onset: np.ndarray, bpm: float) -> float:
+    """Median :func:`~models.networks.tempo.onset_density` (onsets a second) of an onset column
+    (T,) at 30 fps, every 8 frames over the last 8 s, after :data:`SKIP_S`, per beat at ``bpm``."""
+    from models.networks.tempo import DENSITY_WINDOW, onset_density
+    from models.timebase import FPS
+
+    t = np.arange(int(SKIP_S * FPS), len(onset), 8)
+    if not len(t) or bpm <= 0:
+        return 0.0
+    d = [onset_density(onset[max(0, i + 1 - DENSITY_WINDOW): i + 1]) for i in t]
+    return float(np.median(d)) * 60.0 / bpm
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("::")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -123,6 +141,7 @@ def main(argv: list[str] | None = None) -> int:
     wavs: dict[tuple[str, str], str] = {}
     tmp = Path(tempfile.mkdtemp(prefix="tempo_octave_"))
     truth: dict[str, float] = {}
+    onsets: dict[str, dict[str, float]] = {}  # song -> rate -> onsets a beat at the truth's tempo x rate
     for path, bpm in songs:
         name = L.song_name(path)
         truth[name] = bpm
@@ -134,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
             readings.setdefault("follower", {}).setdefault(name, {})[k] = \
                 follower_bpm(feats, cfg.clarity_col, cfg.onset_col) / r
             readings.setdefault("tracker", {}).setdefault(name, {})[k] = tracker_bpm(feats, cfg.clarity_col) / r
+            onsets.setdefault(name, {})[k] = onsets_a_beat(feats[:, cfg.onset_col], bpm * r)
             if a.madmom:  # madmom reads 44.1-kHz files without ffmpeg
                 import librosa
                 import soundfile
@@ -167,8 +187,18 @@ def main(argv: list[str] | None = None) -> int:
     for tr, (c, acc, n) in totals.items():
         print(f"{tr}: consistent on {c} of {n} songs; accurate (within {100 * TOLERANCE:g} % at some octave) "
               f"on {acc} of {3 * n} readings")
+    print()
+    print("| song | truth (bpm) | " + " | ".join(f"onsets a beat at {k}x" for k in rates) + " |")
+    print("| --- | ---: | " + " | ".join("---:" for _ in rates) + " |")
+    for name, v in onsets.items():
+        print(f"| {name} | {truth[name]:.0f} | " + " | ".join(f"{v[k]:.2f}" for k in rates) + " |")
+    for k in rates:
+        if k != "1":
+            ratio = np.mean([v[k] / v["1"] for v in onsets.values() if v["1"] > 0])
+            print(f"onsets a beat at {k}x over 1x, mean over the songs: {ratio:.2f}")
     if a.json:
-        Path(a.json).write_text(json.dumps({"truth": truth, "readings": readings}, indent=1) + "\n")
+        Path(a.json).write_text(json.dumps({"truth": truth, "readings": readings, "onsets_a_beat": onsets},
+                                           indent=1) + "\n")
     return 0
 
 
