@@ -202,7 +202,7 @@ def test_loud_applause_after_a_song_idles_within_2_s_thanks_to_the_sure_count(lm
     pool = [tm.utterance(rng) for _ in range(24)]
     applause = ig.gap_audio("applause", 10.0, -20.0, rng, pool)
     a, b = ig.excerpt(dwm_root, "DANCE_R_5", 20.0), ig.excerpt(dwm_root, "DANCE_W_5", 20.0)
-    settle, held, back = between(lm, a, applause, b)
+    settle, held, _ = between(lm, a, applause, b)
     assert settle is not None and settle <= 2.0 and held >= 0.98, (settle, held)
     monkeypatch.setattr(mg, "SURE_COUNT", 1.0)
     settle_once, _, _ = between(lm, a, applause, b)

@@ -700,10 +700,10 @@ class DanceStream:
         count = 1.0  # a sure detector counts a frame as more than one (music_gate.SURE_COUNT)
         if self._music and not present and self._presence is not None:
             count = self._presence.stop_count()
-        self._run = self._run + count if present != self._music else 0
+        self._run = self._run + count if present != self._music else 0.0
         start = PRESENT_FRAMES if self._presence is None else START_FRAMES  # the presence detector's own
         if self._run >= (start if present else ABSENT_FRAMES):
-            self._music, self._run = present, 0
+            self._music, self._run = present, 0.0
         target = 1.0 if (self.forced_idle or not self._music) else 0.0
         step = 1.0 / FADE_FRAMES
         self._w_idle = min(target, self._w_idle + step) if target > self._w_idle else max(target, self._w_idle - step)

@@ -245,8 +245,8 @@ class MusicGate:
 
     def stop_count(self) -> float:
         """Frames a dancing performer's frame that :meth:`step` heard as no music counts towards
-        the stop: ``-logit / MARGIN_STOP`` within [1, :data:`SURE_COUNT`] (1 in silence,
-        where the logit waits with the statistics)."""
+        the stop: ``-logit / MARGIN_STOP`` within [1, :data:`SURE_COUNT`]. In silence the logit
+        keeps its last value (the statistics wait), so silence right after music counts 1."""
         return min(SURE_COUNT, max(1.0, -self.logit / MARGIN_STOP))
 
 
