@@ -333,6 +333,10 @@ def test_codebook_and_predictor_learn_on_a_toy_dance():
     codes = encode_clips(m, [_Clip(poses, feats, "W")], range(2))
     assert len(codes.codes) == 2 and codes.tokens[0].shape == (64, TINY.seg * TINY.feature_dim)
     assert codes.style == [3, 3]
+    # a checkpoint whose features carry the idle gate's steadiness column past feature_dim
+    # (the shipped one): the predictor's tokens are the same, the extra column left out
+    wide = encode_clips(m, [_Clip(poses, np.concatenate([feats, feats[:, :1]], 1), "W")], range(2))
+    np.testing.assert_array_equal(wide.tokens[0], codes.tokens[0])
     popt = torch.optim.Adam(m.predictor.parameters(), lr=3e-3)
     ce = []
     for _ in range(40):

@@ -375,7 +375,7 @@ def encode_clips(model: DanceVQ, clips: list, phases: range) -> CodeSet:
     s, d = model.config.seg, model.config.feature_dim
     out = CodeSet([], [], [], [])
     for c in clips:
-        x = (c.features - model.feat_mean.numpy()) / model.feat_std.numpy()
+        x = (c.features[:, :d] - model.feat_mean.numpy()) / model.feat_std.numpy()  # columns past d: the gate's
         padded = np.concatenate([np.zeros((s - 1, d), np.float32), x.astype(np.float32)])
         for p in phases:
             n = (c.num_frames - p) // s
