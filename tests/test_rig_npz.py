@@ -45,6 +45,16 @@ def test_missing_and_corrupt_files(tmp_path, motion):
     cut.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
     with pytest.raises(DataError, match="cut.npz"):
         load_npz(cut)
+    # an entry flagged as encrypted (bit 0 of the general-purpose flags, local and central
+    # headers): zipfile raises RuntimeError, the loader a DataError naming the file
+    raw = bytearray(good.read_bytes())
+    raw[6] |= 1
+    central = raw.find(b"PK\x01\x02")
+    raw[central + 8] |= 1
+    locked = tmp_path / "locked.npz"
+    locked.write_bytes(bytes(raw))
+    with pytest.raises(DataError, match="locked.npz"):
+        load_npz(locked)
 
 
 def test_wrong_archives(tmp_path, motion):

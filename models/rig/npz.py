@@ -49,7 +49,8 @@ def _open(path: Path) -> dict[str, np.ndarray]:
     try:
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError) as exc:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError,
+            RuntimeError) as exc:  # RuntimeError: zipfile's "File ... is encrypted, password required"
         raise DataError(f"not a readable .npz archive ({exc})", source=path) from None
     missing = [k for k in _RESERVED if k not in data]
     if missing:
