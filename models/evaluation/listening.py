@@ -56,6 +56,10 @@ SETTLE_S: float = 3.0
 #: seeds 0-2 and over 3-5 the speed ratio differed by 0.06 and the ramp correlation by 0.13
 #: (stop 33's model), so three seeds could pass or fail a target by the draw alone.
 SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4, 5)
+#: Sampling seeds of the ramp (one song, cheap: about 0.7 s a seed). One seed's correlation
+#: spreads from about 0.2 to 0.9 (standard deviation 0.16: its draws decide which movements
+#: the 4-s windows hold), so a mean over six seeds is uncertain by 0.07, over 48 by 0.02.
+RAMP_SEEDS: tuple[int, ...] = tuple(range(48))
 #: Smoothing (s, moving average) of tempo and speed in the ramp.
 SMOOTH_S: float = 4.0
 #: The ramp's rates: from the first to the second over RAMP_S, and back.
@@ -395,8 +399,8 @@ def positions(poses: np.ndarray) -> np.ndarray:
 class Options:
     """What the sets run on. ``dwm``: the DWM dataset (its validation songs join the stretch
     set); ``music``, ``speech``: the recordings directories; ``seeds``: the sampling seeds the
-    stretch set and the ramp run at, their figures the mean over them (:data:`SEEDS`); ``quick``:
-    a few songs, shorter, one seed."""
+    stretch set runs at, its figures the mean over them (:data:`SEEDS`); ``ramp_seeds``: the
+    ramp's (:data:`RAMP_SEEDS`); ``quick``: a few songs, shorter, one seed."""
 
     dwm: str | Path | None = None
     music: str | Path | None = None
@@ -409,16 +413,19 @@ class Options:
     presence_max_s: float | None = None
     speech_song_s: float = 20.0
     seeds: tuple[int, ...] = SEEDS
+    ramp_seeds: tuple[int, ...] = RAMP_SEEDS
     quick: bool = False
     progress: bool = True
     sets: tuple[str, ...] = ("stretch", "ramp", "presence")
 
     def __post_init__(self) -> None:
         self.seeds = tuple(int(x) for x in self.seeds)
-        if not self.seeds:
+        self.ramp_seeds = tuple(int(x) for x in self.ramp_seeds)
+        if not self.seeds or not self.ramp_seeds:
             raise DataError("at least one seed", source="listening options")
         if self.quick:
             self.seeds = self.seeds[:1]
+            self.ramp_seeds = self.ramp_seeds[:1]
             self.max_songs = self.max_songs or 3
             self.excerpt_s = min(self.excerpt_s, 25.0)
             self.presence_max_s = self.presence_max_s or 30.0
@@ -554,7 +561,7 @@ def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict
     see where it is lost, the followed tempo's and the playback rate's, ``follower_corr`` and
     ``rate_corr``; ``followed_bpm``, smoothed, is the curve; ``follows_tempo``: False for a
     model that plays every movement at its own pace); the largest bone rotation per
-    frame after :data:`SETTLE_S`. At each of ``opts.seeds``: ``corr``, ``corr_lag0`` and the
+    frame after :data:`SETTLE_S`. At each of ``opts.ramp_seeds``: ``corr``, ``corr_lag0`` and the
     three diagnostics are the means over the seeds of each one's own (``corr_seeds``, one
     performer's speed each, not the speed averaged over performers), ``lag_s`` and
     ``follower_lag_s`` (the followed tempo's lag behind the real one at its best correlation:
@@ -568,7 +575,7 @@ def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict
     y = cache.ramp(path, start, source_s)[: int(total * SAMPLE_RATE)]
     a, lags = int(hold * FPS), int(MAX_LAG_S * FPS)
     runs = []
-    for seed in opts.seeds:
+    for seed in opts.ramp_seeds:
         trace: dict = {}
         poses, _ = perform(lm, y, seed, trace)
         t = (np.arange(len(poses)) + 1) / FPS
@@ -844,8 +851,11 @@ def markdown(result: dict, command: str | None = None) -> str:
                       "follow the tempo; the speed ratio over it is what the playback rate adds)."]
         if m.get("ramp"):
             r = m["ramp"]
-            per_seed = (" (at each seed: " + ", ".join(f"{c:.2f}" for c in r["corr_seeds"]) + ")"
-                        if len(r.get("corr_seeds", [])) > 1 else "")
+            each = np.asarray(r.get("corr_seeds", []))
+            per_seed = ("" if len(each) < 2 else f" (over {len(each)} seeds: at each seed " + ", ".join(f"{c:.2f}" for c in each) + ")"
+                        if len(each) <= 6 else f" (over {len(each)} seeds, standard error {each.std(ddof=1) / np.sqrt(len(each)):.2f}; "
+                        f"at one seed median {np.median(each):.2f}, 10th-90th percentile {np.percentile(each, 10):.2f}-"
+                        f"{np.percentile(each, 90):.2f}, lowest {each.min():.2f})")
             lines += ["", f"Ramp on {r['song']} ({r['bpm']:.0f} bpm as recorded): correlation {r['corr']:.2f}{per_seed} at "
                       f"lag {r['lag_s']:.2f} s ({r['corr_lag0']:.2f} at lag 0), largest bone rotation "
                       f"{r['max_step_deg']:.1f} deg a frame. Against the real tempo, the followed tempo "
