@@ -129,6 +129,21 @@ def test_a_borderline_song_keeps_one_octave():
     assert len(set(np.round(periods[60:], 6))) == 1 and periods[-1] in (pytest.approx(12.0), pytest.approx(24.0))
 
 
+def test_a_tempo_the_tracker_holds_at_the_faster_octave_is_danced_there_with_one_onset_a_beat():
+    """140 bpm with one onset a beat (nutcracker_sugarplum_kevinmacleod at 1.25x): the onsets
+    alone say the slower octave (70), but the tracker reads 140 throughout, so 140 is danced;
+    where it reads 70, or the faster octave only half the time (DANCE_W_31 at 0.8x, the rest
+    at a 4:3 level), the onsets decide: 70."""
+    period = 60.0 * FPS / 140.0
+    logp, c, onset = pulse_columns(period, 900, onsets_per_beat=1)
+    assert track_periods(logp, c, onset)[-1] == pytest.approx(period, rel=0.02)
+    logp_slow = logp + 1.0  # the tracker at 70
+    assert track_periods(logp_slow, c, onset)[-1] == pytest.approx(2 * period, rel=0.02)
+    mixed = logp.copy()
+    mixed[(np.arange(900) // 45) % 2 == 1] += math.log2(4.0 / 3.0)  # 1.5 s at 140, 1.5 s at 105, ...
+    assert track_periods(mixed, c, onset)[-1] == pytest.approx(2 * period, rel=0.02)
+
+
 def test_the_warp_aims_at_the_danced_beats():
     """The tracker at half the danced tempo (vibeace_kevinmacleod: 65 bpm against 129): its
     phase doubled, so the beats between its beats are warped to as well; a 3:2 or a slower
@@ -172,8 +187,8 @@ def _speed(lm, feats: np.ndarray) -> tuple[float, float]:
 @pytest.mark.slow
 def test_the_same_music_faster_is_danced_faster(clip_stretched, monkeypatch):
     """The bundled clip at 1.25x against 0.8x: the follower hears 1.56x the tempo and the
-    performer moves at least 1.4x faster (1.88x measured: the playback rate, the livelier
-    movements drawn at 150 bpm and the speed cap that rises with the tempo; 0.95x with
+    performer moves at least 1.4x faster (1.86x measured: the playback rate, the livelier
+    movements drawn at 150 bpm and the speed cap that rises with the tempo; 0.96x with
     FOLLOW_TEMPO off, checked)."""
     lm, feats = clip_stretched
     (slow, t_slow), (fast, t_fast) = _speed(lm, feats[0.8]), _speed(lm, feats[1.25])
@@ -272,7 +287,7 @@ def _drawn_liveliness(lm, feats: np.ndarray, bpm: float, seed: int) -> float:
 @pytest.mark.parametrize("tilt_on", [True, False])
 def test_a_faster_tempo_chooses_livelier_movements(clip_stretched, tilt_on, monkeypatch):
     """The same music heard at 150 bpm and at 70 bpm: at the faster tempo the performer draws
-    livelier codes (TEMPO_ENERGY; the drawn codes' mean z-score is about 3.2 higher); with the
+    livelier codes (TEMPO_ENERGY; the drawn codes' mean z-score is about 3.3 higher); with the
     coupling off the tempo does not enter the draw (the same codes)."""
     if not tilt_on:  # the behaviour switched off: the test must see no difference
         monkeypatch.setattr(ds, "TEMPO_ENERGY", 0.0)
@@ -320,7 +335,7 @@ def test_the_memory_is_read_through_a_low_pass():
 def test_at_a_fast_tempo_lively_movements_are_sped_up_too(cap_on, monkeypatch):
     """SPEED_CAP_TEMPO: at 150 bpm the speed cap is higher than at the memory's tempo (up to the
     fastest exemplar at 170 bpm), so a movement faster than the memory's 90th percentile, which
-    plays at its own pace at 88 bpm, is sped up at 150; with the tempo's cap off it is not."""
+    plays at its own pace at the memory's tempo, is sped up at 150; with the tempo's cap off it is not."""
     lm = load_model(None)
     s = ds.DanceStream(lm.model, seed=0)
     s._tempo = _HeldTempo(150.0)
@@ -336,7 +351,7 @@ def test_at_a_fast_tempo_lively_movements_are_sped_up_too(cap_on, monkeypatch):
         assert rates.min() > 1.05
     else:
         assert np.all(rates == 1.0)
-    s._tempo = _HeldTempo(88.0)  # at the memory's own tempo the cap is the 90th percentile either way
+    s._tempo = _HeldTempo(60.0 * FPS / s._ref_period)  # at the memory's own tempo the cap is the 90th percentile either way
     assert s._cap_now(s._tempo.period) == s._speed_cap
 
 

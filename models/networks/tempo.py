@@ -14,7 +14,8 @@ first 3 s read (:data:`VOTE_WIDTH`). So a change of tempo is followed within
 about a second and a level jump of the tracker is not. The danced period is the octave of it
 in :data:`TEMPO_RANGE` (faster music is danced at half time, slower at double time); where
 two octaves are in the range, the faster when its beat is subdivided (:data:`SUBDIVIDED`
-onsets a beat, :func:`onset_density`, a count stretching does not change), else the slower.
+onsets a beat, :func:`onset_density`, a count stretching does not change) or when the
+tracker itself reads the faster one most of the time (:data:`FAST_SHARE`), else the slower.
 :func:`danced_beat` gives the beat warp the phase of the danced beats.
 
 ``DanceStream`` plays each movement of its choreographic memory at the ratio of this tempo
@@ -75,6 +76,15 @@ SUBDIVIDED: float = 1.2
 #: one is chosen (a steady choice on a borderline song instead of a flip every few seconds).
 OCTAVE_MEAN: float = 64.0
 OCTAVE_MARGIN: float = 0.15
+#: The tracker's own octave, where two are in range: a frame whose estimate lies within this
+#: many octaves of the faster one reads it; when such frames hold FAST_SHARE of the
+#: clarity-weighted running mean over FAST_MEAN frames (8 s), the faster octave is danced
+#: whatever the onsets a beat say. nutcracker_sugarplum_kevinmacleod at 1.25x (140 bpm, one
+#: onset a beat) holds it (share 0.9-1.0); DANCE_W_31 at 0.8x (138 bpm, as many onsets a beat)
+#: reads it half the time and a 4:3 level otherwise, DANCE_R_5 0.4-0.5 (docs/history.md).
+FAST_TOLERANCE: float = 0.1
+FAST_SHARE: float = 0.8
+FAST_MEAN: float = 240.0
 
 
 def onset_density(onset: np.ndarray) -> float:
@@ -109,7 +119,7 @@ class TempoFollower:
     ``confidence`` in [0, 1] (the running mean of the clarity over :data:`FULL_CLARITY`).
     """
 
-    __slots__ = ("log_p", "conf", "score", "slow", "heard", "away", "votes", "_a")
+    __slots__ = ("log_p", "conf", "score", "slow", "heard", "away", "votes", "fast_num", "fast_den", "_a")
 
     def __init__(self) -> None:
         self._a = 1.0 / TEMPO_TAU
@@ -123,6 +133,8 @@ class TempoFollower:
         self.heard = 0  # frames with a clear pulse
         self.away = 0.0  # weight of frames at another level, less that of frames at this one
         self.votes = np.zeros((SETTLE_FRAMES, 2))  # (log period, weight) of the first SETTLE_FRAMES clear frames
+        self.fast_num = 0.0  # running (FAST_MEAN) clarity weight of the frames read at the faster octave
+        self.fast_den = 0.0  # ... and of all clear frames
 
     def update(self, logp: float, clarity: float, density: float = 0.0) -> None:
         w = min(1.0, max(clarity, 0.0) / FULL_CLARITY)
@@ -151,12 +163,18 @@ class TempoFollower:
             self.votes[self.heard - 1] = logp, w
             if self.heard == SETTLE_FRAMES:
                 self._vote()
+        fast = self._fast()
+        at_fast = abs(logp - math.log2(fast / 15.0)) <= FAST_TOLERANCE
+        self.fast_num += (w * at_fast - self.fast_num) / FAST_MEAN
+        self.fast_den += (w - self.fast_den) / FAST_MEAN
         if density > 0.0:  # the octave: subdivided beats at the faster one, or the slower
-            x = math.log2(max(density * self._fast() / FPS, 1e-3) / SUBDIVIDED)
+            x = math.log2(max(density * fast / FPS, 1e-3) / SUBDIVIDED)
             first = self.score != self.score
             self.score = x if first else self.score + (x - self.score) / OCTAVE_MEAN
             if first or abs(self.score) > OCTAVE_MARGIN:
                 self.slow = self.score < 0.0
+        if self.fast_num > FAST_SHARE * self.fast_den:  # the tracker holds the faster octave: dance it
+            self.slow = False
 
     def _vote(self) -> None:
         """Move the running log period to the level most of :attr:`votes` read (:data:`VOTE_WIDTH`)."""
