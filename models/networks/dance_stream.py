@@ -110,7 +110,7 @@ WARP_PULL: float = 0.05
 #: Tempo following: each movement plays at ``r = T / T_ref``, T the music's tempo
 #: (:class:`models.networks.tempo.TempoFollower`, in the range the performer dances at) and
 #: T_ref the memory's mean tempo (the geometric mean over its exemplars of the tempo of the
-#: song each was danced to, ``DanceVQ.member_period``: 88 bpm for the shipped model),
+#: song each was danced to, ``DanceVQ.member_period``: 89.8 bpm for the shipped model),
 #: blended towards 1 as the pulse fades (the follower's confidence), within
 #: :data:`RATE_RANGE`, and no movement is sped up past the memory's 90th-percentile speed
 #: (:data:`SPEED_CAP`; one faster on its own plays at its own pace); the rate moves from the last movement's to the new one's over the
