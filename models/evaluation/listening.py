@@ -852,10 +852,14 @@ def markdown(result: dict, command: str | None = None) -> str:
         if m.get("ramp"):
             r = m["ramp"]
             each = np.asarray(r.get("corr_seeds", []))
-            per_seed = ("" if len(each) < 2 else f" (over {len(each)} seeds: at each seed " + ", ".join(f"{c:.2f}" for c in each) + ")"
-                        if len(each) <= 6 else f" (over {len(each)} seeds, standard error {each.std(ddof=1) / np.sqrt(len(each)):.2f}; "
-                        f"at one seed median {np.median(each):.2f}, 10th-90th percentile {np.percentile(each, 10):.2f}-"
-                        f"{np.percentile(each, 90):.2f}, lowest {each.min():.2f})")
+            if len(each) < 2:
+                per_seed = ""
+            elif len(each) <= 6:
+                per_seed = f" (over {len(each)} seeds: at each seed " + ", ".join(f"{c:.2f}" for c in each) + ")"
+            else:  # too many to list: their spread
+                per_seed = (f" (over {len(each)} seeds, standard error {each.std(ddof=1) / np.sqrt(len(each)):.2f}; "
+                            f"at one seed median {np.median(each):.2f}, 10th-90th percentile "
+                            f"{np.percentile(each, 10):.2f}-{np.percentile(each, 90):.2f}, lowest {each.min():.2f})")
             lines += ["", f"Ramp on {r['song']} ({r['bpm']:.0f} bpm as recorded): correlation {r['corr']:.2f}{per_seed} at "
                       f"lag {r['lag_s']:.2f} s ({r['corr_lag0']:.2f} at lag 0), largest bone rotation "
                       f"{r['max_step_deg']:.1f} deg a frame. Against the real tempo, the followed tempo "
