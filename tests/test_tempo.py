@@ -287,7 +287,7 @@ def _drawn_liveliness(lm, feats: np.ndarray, bpm: float, seed: int) -> float:
 @pytest.mark.parametrize("tilt_on", [True, False])
 def test_a_faster_tempo_chooses_livelier_movements(clip_stretched, tilt_on, monkeypatch):
     """The same music heard at 150 bpm and at 70 bpm: at the faster tempo the performer draws
-    livelier codes (TEMPO_ENERGY; the drawn codes' mean z-score is about 3.3 higher); with the
+    livelier codes (TEMPO_ENERGY; the drawn codes' mean z-score is about 3.7 higher); with the
     coupling off the tempo does not enter the draw (the same codes)."""
     if not tilt_on:  # the behaviour switched off: the test must see no difference
         monkeypatch.setattr(ds, "TEMPO_ENERGY", 0.0)
@@ -298,6 +298,104 @@ def test_a_faster_tempo_chooses_livelier_movements(clip_stretched, tilt_on, monk
         assert min(gaps) > 1.5, gaps
     else:
         assert max(abs(g) for g in gaps) < 1e-9, gaps
+
+
+def _drawn_quickness(lm, feats: np.ndarray, bpm: float, seed: int) -> float:
+    """Mean :func:`code_frequency` z-score of the codes a stream draws on ``feats`` at a held tempo."""
+    s = ds.DanceStream(lm.model, seed=seed)
+    s._tempo = _HeldTempo(bpm)
+    s.push(feats)
+    return float(ds._cached_frequency(lm.model, s._members)[np.array(s.codes_drawn)].mean())
+
+
+@pytest.mark.parametrize("freq_on", [True, False])
+def test_a_faster_tempo_chooses_quicker_movements(clip_stretched, freq_on, monkeypatch):
+    """TEMPO_FREQ: the same music at 150 bpm against 70 bpm, the drawn codes' movements are
+    quicker: their frequency z-score is about 2.3 higher (mean of two seeds); with the tilt
+    reading liveliness only, 1.35 (livelier codes are quicker too, correlation 0.49)."""
+    if not freq_on:  # the behaviour switched off: the tilt reads liveliness only
+        monkeypatch.setattr(ds, "TEMPO_FREQ", 0.0)
+    lm, feats = clip_stretched
+    gap = np.mean([_drawn_quickness(lm, feats[1.25], 150.0, seed) - _drawn_quickness(lm, feats[1.25], 70.0, seed)
+                   for seed in (0, 1)])
+    if freq_on:
+        assert gap > 1.8, gap
+    else:
+        assert gap < 1.6, gap
+
+
+def test_joint_speed_is_member_speed():
+    """The compiled joint speed of the speed matching is :func:`member_speed`'s (FK by scipy)
+    to float64 rounding, over every window length a movement plays."""
+    from models.networks.dance_jit import joint_speed
+    from models.rig.skeleton import POINT_PARENT_INDEX, load_default_skeleton
+
+    lm = load_model(None)
+    s = ds.DanceStream(lm.model, seed=0)
+    parents = np.array(POINT_PARENT_INDEX, np.int64)
+    offsets = load_default_skeleton().point_offsets().astype(np.float64)
+    for code, n in ((3, 16), (40, 13), (200, 5), (300, 2)):
+        w = s._members[code, 0]
+        assert joint_speed(w, n, parents, offsets) == pytest.approx(float(ds.member_speed(w[None, None, :n]).mean()),
+                                                                   rel=1e-9)
+
+
+@pytest.mark.parametrize("match_on", [True, False])
+def test_a_handover_plays_the_chosen_movement_at_its_own_speed_times_the_rate(clip_stretched, match_on, monkeypatch):
+    """SPEED_MATCH: the inertialization bends each new movement to continue the last one and so
+    adds or cancels motion; the rate is corrected for it, so what each movement plays moves at
+    the tempo's rate times its exemplar's own speed: per movement (clip at 1.25x, two seeds)
+    the played speed over the tempo's rate x own speed spreads by 0.31 (sd of its log; the
+    beat warp and the rate's glide from the last movement's are in it too); without the
+    matching by 0.47, the handover's noise."""
+    if not match_on:
+        monkeypatch.setattr(ds, "SPEED_MATCH", 0.0)
+    from models.evaluation.evaluate import positions
+    from models.networks.dance_jit import joint_speed
+
+    lm, feats = clip_stretched
+    log: list = []
+    match = ds.match_exemplar
+
+    def logged_match(cands, *args):
+        i, best = match(cands, *args)
+        log.append(cands[i].copy())
+        return i, best
+
+    monkeypatch.setattr(ds, "match_exemplar", logged_match)
+    ratios = []
+    for seed in (0, 1):
+        s = ds.DanceStream(lm.model, seed=seed)
+        starts: list = []
+        play, rate_for, asked = s._play, s._rate_for, [1.0]
+
+        def logged_rate(code, member, _rate_for=rate_for, _asked=asked):
+            _asked[0] = _rate_for(code, member)  # the last before a _play: the tempo's rate for the movement
+            return _asked[0]
+
+        def logged_play(window, rate, limit=np.inf, _play=play, _s=s, _starts=starts, _asked=asked):
+            _play(window, rate, limit)
+            _starts.append((_s.frame, min(_asked[0], limit)))
+
+        s._rate_for, s._play = logged_rate, logged_play
+        log.clear()
+        pos = positions(s.push(feats[1.25]))
+        speed = np.linalg.norm(np.diff(pos, axis=0), axis=-1).mean(-1)  # m a frame
+        matched = starts[-len(log):]  # the movements handed over to (the first plays from its own pose)
+        for (frame, rate), own in zip(matched, log):
+            if frame < 90 or frame + s.seg >= len(speed):
+                continue
+            n = min(len(own), int(math.ceil(s.seg * rate)) + 1)
+            v = joint_speed(own, n, s._fk_parents, s._fk_offsets)
+            if v > 1e-4:
+                ratios.append(speed[frame: frame + s.seg].mean() / (rate * v))
+    r = np.log(np.array(ratios))
+    assert len(r) > 100
+    cv = float(r.std())
+    if match_on:
+        assert cv < 0.38, cv
+    else:
+        assert cv > 0.42, cv
 
 
 def test_the_memory_is_read_through_a_low_pass():

@@ -47,7 +47,8 @@ import numpy as np
 
 from models.errors import ConfigError
 from models.networks.blend import blend_track
-from models.networks.dance_jit import gate_ema, match_exemplar, push_history, renorm_pose, sanitize_rows, warp_pose
+from models.networks.dance_jit import (gate_ema, joint_speed, match_exemplar, push_history, renorm_pose, sanitize_rows,
+                                       warp_pose)
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ, style_token
 from models.networks.music_gate import ENERGY_COL, START_FRAMES, MusicGate
@@ -55,6 +56,7 @@ from models.networks.streaming import FEATURE_LIMIT
 from models.networks.tempo import DENSITY_WINDOW, TEMPO_RANGE, TempoFollower, danced_beat, onset_density
 from models.rig.humanoid import BONE_INDEX
 from models.rig.kinematics import rotation_jumps_deg
+from models.rig.skeleton import POINT_PARENT_INDEX, load_default_skeleton
 from models.timebase import FPS
 
 #: Frames without music before the performer starts to settle (0.5 s; with the presence
@@ -160,12 +162,15 @@ STYLE_PRIOR: float = 3.0
 STYLE_MEMBERS: bool = True
 #: The energy control (:meth:`DanceStream.set_energy`, 0..2, 1 = as the music asks): the code
 #: logits move by ``ENERGY_GAIN * (energy - 1) * z``, z each code's movement speed
-#: (:func:`code_energy`), so energy 0 favours the calmest movements and 2 the liveliest
-#: (benchmarks/studies/energy_control.py: the validation dances' motion energy 0.82x, 1.21x and 1.61x
+#: (:func:`code_energy`; above 1 plus :data:`TEMPO_FREQ` times its quickness, as the tempo's
+#: tilt reads it, so that at a fast tempo 2 stays livelier than 1), so energy 0 favours the
+#: calmest movements and 2 the liveliest
+#: (benchmarks/studies/energy_control.py: the validation dances' motion energy 0.51x, 0.97x and 1.56x
 #: the dancers' at 0, 1 and 2, rising from 0 to 1 to 2 on every song; docs/show.md, "Energy").
 ENERGY_GAIN: float = 3.0
 #: Tempo and liveliness: the code logits also move by ``TEMPO_ENERGY * ln(T / T_ref) * z`` (T the
-#: followed tempo, T_ref the memory's, z :func:`code_energy`), blended out as the pulse fades
+#: followed tempo, T_ref the memory's, z :func:`code_energy` plus :data:`TEMPO_FREQ` times
+#: :func:`code_frequency`), blended out as the pulse fades
 #: like the rate: at a faster tempo livelier movements, at a slower one calmer ones, as the
 #: dancers chose (over the memory's exemplars, their own speed grows with the tempo of the song
 #: they were danced to: as its 0.64th power, correlation 0.25). Without it the choice of
@@ -176,6 +181,27 @@ ENERGY_GAIN: float = 3.0
 #: strength energy 0 moved as much as energy 1 on DANCE_R_5, and energy 2 less than 1 on
 #: DANCE_C_2). 0: the choice ignores the tempo.
 TEMPO_ENERGY: float = 4.0
+#: Tempo and frequency: the tempo's logit tilt (:data:`TEMPO_ENERGY`) reads each code's liveliness
+#: plus this times its movements' frequency (:func:`code_frequency`'s z-score: mean joint
+#: acceleration over mean joint speed, the root's travel taken out). At a faster tempo the
+#: performer then picks quicker movements, not only livelier ones, so the motion's frequency
+#: follows the tempo and not only its speed; at a slower one broader, slower ones. With
+#: :data:`SPEED_MATCH` and without it, the stretch set's frequency centroid ratio (1.25x over
+#: 0.8x, seeds 0-5) was 1.25; with it 1.30 (docs/history.md, "Speed matching and quicker movements").
+#: 0: the tilt reads liveliness only.
+TEMPO_FREQ: float = 1.0
+#: Speed matching: the playback rate of a movement handed over to is multiplied by
+#: ``(v_own / v_bent) ** SPEED_MATCH`` within :data:`SPEED_MATCH_RANGE`, v_own the mean joint
+#: speed of the exemplar frames it is about to play and v_bent that of the same frames bent by
+#: the inertialization (:func:`~models.networks.dance_jit.match_exemplar`). The bend carries
+#: the last movement's offset and velocity into the new one and adds or cancels motion at
+#: every handover: the played speed followed the rate times the bent window's speed (per
+#: movement, correlation 0.9) far more than the rate times the chosen exemplar's own (0.3-0.4),
+#: so the speed the tempo and the choice ask for was lost in handover noise (tempo ramp,
+#: 48 seeds: speed-tempo correlation 0.63, with the matching alone 0.74; validation dances'
+#: jerk 1.90x -> 1.48x the dancers'). 0: every movement at its tempo rate, whatever the bend adds.
+SPEED_MATCH: float = 1.0
+SPEED_MATCH_RANGE: tuple[float, float] = (0.5, 2.0)
 #: Gaussian sigma (frames) of the low-pass each exemplar window of the memory is read through
 #: (:func:`_cached_members`; per track, then renormalised): the mocap's frame-to-frame noise,
 #: which a movement sped up by the tempo rate r turns into jerk as r cubed, is taken out
@@ -184,12 +210,12 @@ MEMBER_SMOOTH: float = 1.25
 #: Repeats: a code drawn n >= :data:`REPEAT_FREE` times among the last :data:`REPEAT_WINDOW`
 #: draws has its logit lowered by ``REPEAT_PENALTY * (n - REPEAT_FREE + 1)`` (a 5th time in
 #: 8 draws 1 lower, a 6th 2, ...). Without it the predictor, its window (16 codes) full of
-#: one code, kept drawing it: runs of 16-36 movements (4-10 s), where the dancers' longest
-#: is 22 and 0.5 % of their movements are in runs of 12 or more (1.8 % of the performer's).
+#: one code, kept drawing it: runs of up to 27 movements (7 s), where the dancers' longest
+#: is 22 and 0.5 % of their movements are in runs of 12 or more (4.2 % of the performer's).
 #: Each repeat restarts a movement of that kind near where the last one started and the
-#: inertialization cancels most of it: the performer shuffled in place, at under half the
-#: speed of the movements it played, in loud music (2.8 % of the dancing frames on the listening
-#: recordings and validation songs, DANCE_W_5 14 %; benchmarks/studies/repeats.py). A run
+#: inertialization cancels most of it: the performer shuffles in place, at under half the
+#: speed of the movements it plays, in loud music (1.4 % of the dancing frames on the listening
+#: recordings and validation songs, DANCE_W_5 5.4 %; benchmarks/studies/repeats.py). A run
 #: broken by one other code (354 354 354 139 354 354 354) shuffles as much, hence a window,
 #: not only a run. Calm codes repeat freely: the penalty is scaled by ``z + REPEAT_CALM``
 #: within [0, 1], z each code's liveliness (:func:`code_energy`'s z-score): none at z <= -1,
@@ -427,6 +453,45 @@ def code_energy(members: np.ndarray, counts: np.ndarray, seg: int, speed: np.nda
     return z
 
 
+def code_frequency(members: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """How quick each code's movements are: z-scores (K,) float32, over the codes with
+    exemplars, of the mean over its exemplars of ln(mean joint acceleration / mean joint speed)
+    (for a sinusoid 2 pi f a frame) over their whole windows, positions relative to the root
+    (the dance, not its travel). ``members`` (K, M, F, P), ``counts`` (K,). A code without
+    exemplars gets 0."""
+    from models.rig.kinematics import fk
+    from models.rig.motion import Motion
+
+    k, m, f, p = members.shape
+    z = np.zeros(k, np.float32)
+    has = counts > 0
+    if has.sum() < 2:
+        return z
+    flat = members.reshape(-1, p).astype(np.float64)
+    q = flat[:, 3:].reshape(len(flat), -1, 4)
+    q[np.linalg.norm(q, axis=-1).min(1) <= 0.5] = [0.0, 0.0, 0.0, 1.0]  # empty member slots
+    flat[:, 3:] = q.reshape(len(flat), -1)
+    pos = fk(Motion.from_vector(flat.astype(np.float32), fps=FPS), load_default_skeleton()).reshape(k, m, f, -1, 3)
+    pos = pos - pos[..., :1, :]
+    v = np.linalg.norm(np.diff(pos, axis=2), axis=-1).mean((-1, -2))
+    a = np.linalg.norm(np.diff(pos, 2, axis=2), axis=-1).mean((-1, -2))
+    lf = np.log(np.maximum(a, 1e-9) / np.maximum(v, 1e-9))  # (K, M)
+    mask = np.arange(m)[None, :] < counts[:, None]
+    per = (lf * mask).sum(1)[has] / counts[has]
+    z[has] = (per - per.mean()) / max(per.std(), 1e-9)
+    return z
+
+
+def _cached_frequency(model: DanceVQ, members: np.ndarray) -> np.ndarray:
+    """:func:`code_frequency` (K,) of ``model``'s exemplars, kept on the model like :func:`_cached_members`."""
+    key = _weights_key([model.member_poses, model.member_count])
+    cached = getattr(model, "_frequency_cache", None)
+    if cached is None or cached[0] != key:
+        cached = (key, code_frequency(members, model.member_count.numpy()))
+        model._frequency_cache = cached
+    return cached[1]
+
+
 def _cached_energy(model: DanceVQ, members: np.ndarray, seg: int) -> tuple[np.ndarray, np.ndarray]:
     """(:func:`code_energy` (K,), each exemplar's mean joint speed over its movement (K, M),
     m/frame) of ``model``'s exemplars, kept on the model like :func:`_cached_members`."""
@@ -537,6 +602,11 @@ class DanceStream:
                             if len(self._speeds) else np.full(_CAP_STEPS + 1, np.inf))
         self._bone_cap = _cached_bone_cap(model, self._members, self._counts)  # degrees a frame
         self._member_speed = speed
+        # what the tempo's tilt reads (TEMPO_ENERGY, TEMPO_FREQ): liveliness and quickness
+        self._tempo_z = (self._code_energy + np.float32(TEMPO_FREQ) * _cached_frequency(model, self._members)
+                         if TEMPO_FREQ != 0.0 else self._code_energy)
+        self._fk_parents = np.array(POINT_PARENT_INDEX, np.int64)  # joint_speed's skeleton (SPEED_MATCH)
+        self._fk_offsets = load_default_skeleton().point_offsets().astype(np.float64)
         # how much a repeat of each code is penalised (REPEAT_PENALTY): calm codes repeat freely
         self._repeat_weight = np.clip(self._code_energy + REPEAT_CALM, 0.0, 1.0).astype(np.float32)
         period = model.member_period.numpy().astype(np.float64)  # (K, M) each exemplar's song; 0 unknown
@@ -617,7 +687,10 @@ class DanceStream:
                               f"got {energy!r}") from None
         if not lo <= e <= hi:  # NaN fails too
             raise ConfigError(f"energy must be in [{lo:g}, {hi:g}] (1: as the music asks), got {energy!r}")
-        self._energy_bias = None if e == 1.0 else (ENERGY_GAIN * (e - 1.0) * self._code_energy).astype(np.float32)
+        # above 1 livelier and quicker (what the tempo's tilt asks for at a fast tempo, so energy 2
+        # stays above energy 1 there), below 1 calmer
+        z = self._tempo_z if e > 1.0 else self._code_energy
+        self._energy_bias = None if e == 1.0 else (ENERGY_GAIN * (e - 1.0) * z).astype(np.float32)
         self._speed_cap = self._speed_cap_at(e)
         self.energy = e
 
@@ -739,7 +812,7 @@ class DanceStream:
                 logits = logits + bias
             tilt = self._tempo_tilt()
             if tilt != 0.0:  # livelier codes at a faster tempo, calmer at a slower one (TEMPO_ENERGY)
-                logits = logits + np.float32(tilt) * self._code_energy
+                logits = logits + np.float32(tilt) * self._tempo_z
             if REPEAT_PENALTY > 0.0 and len(self.codes_drawn) >= REPEAT_FREE:
                 logits = self._repeat_penalty(logits)
             self._tokens.append(token)
@@ -781,6 +854,8 @@ class DanceStream:
             i, best = match_exemplar(cands, dips, cont, self._decay, frame, BEAT_WEIGHT * clarity,
                                      self.seg, VEL_CAP)  # match_exemplar's quaternions are unit already
         rate = self._rate_for(*pairs[i])
+        if self._has_cont and SPEED_MATCH > 0.0:  # the speed the bend adds or takes away, undone
+            rate = self._speed_matched(cands[i], best, rate)
         self._play(best, rate, self._bone_limit(best, max(rate, self._rate)))
         self._own_speed = float(self._member_speed[pairs[i]])
         self._commit(pairs[i][0])
@@ -819,6 +894,19 @@ class DanceStream:
         r = min(max(src / period, lo), hi) ** min(1.0, self._tempo.confidence / RATE_CONFIDENCE)  # towards 1 as the pulse fades
         v = self._member_speed[code, member]
         return min(r, max(1.0, self._cap_now(period) / v)) if v > 0 else r
+
+    def _speed_matched(self, own: np.ndarray, bent: np.ndarray, rate: float) -> float:
+        """``rate`` times ``(v_own / v_bent) ** SPEED_MATCH`` (within :data:`SPEED_MATCH_RANGE`, then
+        :data:`RATE_RANGE`): v the mean joint speed of the frames a movement at ``rate`` plays of
+        the exemplar window ``own`` (2 seg, P) and of ``bent``, the same bent to continue the motion."""
+        n = min(len(bent), int(math.ceil(self.seg * rate)) + 1)
+        v_own = joint_speed(own, n, self._fk_parents, self._fk_offsets)
+        v_bent = joint_speed(bent, n, self._fk_parents, self._fk_offsets)
+        if v_own <= 0.0 or v_bent <= 0.0:
+            return rate
+        lo, hi = SPEED_MATCH_RANGE
+        f = min(max((v_own / v_bent) ** SPEED_MATCH, lo), hi)
+        return min(max(rate * f, RATE_RANGE[0]), RATE_RANGE[1])
 
     def _cap_now(self, period: float) -> float:
         """The speed cap (m/frame) at the followed tempo's ``period`` (frames): the energy's
