@@ -276,12 +276,17 @@ class _HeldTempo:
         pass
 
 
-def _drawn_liveliness(lm, feats: np.ndarray, bpm: float, seed: int) -> float:
-    """Mean :func:`code_energy` z-score of the codes a stream draws on ``feats`` at a held tempo."""
+def _drawn_mean(lm, feats: np.ndarray, bpm: float, seed: int, per_code) -> float:
+    """Mean over the codes a stream draws on ``feats`` at a held tempo of ``per_code(stream)`` (K,)."""
     s = ds.DanceStream(lm.model, seed=seed)
     s._tempo = _HeldTempo(bpm)
     s.push(feats)
-    return float(s._code_energy[np.array(s.codes_drawn)].mean())
+    return float(per_code(s)[np.array(s.codes_drawn)].mean())
+
+
+def _drawn_liveliness(lm, feats: np.ndarray, bpm: float, seed: int) -> float:
+    """Mean :func:`code_energy` z-score of the codes a stream draws on ``feats`` at a held tempo."""
+    return _drawn_mean(lm, feats, bpm, seed, lambda s: s._code_energy)
 
 
 @pytest.mark.parametrize("tilt_on", [True, False])
@@ -302,10 +307,7 @@ def test_a_faster_tempo_chooses_livelier_movements(clip_stretched, tilt_on, monk
 
 def _drawn_quickness(lm, feats: np.ndarray, bpm: float, seed: int) -> float:
     """Mean :func:`code_frequency` z-score of the codes a stream draws on ``feats`` at a held tempo."""
-    s = ds.DanceStream(lm.model, seed=seed)
-    s._tempo = _HeldTempo(bpm)
-    s.push(feats)
-    return float(ds._cached_frequency(lm.model, s._members)[np.array(s.codes_drawn)].mean())
+    return _drawn_mean(lm, feats, bpm, seed, lambda s: ds._cached_frequency(lm.model, s._members))
 
 
 @pytest.mark.parametrize("freq_on", [True, False])

@@ -487,7 +487,7 @@ def joint_speed(window, n, parents, offsets):  # pragma: no cover - compiled
     root), ``offsets`` (J + E, 3) float64 the points' offsets (m); quaternions renormalised.
     The speed is np.gradient's along the frames (central, one-sided at the ends), its norm
     averaged over points and frames: what ``dance_stream.member_speed`` gives, without its
-    scipy calls (about 1.5 ms a window there, a few µs here, on the code step's path)."""
+    scipy calls (a 13-frame window: median 1.2 ms there, 11 µs here, p99 18 µs; on the code step's path)."""
     npt = parents.shape[0]
     nb = (window.shape[1] - 3) // 4
     pos = np.zeros((n, npt, 3))

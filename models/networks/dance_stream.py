@@ -323,13 +323,11 @@ def _unit(p: np.ndarray) -> np.ndarray:
     return p
 
 
-def member_speed(windows: np.ndarray) -> np.ndarray:
-    """(K, M, F) mean joint speed of each exemplar frame, m a frame, by forward kinematics on
-    the default skeleton. windows: (K, M, F, P) poses; empty member slots (zeros) read as
-    the rest pose."""
+def member_positions(windows: np.ndarray) -> np.ndarray:
+    """(K, M, F, J + E, 3) world positions (m) of every point of exemplar windows (K, M, F, P)
+    by forward kinematics on the default skeleton; empty member slots (zeros) read as the rest pose."""
     from models.rig.kinematics import fk
     from models.rig.motion import Motion
-    from models.rig.skeleton import load_default_skeleton
 
     k, m, f, p = windows.shape
     flat = windows.reshape(-1, p).astype(np.float64)
@@ -337,8 +335,13 @@ def member_speed(windows: np.ndarray) -> np.ndarray:
     ok = np.linalg.norm(q, axis=-1).min(1) > 0.5  # empty member slots are zeros
     q[~ok] = [0.0, 0.0, 0.0, 1.0]
     flat[:, 3:] = q.reshape(len(flat), -1)
-    pos = fk(Motion.from_vector(flat.astype(np.float32), fps=FPS), load_default_skeleton()).reshape(k * m, f, -1, 3)
-    return np.linalg.norm(np.gradient(pos, axis=1), axis=-1).mean(-1).reshape(k, m, f)
+    return fk(Motion.from_vector(flat.astype(np.float32), fps=FPS), load_default_skeleton()).reshape(k, m, f, -1, 3)
+
+
+def member_speed(windows: np.ndarray) -> np.ndarray:
+    """(K, M, F) mean joint speed of each exemplar frame, m a frame (:func:`member_positions`).
+    windows: (K, M, F, P) poses."""
+    return np.linalg.norm(np.gradient(member_positions(windows), axis=2), axis=-1).mean(-1)
 
 
 def member_dips(windows: np.ndarray, seg: int) -> np.ndarray:
@@ -459,19 +462,12 @@ def code_frequency(members: np.ndarray, counts: np.ndarray) -> np.ndarray:
     (for a sinusoid 2 pi f a frame) over their whole windows, positions relative to the root
     (the dance, not its travel). ``members`` (K, M, F, P), ``counts`` (K,). A code without
     exemplars gets 0."""
-    from models.rig.kinematics import fk
-    from models.rig.motion import Motion
-
-    k, m, f, p = members.shape
+    k, m = members.shape[:2]
     z = np.zeros(k, np.float32)
     has = counts > 0
     if has.sum() < 2:
         return z
-    flat = members.reshape(-1, p).astype(np.float64)
-    q = flat[:, 3:].reshape(len(flat), -1, 4)
-    q[np.linalg.norm(q, axis=-1).min(1) <= 0.5] = [0.0, 0.0, 0.0, 1.0]  # empty member slots
-    flat[:, 3:] = q.reshape(len(flat), -1)
-    pos = fk(Motion.from_vector(flat.astype(np.float32), fps=FPS), load_default_skeleton()).reshape(k, m, f, -1, 3)
+    pos = member_positions(members)
     pos = pos - pos[..., :1, :]
     v = np.linalg.norm(np.diff(pos, axis=2), axis=-1).mean((-1, -2))
     a = np.linalg.norm(np.diff(pos, 2, axis=2), axis=-1).mean((-1, -2))
