@@ -354,8 +354,9 @@ def test_the_ramps_lag_is_judged_only_where_the_speed_follows_the_tempo():
 
 def test_the_ramp_reports_how_late_the_followed_tempo_is(tmp_path, shipped):
     """The bundled clip (120 bpm) looped and ramped: the tempo the performer follows tracks the
-    ramp (correlation over 0.9) and is reported with its lag, the beat tracker's 6-s window
-    making it late (between 1 and 5 s; 3.2 s on the benchmark's ramp)."""
+    ramp (correlation over 0.9) and is reported with its lag, within 2 s (issue 43): the
+    follower's drift lead makes up for the beat tracker's 6-s window (0.2 s; 2.07 s without the
+    lead, 3.2 s on the benchmark's ramp)."""
     import soundfile as sf
 
     from models.features.audio_io import bundled_clip_path, load_audio
@@ -365,4 +366,7 @@ def test_the_ramp_reports_how_late_the_followed_tempo_is(tmp_path, shipped):
     sf.write(path, np.tile(song, 3), SAMPLE_RATE)
     opts = L.Options(cache_dir=tmp_path / "cache", excerpt_start_s=0.0, progress=False, seeds=(0,), ramp_seeds=(0,))
     r = L.ramp(shipped, L.AudioCache(opts.cache_dir), (path, 120.0), opts)
-    assert r["follower_corr"] > 0.9 and 1.0 <= r["follower_lag_s"] <= L.MAX_LAG_S, r["follower_lag_s"]
+    assert r["follower_corr"] > 0.9 and r["follower_lag_s"] <= 1.0, r["follower_lag_s"]
+    s = L.summary({"ramp": {**r, "corr": 0.8}})
+    assert L.verdict("ramp_follower_lag_s", s["ramp_follower_lag_s"]) == "PASS"
+    assert L.verdict("ramp_follower_corr", s["ramp_follower_corr"]) == "PASS"

@@ -88,6 +88,8 @@ TARGETS: tuple[tuple[str, str, str, float], ...] = (
     ("hit_half_min", "beat hit / half-beat-shifted hit, lowest rate", ">=", 1.5),
     ("ramp_corr", "ramp: speed-tempo correlation at best lag", ">=", 0.7),
     ("ramp_lag_s", "ramp: lag of best correlation (s)", "<=", 2.0),
+    ("ramp_follower_corr", "ramp: followed tempo-tempo correlation at best lag", ">=", 0.7),
+    ("ramp_follower_lag_s", "ramp: lag of the followed tempo (s)", "<=", 2.0),
     ("ramp_max_step_deg", "ramp: largest bone rotation per frame (deg)", "<=", 50.0),
     ("idle_sounding_max", "music: largest idle fraction of a recording, to the end of its music", "<=", 0.02),
     ("speech_settle_s", "speech: seconds to idle, worst case", "<=", 2.0),
@@ -554,6 +556,15 @@ def ramp_song(cache: AudioCache, songs: list[tuple[Path, float]], opts: Options)
     return None
 
 
+def ramp_audio(cache: AudioCache, path: Path, opts: Options) -> tuple[np.ndarray, float]:
+    """(the ramp's audio (n,) at 22050 Hz, :func:`ramp_rate` from its start; the second of
+    ``path`` it starts at)."""
+    total = RAMP_HOLD_S + 2 * RAMP_S
+    source_s = RAMP_HOLD_S * RAMP_RATES[0] + RAMP_S * (RAMP_RATES[0] + RAMP_RATES[1]) + 2.0
+    start = min(opts.excerpt_start_s, max(0.0, len(cache.audio(path)) / SAMPLE_RATE - source_s))
+    return cache.ramp(path, start, source_s)[: int(total * SAMPLE_RATE)], start
+
+
 def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict:
     """The ramp's figures and curves: ``tempo_bpm`` (real tempo: the song's bpm x
     :func:`ramp_rate`) and ``speed`` (mean joint speed, m/s), both per frame and smoothed over
@@ -568,12 +579,8 @@ def ramp(lm, cache: AudioCache, song: tuple[Path, float], opts: Options) -> dict
     how late a tempo change is followed) the medians, ``max_step_deg`` the largest; the
     curves are the first seed's."""
     path, bpm = song
-    hold = RAMP_HOLD_S
-    total = hold + 2 * RAMP_S
-    source_s = hold * RAMP_RATES[0] + RAMP_S * (RAMP_RATES[0] + RAMP_RATES[1]) + 2.0
-    start = min(opts.excerpt_start_s, max(0.0, len(cache.audio(path)) / SAMPLE_RATE - source_s))
-    y = cache.ramp(path, start, source_s)[: int(total * SAMPLE_RATE)]
-    a, lags = int(hold * FPS), int(MAX_LAG_S * FPS)
+    y, start = ramp_audio(cache, path, opts)
+    a, lags = int(RAMP_HOLD_S * FPS), int(MAX_LAG_S * FPS)
     runs = []
     for seed in opts.ramp_seeds:
         trace: dict = {}
@@ -708,6 +715,9 @@ def summary(result: dict) -> dict[str, float | None]:
         s["ramp_corr"], s["ramp_max_step_deg"] = r["corr"], r["max_step_deg"]
         corr_target = next(thr for k, _, _, thr in TARGETS if k == "ramp_corr")
         s["ramp_lag_s"] = r["lag_s"] if r["corr"] >= corr_target else None  # NOT_APPLICABLE
+        if "follower_corr" in r:  # how late the followed tempo is (issue 43), judged where it follows
+            s["ramp_follower_corr"] = r["follower_corr"]
+            s["ramp_follower_lag_s"] = r["follower_lag_s"] if r["follower_corr"] >= corr_target else None
     pres = result.get("presence") or {}
     if pres.get("music"):
         s["idle_max"] = max(m["idle"] for m in pres["music"])
@@ -725,7 +735,8 @@ def summary(result: dict) -> dict[str, float | None]:
 #: Targets whose None means "nothing to judge" (n/a), with why: dancing again when it never
 #: went idle; the lag of a correlation that is not there (the best lag of a correlation under
 #: its target says nothing of how late the speed follows).
-NOT_APPLICABLE: dict[str, str] = {"speech_back_s": "never idle", "ramp_lag_s": "correlation under 0.7"}
+NOT_APPLICABLE: dict[str, str] = {"speech_back_s": "never idle", "ramp_lag_s": "correlation under 0.7",
+                                  "ramp_follower_lag_s": "correlation under 0.7"}
 
 
 def verdict(key: str, value: float | None) -> str:

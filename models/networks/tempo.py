@@ -85,6 +85,16 @@ OCTAVE_MARGIN: float = 0.15
 FAST_TOLERANCE: float = 0.1
 FAST_SHARE: float = 0.8
 FAST_MEAN: float = 240.0
+#: The lead: a tempo that keeps changing is read late, the tracker's 6-s window reading the
+#: tempo of about 1.8 s ago and the running mean adding 1.4 s (the listening ramp: 3.2 s in
+#: all, docs/listening.md "Tempo"). So the followed period is moved on by its own drift: the
+#: running mean (DRIFT_TAU frames) of the running log period's step a frame, times DRIFT_LEAD
+#: frames, at most DRIFT_CAP octave (3.5 %; the ramp asks for 0.04) either way. On a steady
+#: song the drift stays near 0 (the followed tempo wanders 0.7 % more); a level taken or voted
+#: resets it. 0: no lead.
+DRIFT_LEAD: float = 75.0
+DRIFT_TAU: float = 120.0
+DRIFT_CAP: float = 0.05
 
 
 def onset_density(onset: np.ndarray) -> float:
@@ -119,7 +129,7 @@ class TempoFollower:
     ``confidence`` in [0, 1] (the running mean of the clarity over :data:`FULL_CLARITY`).
     """
 
-    __slots__ = ("log_p", "conf", "score", "slow", "heard", "away", "votes", "fast_num", "fast_den", "_a")
+    __slots__ = ("log_p", "conf", "score", "slow", "heard", "away", "votes", "fast_num", "fast_den", "drift", "_a")
 
     def __init__(self) -> None:
         self._a = 1.0 / TEMPO_TAU
@@ -135,12 +145,15 @@ class TempoFollower:
         self.votes = np.zeros((SETTLE_FRAMES, 2))  # (log period, weight) of the first SETTLE_FRAMES clear frames
         self.fast_num = 0.0  # running (FAST_MEAN) clarity weight of the frames read at the faster octave
         self.fast_den = 0.0  # ... and of all clear frames
+        self.drift = 0.0  # running mean (DRIFT_TAU) of the running log period's step a frame
 
     def update(self, logp: float, clarity: float, density: float = 0.0) -> None:
         w = min(1.0, max(clarity, 0.0) / FULL_CLARITY)
         self.conf += self._a * (w - self.conf)
         if clarity < MIN_CLARITY or not math.isfinite(logp):
+            self.drift -= self.drift / DRIFT_TAU  # no step this frame
             return
+        before = self.log_p
         if self.log_p != self.log_p:  # NaN: the first clear pulse
             self.log_p = logp
         else:  # the nearest octave of the new estimate to the running one
@@ -154,6 +167,7 @@ class TempoFollower:
                 if self.away >= AWAY_FRAMES:  # another level, held: take it
                     self.log_p += d
                     self.away = 0.0
+                    before = math.nan  # a jump, not a drift
                 else:  # a level 3:2 or 4:3 away still says how the tempo moves
                     r = d - math.copysign(THIRD, d)
                     if abs(r) <= THIRD_TOLERANCE:
@@ -163,6 +177,11 @@ class TempoFollower:
             self.votes[self.heard - 1] = logp, w
             if self.heard == SETTLE_FRAMES:
                 self._vote()
+                before = math.nan
+        if before == before:  # the tempo's drift (DRIFT_LEAD)
+            self.drift += (self.log_p - before - self.drift) / DRIFT_TAU
+        else:
+            self.drift = 0.0
         fast = self._fast()
         at_fast = abs(logp - math.log2(fast / 15.0)) <= FAST_TOLERANCE
         self.fast_num += (w * at_fast - self.fast_num) / FAST_MEAN
@@ -199,7 +218,12 @@ class TempoFollower:
         if self.log_p != self.log_p:
             return 0.0
         p = self._fast()
-        return 2.0 * p if self.slow and 2.0 * p <= 60.0 * FPS / TEMPO_RANGE[0] else p
+        hi = 60.0 * FPS / TEMPO_RANGE[0]
+        p = 2.0 * p if self.slow and 2.0 * p <= hi else p
+        if DRIFT_LEAD == 0.0:
+            return p
+        lead = min(max(DRIFT_LEAD * self.drift, -DRIFT_CAP), DRIFT_CAP)  # the drift carried on (DRIFT_LEAD)
+        return min(max(p * 2.0 ** lead, 60.0 * FPS / TEMPO_RANGE[1]), hi)
 
     @property
     def confidence(self) -> float:
