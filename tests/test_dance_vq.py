@@ -11,7 +11,8 @@ import torch
 
 from models.errors import CheckpointError, ConfigError
 from models.networks.checkpoint import build_model, load_checkpoint, save_checkpoint
-from models.networks.dance_stream import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, DanceStream, generate, idle_pose
+from models.networks.dance_stream import FADE_FRAMES, PRESENT_FRAMES, DanceStream, generate, idle_pose
+from models.networks.idle_gate import BREAK_HOLD_SILENT
 from models.networks.dance_vq import DanceVQ, DanceVQConfig, style_token
 from models.rig.humanoid import BONES
 from models.rig.motion import POSE_DIM
@@ -93,9 +94,9 @@ def test_silence_settles_to_a_calm_idle_and_music_brings_the_dance_back_without_
     # a stream starts at rest and fades in on music
     assert w[0] == pytest.approx(1.0 - 1 / FADE_FRAMES) or w[0] == 1.0
     assert w[PRESENT_FRAMES + FADE_FRAMES + 2] == 0.0
-    # silence: idle within ABSENT + FADE frames (< 2 s) and held
-    settle = 200 + ABSENT_FRAMES + FADE_FRAMES
-    assert settle - 200 < 60 and np.all(w[settle:400] == 1.0)
+    # silence: the song's break held for BREAK_HOLD_SILENT frames, then idle within 3 s, and held
+    settle = 200 + BREAK_HOLD_SILENT + FADE_FRAMES
+    assert settle - 200 <= 90 and np.all(w[settle:400] == 1.0) and np.all(w[30:200 + BREAK_HOLD_SILENT - 1] == 0.0)
     idle = idle_pose(s._idle_base, np.arange(settle, 400))
     assert quat_angles_deg(p[settle:400], idle).max() < 0.01
     # the idle is calm: a small sway, far less than the dance moves

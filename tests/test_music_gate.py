@@ -91,7 +91,7 @@ def test_a_checkpoint_from_before_the_detector_loads_and_keeps_the_logistic_gate
     state = {k: v for k, v in model.state_dict().items() if k != "presence"}
     model.load_state_dict(state)
     assert float(model.presence.abs().sum()) == 0
-    assert DanceStream(model)._presence is None
+    assert DanceStream(model)._idle.presence is None
 
 
 def test_electronic_music_stays_danced(lm) -> None:
@@ -118,7 +118,7 @@ def test_speech_between_songs_idles_within_2_s_holds_and_dances_again(lm) -> Non
 
 
 def test_crowd_between_songs_idles_only_thanks_to_the_detector(lm) -> None:
-    """Crowd babble at -35 dBFS: the presence detector idles; the logistic one it replaces
+    """Crowd babble at -35 dBFS: the presence detector idles within 2.5 s; the logistic one it replaces
     (the same checkpoint with the detector zeroed) keeps dancing."""
     needs_espeak()
     from models.generate import load_model
@@ -127,7 +127,8 @@ def test_crowd_between_songs_idles_only_thanks_to_the_detector(lm) -> None:
     pool = [tm.utterance(rng) for _ in range(12)]
     a, crowd, b = tm.electronic(15.0, rng), tm.babble(10.0, rng, pool, -35.0), tm.electronic(10.0, rng)
     settle, held, back = between(lm, a, crowd, b)
-    assert settle is not None and settle <= 2.0 and held >= 0.98
+    # within 2.5 s (issue 43): 20 dB under the music, the crowd is a break the gate holds for 1.93 s
+    assert settle is not None and settle <= 2.5 and held >= 0.98
     assert back is not None and back <= 1.0
     off = load_model(os.environ.get("PERFORMER_GATE_CHECKPOINT") or None)
     with torch.no_grad():

@@ -131,7 +131,7 @@ def test_the_stream_runs_the_detector_at_the_time_constant_it_was_fitted_at() ->
     if c.gate_col < 0:
         pytest.skip(f"{lm.path} has no steadiness column")
     assert lm.features.steadiness and c.gate_col == c.feature_dim and c.gate_tau == 10.0
-    gate = DanceStream(lm.model)._presence
+    gate = DanceStream(lm.model)._idle.presence
     assert gate is not None and gate._a_music == pytest.approx(math.exp(-1.0 / c.gate_tau))
     assert gate._scol == c.gate_col
 

@@ -24,6 +24,15 @@ features as the engine computes them):
   dance's own (no snap); ``idle_step_deg``, the largest while fully idle (calm). The full
   stream runs (poses too).
 
+* **Voices and breaks** (``--music`` only; issue 43): each recording with the ``--speech``
+  recordings (strung together, looped) laid over it at 0 and -6 dB relative to its RMS level
+  (a rapper or a host over the track: still music), and with its audio cut to silence for 1 s
+  and for 2 s every 10 s (stop-time breaks); ``idle_sounding`` of each (target at most 0.02).
+  The between-songs targets of issue 43: silence idle within 3 s (a song's 2-s break is
+  danced through), speech within 2 s, crowd and noise within 2.5 s.
+
+``--parts`` picks the parts (default all: ``recordings,mixes,gaps``).
+
 It also prints the gate's own cost per frame (median and 99th percentile, microseconds).
 
 ``--plot`` draws the idle weight over the between-songs programmes.
@@ -51,6 +60,14 @@ GAPS: tuple[tuple[str, str, float | None], ...] = (
     ("room -60", "room", -60.0), ("pink -30", "pink", -30.0))
 SR = 22050
 HOP = 735
+#: Levels (dB relative to the recording's RMS) of the speech laid over each recording.
+MIX_DB: tuple[float, ...] = (0.0, -6.0)
+#: Lengths (s) of the silences cut into each recording, one every :data:`BREAK_EVERY_S`.
+BREAKS_S: tuple[float, ...] = (1.0, 2.0)
+BREAK_EVERY_S: float = 10.0
+#: Most seconds to fully idle per kind of gap (issue 43): silence 3, speech 2, the rest 2.5.
+SETTLE_TARGET_S: dict[str, float] = {"silence": 3.0, "speech": 2.0}
+SETTLE_TARGET_OTHER_S: float = 2.5
 
 
 def rms_dbfs(x: np.ndarray) -> float:
@@ -69,6 +86,33 @@ def gap_audio(kind: str, seconds: float, dbfs: float | None, rng: np.random.Gene
     if kind == "room":
         return mg.room(seconds, rng, pool, dbfs)
     return mg.plain_noise(seconds, rng, kind, dbfs)
+
+
+def with_speech(audio: np.ndarray, speech: np.ndarray, db: float, sound: int) -> np.ndarray:
+    """``audio`` (n,) with ``speech`` looped over all of it at ``db`` dB relative to the RMS of its
+    first ``sound`` frames (its music, without a silent end)."""
+    talk = np.resize(speech, len(audio))
+    gain = 10 ** ((rms_dbfs(audio[: sound * HOP]) - rms_dbfs(speech) + db) / 20)
+    return (audio + gain * talk).astype(np.float32)
+
+
+def with_breaks(audio: np.ndarray, seconds: float, every: float = BREAK_EVERY_S) -> np.ndarray:
+    """``audio`` (n,) with ``seconds`` of silence cut in (the audio replaced) every ``every`` s from
+    ``every`` s on: a song's stop-time breaks."""
+    out = audio.copy()
+    for t0 in np.arange(every, len(out) / SR - seconds, every):
+        out[int(t0 * SR): int((t0 + seconds) * SR)] = 0.0
+    return out
+
+
+def idle_sounding(lm, audio: np.ndarray, end: int, seed: int) -> float:
+    """Share of frames after the first 3 s up to frame ``end`` (the end of the recording's music)
+    in which the gate of a fresh stream on ``audio`` (n,) is not fully dancing."""
+    from models.features.spectral import extract_features
+    from models.networks.dance_stream import DanceStream
+
+    w = DanceStream(lm.model, seed=seed).listen(extract_features(audio, lm.features))
+    return float((w[90:end] > 0).mean()) if end > 90 else 0.0
 
 
 def excerpt(data: Path, name: str, seconds: float) -> np.ndarray:
@@ -113,6 +157,11 @@ def run_gap(lm, a: np.ndarray, gap: np.ndarray, b: np.ndarray, seed: int) -> dic
             "idle_w": w.tolist(), "gap_frames": [g0, g1]}
 
 
+def settle_target(gap: str) -> float:
+    """Most seconds to fully idle on gap ``gap`` (its label): :data:`SETTLE_TARGET_S`."""
+    return SETTLE_TARGET_S.get(gap.split()[0], SETTLE_TARGET_OTHER_S)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--checkpoint", default=None, help="a dance_vq checkpoint (default: the packaged one)")
@@ -124,7 +173,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=7, help="noise and dance seed (default 7)")
     p.add_argument("--plot", type=Path, help="write a PNG of the idle weight over the between-songs programmes")
     p.add_argument("--json", type=Path, help="write the results as JSON")
+    p.add_argument("--parts", default="recordings,mixes,gaps",
+                   help="comma-separated parts to run: recordings, mixes (voices and breaks), gaps (default all)")
     args = p.parse_args(argv)
+    parts = set(args.parts.split(","))
+    if parts - {"recordings", "mixes", "gaps"}:
+        p.error(f"--parts: unknown part(s) {sorted(parts - {'recordings', 'mixes', 'gaps'})}")
 
     from models.errors import PerformerError
     from models.features.audio_io import load_audio
@@ -151,7 +205,7 @@ def main(argv: list[str] | None = None) -> int:
     import time
 
     rec_rows, cost = [], []
-    for name, audio in recordings:
+    for name, audio in (recordings if "recordings" in parts else []):
         feats = extract_features(audio, lm.features)
         stream = DanceStream(lm.model, seed=args.seed)
         w = np.empty(len(feats))
@@ -166,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
         rec_rows.append({"recording": name, "s": len(audio) / SR, "idle": float(idle.mean()), "longest_idle_s": longest / 30,
                          "silent_tail_s": (len(feats) - sound) / 30, "after_music_s": (sound - end) / 30,
                          "idle_sounding": float((w[90:end] > 0).mean()) if end > 90 else 0.0})
-    cost_us = np.array(cost) * 1e6
+    cost_us = np.array(cost) * 1e6 if cost else np.zeros(1)
     print(f"the gate's cost per frame (DanceStream.listen of one frame): median {np.median(cost_us):.1f} us, "
           f"p99 {np.percentile(cost_us, 99):.1f} us over {len(cost_us)} frames")
     print("\n| recording | s | idle after 3 s, to the file's end | longest idle (s) | silent end (s) | applause before it (s) "
@@ -176,25 +230,47 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {r['recording']} | {r['s']:.0f} | {r['idle']:.3f} | {r['longest_idle_s']:.1f} | {r['silent_tail_s']:.1f} | "
               f"{r['after_music_s']:.1f} | {r['idle_sounding']:.3f} |")
 
+    mix_rows = []
+    talk = np.concatenate([s for _, s in speech]) if speech else None
+    for name, audio in (recordings if "mixes" in parts and talk is not None else []):
+        if name not in {f.name for f in args.music.glob("*.ogg")}:
+            continue  # the shared recordings only
+        audio = audio[: len(audio) // HOP * HOP]
+        sound, end = music_end(lm, extract_features(audio, lm.features), Path(name).stem)
+        row = {"recording": name, "alone": idle_sounding(lm, audio, end, args.seed)}
+        for db in MIX_DB:
+            row[f"speech {db:g} dB"] = idle_sounding(lm, with_speech(audio, talk, db, sound), end, args.seed)
+        for sec in BREAKS_S:
+            row[f"breaks {sec:g} s"] = idle_sounding(lm, with_breaks(audio, sec), end, args.seed)
+        mix_rows.append(row)
+    if mix_rows:
+        cols = [k for k in mix_rows[0] if k != "recording"]
+        print(f"\n| recording (idle to the end of the music ≤ 0.02) | {' | '.join(cols)} |")
+        print("| --- |" + " ---: |" * len(cols))
+        for r in mix_rows:
+            print(f"| {r['recording']} | " + " | ".join(f"{r[c]:.3f}" for c in cols) + " |")
+        print(f"| worst | " + " | ".join(f"{max(r[c] for r in mix_rows):.3f}" for c in cols) + " |")
+
     rng = np.random.default_rng(1000 + args.seed)
     pool = [mg.utterance(rng) for _ in range(24)] if mg.espeak_available() else []
     cases = [(lab, gap_audio(kind, args.gap_s, lvl, rng, pool)) for lab, kind, lvl in GAPS
              if pool or kind not in ("crowd",)]
     gap_rows = []
-    for i, (lab, gap) in enumerate(cases + [(f"speech {n.removesuffix('.ogg')}", s) for n, s in speech]):
+    for i, (lab, gap) in enumerate([] if "gaps" not in parts else cases + [(f"speech {n.removesuffix('.ogg')}", s) for n, s in speech]):
         a, b = songs[i % len(songs)], songs[(i + 1) % len(songs)]
         if lab.startswith("speech"):
             gap = gap * 10 ** ((rms_dbfs(a) - rms_dbfs(gap)) / 20)  # at the level of the music
         row = run_gap(lm, a, gap, b, args.seed)
         gap_rows.append({"gap": lab, "dbfs": rms_dbfs(gap) if lab != "silence" else None, **row})
-    print(f"\n| between songs | gap dBFS | settle (s) ≤ 2 | held | back (s) ≤ 1 | largest step in the fades (deg) | largest step while idle (deg) | dance p99 (deg) |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    print(f"\n| between songs | gap dBFS | settle (s) | ≤ | held | back (s) ≤ 1 | largest step in the fades (deg) | largest step while idle (deg) | dance p99 (deg) |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     f = lambda v, d=2: "never" if v is None else f"{v:.{d}f}"  # noqa: E731
     for r in gap_rows:
-        print(f"| {r['gap']} | {f(r['dbfs'], 1) if r['dbfs'] is not None else '-'} | {f(r['settle_s'])} | {f(r['held'])} | "
+        print(f"| {r['gap']} | {f(r['dbfs'], 1) if r['dbfs'] is not None else '-'} | {f(r['settle_s'])} | "
+              f"{settle_target(r['gap']):g} | {f(r['held'])} | "
               f"{f(r['back_s'])} | {r['max_step_deg']:.1f} | {f(r['idle_step_deg'])} | {r['dance_step_p99_deg']:.1f} |")
     if args.json:
-        args.json.write_text(json.dumps({"gate_us_median": float(np.median(cost_us)),
+        args.json.write_text(json.dumps({"mixes": mix_rows, "gate_us_median": float(np.median(cost_us)),
                                          "gate_us_p99": float(np.percentile(cost_us, 99)), "recordings": rec_rows, "gaps": [{k: v for k, v in r.items() if k != "idle_w"}
                                                                              for r in gap_rows]}, indent=1))
     if args.plot:

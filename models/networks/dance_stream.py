@@ -23,19 +23,12 @@ live give the same poses for the same seed and style, however the frames are chu
 every beat the causal beat tracker expects, faster between them (:data:`BEAT_WARP`), read
 between frames about :data:`WARP_LAG` frames late, so its speed dips land on the beats.
 
-**Idle between songs.** A gate decides whether music is playing. A model with a fitted
-presence detector (:mod:`models.networks.music_gate`, the shipped one) asks it (the shipped
-one also reads the features' last column, the spectral steadiness, which the predictor
-never sees: ``DanceVQConfig.gate_col``); an older one: the log frame energy must be above a threshold (silence), and a logistic music detector on a 0.5-s running
-mean of the spectral shape (MFCC 1-12) and the beat tracker's pulse clarity must say
-music (applause, crowd, room noise: energy without music). Both are fitted on the
-training songs against synthetic noise (:func:`models.training.dance_vq.fit_music_gate`). After
-:data:`ABSENT_FRAMES` frames without music the performer fades over
-:data:`FADE_FRAMES` into a calm idle (the dancers' mean pose with a slow sway of hips,
-spine and head, :func:`idle_pose`), and after :data:`PRESENT_FRAMES` frames of music it
-fades back into the dance, which has kept running underneath, so nothing jumps.
-``set_idle(True)`` holds the idle whatever the music (the show control's
-``/performer/idle``).
+**Idle between songs.** The idle gate (:class:`models.networks.idle_gate.IdleGate`) decides
+whether music is playing (its presence detector, :mod:`models.networks.music_gate`, or an older
+checkpoint's logistic one) and holds through a song's breaks of up to 2 s; without music the
+performer fades into a calm idle (the dancers' mean pose with a slow sway of hips, spine and
+head, :func:`idle_pose`) and back into the dance, which has kept running underneath, so nothing
+jumps. ``set_idle(True)`` holds the idle whatever the music (the show control's ``/performer/idle``).
 """
 
 from __future__ import annotations
@@ -47,11 +40,11 @@ import numpy as np
 
 from models.errors import ConfigError
 from models.networks.blend import blend_track
-from models.networks.dance_jit import (gate_ema, joint_speed, match_exemplar, push_history, renorm_pose, sanitize_rows,
+from models.networks.dance_jit import (joint_speed, match_exemplar, push_history, renorm_pose, sanitize_rows,
                                        warp_pose)
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
-from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ, style_token
-from models.networks.music_gate import ENERGY_COL, START_FRAMES, MusicGate
+from models.networks.dance_vq import DanceVQ, style_token
+from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate
 from models.networks.streaming import FEATURE_LIMIT
 from models.networks.tempo import DENSITY_WINDOW, TEMPO_RANGE, TempoFollower, danced_beat, onset_density
 from models.rig.humanoid import BONE_INDEX
@@ -59,23 +52,10 @@ from models.rig.kinematics import rotation_jumps_deg
 from models.rig.skeleton import POINT_PARENT_INDEX, load_default_skeleton
 from models.timebase import FPS
 
-#: Frames without music before the performer starts to settle (0.5 s; with the presence
-#: detector a frame it is sure of counts up to twice, ``music_gate.SURE_COUNT``: 0.27 s).
-ABSENT_FRAMES: int = 15
-#: Frames of music before it starts to dance again (0.2 s).
-PRESENT_FRAMES: int = 6
-#: Frames of the crossfade between dance and idle (0.53 s), eased with a smoothstep.
-FADE_FRAMES: int = 16
 #: A fade that follows a bone's rotation to the idle the long way round (past 180 degrees,
 #: :meth:`DanceStream._fade`) goes back to the shorter way when that moves the bone by at most
 #: this much (radians: 10 degrees), near the fade's start or end.
 FADE_SWITCH: float = math.radians(10.0)
-#: Time constant (frames) of the music detector's running mean while no music is heard: shorter
-#: than the one it was fitted with (GATE_TAU, 0.5 s), so the dance comes back within a second.
-GATE_TAU_RETURN: float = 5.0
-#: Logit margin of the music detector while music is playing: quiet or pulse-less passages
-#: of a song must look clearly like noise before the performer stops dancing.
-GATE_MARGIN: float = 6.0
 #: Frames over which a new movement's difference from the last one decays (inertialization), at 8 frames a code.
 DECAY_FRAMES: int = 16
 #: Largest angular-velocity mismatch (per bone, radians per frame: 23 degrees) that the
@@ -570,18 +550,7 @@ class DanceStream:
         self.style = style_token(style)
         self._feat_mean = model.feat_mean.numpy().astype(np.float32)
         self._feat_std = model.feat_std.numpy().astype(np.float32)
-        self._energy_min, self._gate_b = (float(v) for v in model.gate)
-        self._ecol = c.energy_col if 0 <= c.energy_col < c.feature_dim else None
-        self._gcols = [*GATE_MFCC, c.clarity_col] if 0 <= c.clarity_col < c.feature_dim else []
-        self._gate_idx = np.array(self._gcols, np.int64)  # (G,) the detector's feature columns
-        self._gate_w = model.gate_w.numpy().astype(np.float64)[: len(self._gcols)]
-        self._gate_mean = self._feat_mean[self._gcols].astype(np.float64)
-        self._gate_std = self._feat_std[self._gcols].astype(np.float64)
-        self._gate_a = float(np.exp(-1.0 / GATE_TAU))
-        self._gate_a_return = float(np.exp(-1.0 / GATE_TAU_RETURN))
-        fitted = bool(model.presence.abs().sum() > 0) and self._ecol == ENERGY_COL  # else the logistic detector
-        self._presence = MusicGate(self._feat_mean, self._feat_std, model.presence.numpy(), self._energy_min,
-                                   c.clarity_col, c.gate_col, c.gate_tau, model.presence_stop.numpy()) if fitted else None
+        self._idle = IdleGate(model, self._feat_mean, self._feat_std)  # music present or not, the idle weight
         self._members = _cached_members(model)  # (K, M, 2 seg, P), shared: never written
         self._counts = model.member_count.numpy()
         self._style_prior = model.style_prior.numpy().astype(np.float32)  # (K, 4)
@@ -628,7 +597,6 @@ class DanceStream:
         base = model.destandardize_poses(model.pose_mean * 0)  # the mean pose, unit quaternions
         self._idle_base = base.numpy().astype(np.float32)
         self._sway = IdleSway(self._idle_base)
-        self.forced_idle = False
         self.reset()
 
     # -- controls ----------------------------------------------------------------------------
@@ -656,12 +624,7 @@ class DanceStream:
         self._density = 0.0  # their onset density (per s), taken at each code step
         self._lag = WARP_LAG  # exemplar frames the beat warp plays behind the movement
         self._has_cont = False  # the playing movement has a real continuation to match the next one to
-        self._music = False
-        self._ema = np.zeros(len(self._gcols))  # the music detector's running mean
-        if self._presence is not None:
-            self._presence.reset()
-        self._run = 0.0  # frames the gate's input has disagreed with its state (weighted: SURE_COUNT)
-        self._w_idle = 1.0  # 1 = idle, 0 = dancing; a stream starts at rest and fades in on music
+        self._idle.reset()  # no music, fully idle: a stream starts at rest and fades in on music
         self._fade_prev: np.ndarray | None = None  # the fade's last rotation vectors, dance -> idle (J, 3)
         self._prev_quat: np.ndarray | None = None
         self.codes_drawn: list[int] = []
@@ -725,16 +688,21 @@ class DanceStream:
 
     def set_idle(self, idle: bool) -> None:
         """True: settle into the idle and hold it whatever the music; False: dance to the music again."""
-        self.forced_idle = bool(idle)
+        self._idle.forced_idle = bool(idle)
+
+    @property
+    def forced_idle(self) -> bool:
+        """The idle is held whatever the music (:meth:`set_idle`)."""
+        return self._idle.forced_idle
 
     @property
     def idle_weight(self) -> float:
         """Current blend towards the idle pose: 0 dancing, 1 idle."""
-        return self._w_idle
+        return self._idle.w_idle
 
     @property
     def music_present(self) -> bool:
-        return self._music
+        return self._idle.music
 
     @property
     def tempo_bpm(self) -> float:
@@ -754,29 +722,6 @@ class DanceStream:
         return self._own_speed * FPS
 
     # -- generation ----------------------------------------------------------------------------
-    def _gate(self, row: np.ndarray) -> None:
-        present = True
-        if self._presence is not None:  # the presence detector (models/networks/music_gate.py)
-            present = self._presence.step(row, self._music)
-        elif self._ecol is not None and row[self._ecol] <= self._energy_min:
-            present = False  # silence: the detector's running mean waits for sound
-        elif self._gcols:  # noise without music: the logistic detector on the running mean
-            a = self._gate_a if self._music else self._gate_a_return
-            gate_ema(row, self._gate_idx, self._gate_mean, self._gate_std, self._ema, a)  # in place, compiled
-            # hysteresis: while dancing, noise must be clearly noise (logit below -GATE_MARGIN)
-            if float(self._ema @ self._gate_w) + self._gate_b <= (-GATE_MARGIN if self._music else 0.0):
-                present = False
-        count = 1.0  # a sure detector counts a frame as more than one (music_gate.SURE_COUNT)
-        if self._music and not present and self._presence is not None:
-            count = self._presence.stop_count()
-        self._run = self._run + count if present != self._music else 0.0
-        start = PRESENT_FRAMES if self._presence is None else START_FRAMES  # the presence detector's own
-        if self._run >= (start if present else ABSENT_FRAMES):
-            self._music, self._run = present, 0.0
-        target = 1.0 if (self.forced_idle or not self._music) else 0.0
-        step = 1.0 / FADE_FRAMES
-        self._w_idle = min(target, self._w_idle + step) if target > self._w_idle else max(target, self._w_idle - step)
-
     def listen(self, features: np.ndarray) -> np.ndarray:
         """Run only the idle gate on feature frames (k, D), no poses: the idle weight after each
         frame (k,), as :attr:`idle_weight` reads after :meth:`push` of the same frames (the gate
@@ -784,8 +729,7 @@ class DanceStream:
         x = np.asarray(features, np.float32)
         out = np.empty(len(x))
         for i in range(len(x)):
-            self._gate(x[i])
-            out[i] = self._w_idle
+            out[i] = self._idle.step(x[i])
         return out
 
     def _next_code(self) -> None:
@@ -1064,8 +1008,7 @@ class DanceStream:
                             for _ in range(-(-pre.left // self._free[t % self.seg])):
                                 pre.step()  # (models/networks/dance_numpy.py)
             pose = self._warped(t % self.seg)
-            self._gate(x[i])
-            w = self._w_idle
+            w = self._idle.step(x[i])
             if w <= 0.0:
                 self._fade_prev = None
             else:

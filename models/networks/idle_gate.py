@@ -1,0 +1,162 @@
+"""The dancing performer's idle gate: is music playing, and how far is the performer faded to its idle.
+
+:class:`IdleGate` reads one feature frame at a time (30 fps) and keeps a small state: whether
+music plays (``music``), the frames the input has disagreed with that (``run``), the idle
+weight (``w_idle``: 0 dancing, 1 idle; a smoothstep of it blends the pose,
+:meth:`models.networks.dance_stream.DanceStream._fade`), the music's running level and the
+length of the current break. Which frames sound like music is the detector's call:
+
+* a model with a fitted presence detector (:class:`models.networks.music_gate.MusicGate`, the
+  shipped one): its detector while idle, its stop network while dancing;
+* an older one: the log frame energy above the model's silence threshold, and a logistic music
+  detector on a 0.5-s running mean of the spectral shape (MFCC 1-12) and the beat tracker's
+  pulse clarity (:data:`GATE_TAU_RETURN`, :data:`GATE_MARGIN`).
+
+**Breaks are not the end of the music.** A frame at the model's silence threshold or
+:data:`BREAK_DB` below the music's running level (:data:`LEVEL_TAU`) is a *break* frame. The
+detector hears it as before (silence: its statistics wait; an audible quiet: they run, so a
+reader's pauses between words still tell speech from music), but a dancing performer stops
+only once the break has lasted :data:`BREAK_HOLD_SILENT` frames (silence: idle within 3 s of
+its start) or :data:`BREAK_HOLD` (an audible quiet, crowd or room after a song: idle within
+2.5 s). The stop-time breaks and breakdowns of a song (up to 2 s) are danced through, and
+what a break danced through counted towards the stop is void when it ends.
+
+After :data:`ABSENT_FRAMES` frames without music (a sure detector's frame counting up to
+twice, ``music_gate.SURE_COUNT``) the performer fades over :data:`FADE_FRAMES` into the idle;
+after ``music_gate.START_FRAMES`` (:data:`PRESENT_FRAMES` with the logistic detector) frames
+of music it fades back. ``forced_idle`` holds the idle whatever the music (the show's
+``/performer/idle``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from models.networks.dance_jit import gate_ema
+from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ
+from models.networks.music_gate import ENERGY_COL, START_FRAMES, MusicGate
+
+#: Frames without music before the performer starts to settle (0.5 s; with the presence
+#: detector a frame it is sure of counts up to twice, ``music_gate.SURE_COUNT``: 0.27 s).
+ABSENT_FRAMES: int = 15
+#: Frames of music before it starts to dance again (0.2 s; the logistic detector's).
+PRESENT_FRAMES: int = 6
+#: Frames of the crossfade between dance and idle (0.53 s), eased with a smoothstep.
+FADE_FRAMES: int = 16
+#: Time constant (frames) of the logistic detector's running mean while no music is heard:
+#: shorter than the one it was fitted with (GATE_TAU, 0.5 s), so the dance comes back within a second.
+GATE_TAU_RETURN: float = 5.0
+#: Logit margin of the logistic detector while music is playing: quiet or pulse-less passages
+#: of a song must look clearly like noise before the performer stops dancing.
+GATE_MARGIN: float = 6.0
+#: A frame this many dB (log frame energy) below the music's running level is a break frame.
+#: On the shared recordings and the validation songs, played whole, no run of such frames
+#: lasts 1 s (the longest 0.7 s, DANCE_C_2); at 15 dB runs of 0.8-1.2 s appear
+#: (benchmarks/studies/idle_gate.py --breaks).
+BREAK_DB: float = 20.0
+#: Time constant (frames) of the music's running level (log frame energy, dB), taken over the
+#: frames that are not break frames (2 s).
+LEVEL_TAU: float = 60.0
+#: Frames of silence (every frame at the silence threshold) after which a dancing performer
+#: stops (2.33 s: with the fade, idle 2.87 s after the music stops; a 2-s break danced through).
+BREAK_HOLD_SILENT: int = 70
+#: Frames of an audible break (some frame above the silence threshold, all 20 dB under the
+#: music) after which it stops (1.93 s: idle 2.47 s after the music gave way to a quiet crowd
+#: or room; a stop-time break of a second or so danced through).
+BREAK_HOLD: int = 58
+
+
+class IdleGate:
+    """Music present or not, and the idle weight, one feature frame at a time (module docstring).
+
+    model: the dance_vq model whose gate runs (its ``presence``/``presence_stop`` networks, or
+    its logistic ``gate``/``gate_w``); feat_mean, feat_std: its feature standardisation (D,);
+    hold_breaks: False judges break frames by the detector like any other (as before breaks
+    were held: silence stopped after :data:`ABSENT_FRAMES`).
+
+    State (``reset``): ``music`` (bool), ``run`` (frames of disagreement, weighted),
+    ``w_idle`` (0..1), ``level`` (dB), ``break_frames`` (the current break's length),
+    ``break_silent`` (every frame of it silent), ``forced_idle``.
+    """
+
+    def __init__(self, model: DanceVQ, feat_mean: np.ndarray, feat_std: np.ndarray, hold_breaks: bool = True) -> None:
+        c = model.config
+        self.hold_breaks = bool(hold_breaks)
+        self.energy_min, self._gate_b = (float(v) for v in model.gate)
+        self._ecol = c.energy_col if 0 <= c.energy_col < c.feature_dim else None
+        self._gcols = [*GATE_MFCC, c.clarity_col] if 0 <= c.clarity_col < c.feature_dim else []
+        self._gate_idx = np.array(self._gcols, np.int64)  # (G,) the logistic detector's feature columns
+        self._gate_w = model.gate_w.numpy().astype(np.float64)[: len(self._gcols)]
+        self._gate_mean = np.asarray(feat_mean, np.float64)[self._gcols]
+        self._gate_std = np.asarray(feat_std, np.float64)[self._gcols]
+        self._gate_a = math.exp(-1.0 / GATE_TAU)
+        self._gate_a_return = math.exp(-1.0 / GATE_TAU_RETURN)
+        self._level_a = math.exp(-1.0 / LEVEL_TAU)
+        fitted = bool(model.presence.abs().sum() > 0) and self._ecol == ENERGY_COL  # else the logistic detector
+        self.presence = MusicGate(feat_mean, feat_std, model.presence.numpy(), self.energy_min, c.clarity_col,
+                                  c.gate_col, c.gate_tau, model.presence_stop.numpy()) if fitted else None
+        self.forced_idle = False
+        self.reset()
+
+    def reset(self) -> None:
+        """A stream's start: no music, fully idle, no level heard yet."""
+        self.music = False
+        self.run = 0.0  # frames the input has disagreed with ``music`` (weighted: SURE_COUNT)
+        self.w_idle = 1.0  # 1 = idle, 0 = dancing; a stream starts at rest and fades in on music
+        self.level = math.nan  # the music's running level, dB (NaN: nothing heard yet)
+        self.break_frames = 0
+        self.break_silent = True
+        self._ema = np.zeros(len(self._gcols))  # the logistic detector's running mean
+        if self.presence is not None:
+            self.presence.reset()
+
+    def _is_break(self, energy: float) -> bool:
+        """Frame energy ``energy`` (dB) is a break frame: silence, or :data:`BREAK_DB` under the
+        running level. Updates the level with the frames that are not, and the break's length."""
+        silent = energy <= self.energy_min
+        if not silent and not energy < self.level - BREAK_DB:  # NaN level: nothing to be under yet
+            a = 0.0 if math.isnan(self.level) else self._level_a
+            self.level = a * self.level + (1.0 - a) * energy if a else energy
+            self.break_frames, self.break_silent = 0, True
+            return False
+        self.break_frames += 1
+        self.break_silent = self.break_silent and silent
+        return True
+
+    def _detector(self, row: np.ndarray) -> bool:
+        """The detector's verdict on a frame that is not a break: sounds like music."""
+        if self.presence is not None:  # the presence detector (models/networks/music_gate.py)
+            return self.presence.step(row, self.music)
+        if self._ecol is not None and row[self._ecol] <= self.energy_min:
+            return False  # silence: the detector's running mean waits for sound
+        if self._gcols:  # noise without music: the logistic detector on the running mean
+            a = self._gate_a if self.music else self._gate_a_return
+            gate_ema(row, self._gate_idx, self._gate_mean, self._gate_std, self._ema, a)  # in place, compiled
+            # hysteresis: while dancing, noise must be clearly noise (logit below -GATE_MARGIN)
+            if float(self._ema @ self._gate_w) + self._gate_b <= (-GATE_MARGIN if self.music else 0.0):
+                return False
+        return True
+
+    def step(self, row: np.ndarray) -> float:
+        """Advance by one feature frame ``row`` (D,); the idle weight after it (0 dancing, 1 idle)."""
+        held = False
+        if self.hold_breaks and self._ecol is not None:
+            was = self.break_frames
+            if self._is_break(float(row[self._ecol])):
+                held = self.music and self.break_frames < (BREAK_HOLD_SILENT if self.break_silent else BREAK_HOLD)
+            elif was and self.music:
+                self.run = 0.0  # a break danced through: what it counted towards the stop is void
+        present = self._detector(row)
+        count = 1.0  # a sure detector counts a frame as more than one (music_gate.SURE_COUNT)
+        if self.music and not present and self.presence is not None:
+            count = self.presence.stop_count()
+        self.run = self.run + count if present != self.music else 0.0
+        start = PRESENT_FRAMES if self.presence is None else START_FRAMES  # the presence detector's own
+        if self.run >= (start if present else ABSENT_FRAMES) and not held:
+            self.music, self.run = present, 0.0
+        target = 1.0 if (self.forced_idle or not self.music) else 0.0
+        step = 1.0 / FADE_FRAMES
+        self.w_idle = min(target, self.w_idle + step) if target > self.w_idle else max(target, self.w_idle - step)
+        return self.w_idle

@@ -1,0 +1,132 @@
+"""The idle gate (models/networks/idle_gate.py): breaks inside a song are danced through.
+
+The break tests run on a tiny random model (its logistic detector, silence in column 0); the
+last on the shipped checkpoint and the shared recordings (skipped without them).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from models.networks.dance_stream import FADE_FRAMES, DanceStream
+from models.networks.idle_gate import BREAK_DB, BREAK_HOLD, BREAK_HOLD_SILENT
+from test_dance_vq import music, tiny_model
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def weights(stream: DanceStream, x: np.ndarray) -> np.ndarray:
+    return np.array([stream.push(row[None]) is not None and stream.idle_weight for row in x], np.float64)
+
+
+def song_with_break(frames: int, level: float) -> np.ndarray:
+    """300 frames of music, a break of ``frames`` frames at log energy ``level`` (column 0), 200 of music."""
+    x = music(500 + frames)
+    x[300:300 + frames, 0] = level
+    return x
+
+
+def test_a_two_second_silence_inside_a_song_is_danced_through() -> None:
+    x = song_with_break(60, -100.0)  # 2 s of digital silence
+    w = weights(DanceStream(tiny_model(), seed=0), x)
+    assert np.all(w[60:] == 0.0), "the performer faded during a 2-s break"
+    off = DanceStream(tiny_model(), seed=0)
+    off._idle.hold_breaks = False  # as before breaks were held: silence stopped after ABSENT_FRAMES
+    assert weights(off, x)[300:360].max() == 1.0
+
+
+def test_silence_of_three_seconds_idles_within_three_seconds_and_music_returns() -> None:
+    x = song_with_break(150, -100.0)  # 5 s of silence: the song has ended
+    w = weights(DanceStream(tiny_model(), seed=0), x)
+    idle_at = 300 + int(np.argmax(w[300:] >= 1.0))
+    assert w[300 + BREAK_HOLD_SILENT - 2] == 0.0  # held for the hold
+    assert idle_at - 300 + 1 == BREAK_HOLD_SILENT + FADE_FRAMES - 1 <= 90  # then fully idle within 3 s
+    assert np.all(w[idle_at:450] == 1.0) and np.all(w[450 + 30:] == 0.0)  # held, then back within 1 s
+
+
+def judging_stream() -> DanceStream:
+    """A tiny model's stream whose logistic detector judges column 1: music around 0, "no music"
+    where its running mean falls below -GATE_MARGIN."""
+    s = DanceStream(tiny_model(), seed=0)
+    g = s._idle
+    g._gcols, g._gate_idx = [1], np.array([1], np.int64)
+    g._gate_w, g._gate_mean, g._gate_std, g._gate_b = np.ones(1), np.zeros(1), np.ones(1), 0.0
+    g.reset()
+    return s
+
+
+def test_an_audible_quiet_break_is_held_shorter_than_silence() -> None:
+    """A break 20+ dB under the music but above the silence threshold (a quiet crowd or room
+    after a song, a stop-time break with a cymbal's tail), which the detector hears as no music,
+    stops the dance only after BREAK_HOLD frames: idle within 2.5 s; 1.3 s of it is danced through."""
+    def quiet(frames: int) -> np.ndarray:
+        x = song_with_break(frames, -10.0 - BREAK_DB - 5.0)
+        x[300:300 + frames, 1] = -10.0  # no music to the detector (its running mean under -6)
+        return x
+
+    assert -10.0 - BREAK_DB - 5.0 > tiny_model().gate[0].item()  # above the silence threshold
+    w = weights(judging_stream(), quiet(150))
+    assert w[300 + BREAK_HOLD - 2] == 0.0 and int(np.argmax(w[300:] >= 1.0)) + 1 == BREAK_HOLD + FADE_FRAMES - 1
+    assert BREAK_HOLD + FADE_FRAMES - 1 <= 75  # idle within 2.5 s
+    assert np.all(weights(judging_stream(), quiet(40))[60:] == 0.0)  # 1.3 s: danced through
+    off = judging_stream()
+    off._idle.hold_breaks = False
+    assert weights(off, quiet(40))[300:360].max() > 0.5  # without the hold it fades
+
+
+# -- a voice over the music, on the shipped checkpoint --------------------------------------------
+
+needs_shared = pytest.mark.skipif(not (SHARED / "music").is_dir() or not (SHARED / "speech").is_dir(),
+                                  reason=f"the shared recordings are not at {SHARED} (../shared/data/music, speech)")
+
+
+def _recording(name: str, seconds: float) -> np.ndarray:
+    """The first ``seconds`` of shared recording ``name``, 22050 Hz mono, whole 30-fps frames."""
+    from models.features.audio_io import load_audio
+
+    return load_audio(SHARED / "music" / name, 22050)[0][: int(seconds * 22050) // 735 * 735]
+
+
+def _speech() -> np.ndarray:
+    from models.features.audio_io import load_audio
+
+    return np.concatenate([load_audio(f, 22050)[0] for f in sorted((SHARED / "speech").glob("*.ogg"))])
+
+
+@needs_shared
+def test_a_voice_alone_still_idles_within_two_seconds_and_holds() -> None:
+    from models.features.spectral import extract_features
+    from models.generate import load_model
+    from script_loader import load_script
+
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    lm = load_model(None)
+    song = _recording("vibeace_kevinmacleod.ogg", 20.0)
+    talk = _speech()[: 10 * 22050 // 735 * 735]
+    talk = talk * 10 ** ((ig.rms_dbfs(song) - ig.rms_dbfs(talk)) / 20)  # at the music's level
+    x = np.concatenate([song, talk, song]).astype(np.float32)
+    w = DanceStream(lm.model, seed=7).listen(extract_features(x, lm.features))
+    g0, g1 = len(song) // 735, (len(song) + len(talk)) // 735
+    idle_at = g0 + int(np.argmax(w[g0:g1] >= 1.0))
+    assert w[idle_at] == 1.0 and idle_at - g0 < 60 and np.all(w[idle_at:g1] == 1.0)
+
+
+@needs_shared
+def test_a_recording_with_two_second_silences_cut_in_is_danced_through() -> None:
+    """Issue 43's breaks on a real recording: 2 s of silence every 10 s, idle at most 2 % of its
+    frames after the first 3 s (before the hold: 20 %)."""
+    from models.features.spectral import extract_features
+    from models.generate import load_model
+    from script_loader import load_script
+
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    lm = load_model(None)
+    feats = extract_features(ig.with_breaks(_recording("pistachio_ragtime_lenaorsa.ogg", 45.0), 2.0), lm.features)
+    on = DanceStream(lm.model, seed=7)
+    assert (on.listen(feats)[90:] > 0).mean() <= 0.02
+    off = DanceStream(lm.model, seed=7)
+    off._idle.hold_breaks = False
+    assert (off.listen(feats)[90:] > 0).mean() > 0.1
