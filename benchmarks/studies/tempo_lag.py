@@ -24,7 +24,8 @@ the largest lead::
 
     nice -n 5 .venv/bin/python benchmarks/studies/tempo_lag.py --data ../shared/data --seeds 48 --stretch
 
-``--stretch-motion`` adds the stretch set's figures (speed and centroid ratios, band
+``--grid LEAD,TAU ...`` tries other settings of the lead (the ramp's lag against the wander
+each adds on the stretch set); ``--stretch-motion`` adds the stretch set's figures (speed and centroid ratios, band
 amplitudes, beat hit rates; ``benchmarks/listening.py --sets stretch``) with the lead off and on.
 """
 
@@ -175,6 +176,35 @@ def steadiness(lm, cache, songs, opts) -> list[tuple[str, str, float, float, flo
     return rows
 
 
+def lead_grid(lm, y: np.ndarray, bpm: float, cache, songs, opts, grid) -> list[tuple[float, float, float, float, float]]:
+    """Per (DRIFT_LEAD, DRIFT_TAU) of ``grid``: (lead, tau, the followed tempo's lag on the ramp
+    (s, 4-s smoothing), the mean and the largest over the stretch-set excerpts of the wander
+    the lead adds: the standard deviation of ln(followed bpm with it / without it), %)."""
+    from models.evaluation import listening as L
+    from models.networks import tempo as TM
+    from models.timebase import FPS
+
+    logp, clarity, onset = beat_columns(lm, y)
+    truth = bpm * L.ramp_rate((np.arange(len(logp)) + 1) / FPS)
+    steady = []
+    for p, _ in songs:
+        start, seconds = L._excerpt_window(cache, p, opts)
+        steady += [beat_columns(lm, cache.excerpt(p, start, seconds, r)) for r in L.STRETCH_RATES]
+    skip = int(SKIP_S * FPS)
+    off = [followed_bpm(*c, False)[skip:] for c in steady]
+    keep = TM.DRIFT_LEAD, TM.DRIFT_TAU
+    rows = []
+    try:
+        for lead, tau in grid:
+            TM.DRIFT_LEAD, TM.DRIFT_TAU = lead, tau
+            lag = lag_through_the_measure(truth, _filled(followed_bpm(logp, clarity, onset, True)), L.SMOOTH_S)[1]
+            added = [100.0 * float(np.nanstd(np.log(followed_bpm(*c, True)[skip:] / o))) for c, o in zip(steady, off)]
+            rows.append((lead, tau, lag, float(np.mean(added)), float(np.max(added))))
+    finally:
+        TM.DRIFT_LEAD, TM.DRIFT_TAU = keep
+    return rows
+
+
 #: The stretch set's figures ``--stretch-motion`` compares (keys of ``listening.summary``).
 MOTION_KEYS: tuple[str, ...] = ("speed_ratio", "centroid_ratio", "amp_min", "amp_max", "hit_0.8", "hit_1", "hit_1.25",
                                 "hit_half_min")
@@ -200,6 +230,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cache", default=".cache/listening", metavar="DIR", help="audio cache (default .cache/listening)")
     p.add_argument("--seeds", type=int, default=0, metavar="N", help="run the performer over the ramp at seeds 0..N-1")
     p.add_argument("--stretch", action="store_true", help="the follower's wander over the stretch set")
+    p.add_argument("--grid", nargs="+", metavar="LEAD,TAU",
+                   help="other DRIFT_LEAD,DRIFT_TAU (frames) pairs: the ramp's lag and the wander each adds")
     p.add_argument("--stretch-motion", action="store_true",
                    help="the stretch set's figures (benchmarks/listening.py, seeds 0-5), lead off and on")
     a = p.parse_args(argv)
@@ -243,6 +275,12 @@ def main(argv: list[str] | None = None) -> int:
               "| --- | ---: | ---: | ---: | ---: | ---: |")
         for row in steadiness(lm, cache, songs, opts):
             print("| {} | {} | {:.2f} | {:.2f} | {:.4f} | {:.1f} |".format(*row))
+    if a.grid:
+        grid = [tuple(float(v) for v in g.split(",")) for g in a.grid]
+        print("\n| DRIFT_LEAD | DRIFT_TAU | ramp: followed tempo's lag (s) | wander added, mean (%) | largest (%) |\n"
+              "| ---: | ---: | ---: | ---: | ---: |")
+        for row in lead_grid(lm, y, bpm, cache, songs, opts, grid):
+            print("| {:.0f} | {:.0f} | {:.2f} | {:.2f} | {:.2f} |".format(*row))
     if a.stretch_motion:
         got = stretch_motion(lm, cache, songs, opts)
         print("\nThe stretch set (seeds 0-5), lead off and on\n\n| figure | off | on |\n| --- | ---: | ---: |")
