@@ -13,6 +13,7 @@ would; the figures are for finding where the time goes, the budgets are checked 
 ``make bench``::
 
     .venv/bin/python benchmarks/hop_profile.py --seconds 30
+    .venv/bin/python benchmarks/hop_profile.py --seconds 30 --style waltz --guidance 1   # a style, unguided
 
 Prints median, p95 and p99 per stage in ms (the first quarter of each stage's calls,
 warm-up included, left out).
@@ -59,7 +60,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--lead", type=float, default=0.0, help="the performer's lead, ms (default 0; performer run --lead)")
     p.add_argument("--block", type=int, default=512, help="samples per audio block (default 512)")
     p.add_argument("--rate", type=int, default=44100, help="input sample rate the audio is played at (default 44100)")
+    p.add_argument("--style", default=None, help="a requested style (performer run --style; default: auto)")
+    p.add_argument("--guidance", type=float, default=None,
+                   help="STYLE_GUIDANCE for this run (default: the shipped one; 1: a style without guidance)")
     args = p.parse_args(argv)
+    if args.guidance is not None and not args.guidance > 0:
+        p.error("--guidance must be > 0")
 
     import models.features.context as context
     import models.features.steadiness as steadiness
@@ -98,9 +104,11 @@ def main(argv: list[str] | None = None) -> int:
         _wrap(t, owner, name, label)
     if hasattr(dance_stream, "match_exemplar"):  # (older trees: NumPy steps instead)
         dance_stream.match_exemplar = _timed(t, "dance_vq: code step: motion matching", dance_stream.match_exemplar)
+    if args.guidance is not None:  # a script: the module's setting for this one run
+        dance_stream.STYLE_GUIDANCE = args.guidance
 
     try:
-        pipe = build_pipeline(args.checkpoint, lead=args.lead)
+        pipe = build_pipeline(args.checkpoint, lead=args.lead, style=args.style)
         audio, sr = load_audio(args.audio or bundled_clip_path(), args.rate, mono=False)
     except PerformerError as exc:
         print(f"hop_profile: {exc}", file=sys.stderr)
@@ -116,7 +124,8 @@ def main(argv: list[str] | None = None) -> int:
     src = FileSource(audio, sr, name="audio", block_size=args.block)
     engine = Engine(src, pipe.extractor_factory, model, sinks,
                     EngineConfig(threads=1, warmup_s=3.0, duration_s=args.seconds, stats_size=frames + 64))
-    print(f"playing {args.seconds:.0f} s of {args.audio or 'the bundled clip'} in real time ...", file=sys.stderr)
+    print(f"playing {args.seconds:.0f} s of {args.audio or 'the bundled clip'} in real time, style "
+          f"{args.style or 'auto'}, STYLE_GUIDANCE {dance_stream.STYLE_GUIDANCE:g} ...", file=sys.stderr)
     engine.start()
     engine.wait()
     hop = np.asarray(engine.compute_ms.values(), float)

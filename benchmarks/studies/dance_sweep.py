@@ -11,7 +11,8 @@ real dances' and the pooled beat hit rate and coverage (the evaluate report's de
         --data ../shared/data/dwm 1,1 2,1 4,2 1,1,0.8
 
 ``--members 0`` plays the codebook's decoder instead of the real exemplars (the design
-without choreographic memory); ``--style`` dances every song in one style.
+without choreographic memory); ``--style`` dances every song in one style, ``--guidance G``
+with ``STYLE_GUIDANCE`` G (1: the style unguided).
 """
 
 from __future__ import annotations
@@ -41,6 +42,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--members", type=int, choices=(0,), help="0: play the decoder, not the exemplars")
     p.add_argument("--style", default=None, choices=("auto", "chacha", "rumba", "waltz"),
                    help="dance every song in this style (default: auto, the music decides)")
+    p.add_argument("--guidance", type=float, default=None,
+                   help="STYLE_GUIDANCE for this run (default: the shipped one; 1: a style without guidance)")
     args = p.parse_args(argv)
 
     import torch
@@ -70,6 +73,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.members == 0:
         lm.model.member_count.zero_()
+    if args.guidance is not None:  # a script: the module's setting for this one run
+        ds.STYLE_GUIDANCE = args.guidance
     real = [positions(c.poses) for c in clips]
     beats = [clip_music_beats(args.data, c) for c in clips]
     rb = pooled_beats(real, beats)

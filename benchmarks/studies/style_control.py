@@ -22,6 +22,11 @@ song's full class shares::
     .venv/bin/python benchmarks/studies/style_control.py --checkpoint models/assets/default.pt \\
         --data ../shared/data/dwm --json runs/style_control.json
 
+``--seed 0 1 2 3 4`` prints one summary per seed and their pool (every song-seed a row);
+``--styles chacha rumba`` requests only those styles; ``--guidance G`` sets
+``STYLE_GUIDANCE`` (models/networks/dance_stream.py) for the run, ``--guidance 1``
+switching the classifier-free guidance off.
+
 Exit status 2 on a missing or unreadable checkpoint or dataset, or a checkpoint whose
 model takes no style.
 """
@@ -29,6 +34,7 @@ model takes no style.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 from collections.abc import Callable, Sequence
@@ -128,9 +134,28 @@ def table(results: dict[str, dict], requests: Sequence[str | None] = REQUESTS, c
     return "\n".join(lines)
 
 
-def run(checkpoint: str, data_root: str | Path, cache_dir: str | Path | None, seed: int = 0,
-        log=print) -> tuple[dict[str, dict], list[str]]:
-    """Load, generate and classify (see the module docstring); returns (results, class names)."""
+def seeds_table(runs: dict[int, dict[str, dict]], requests: Sequence[str | None] = REQUESTS,
+                clear: float = 0.2) -> str:
+    """Markdown table of several seeds' :func:`summary`: per seed and pooled (:func:`pool`), each
+    column's mean share of the target style and the songs it wins by at least ``clear``."""
+    cols = ["real", *(r or "auto" for r in requests)]
+    lines = ["| seed | " + " | ".join(cols) + " |", "| --- |" + " ---: |" * len(cols)]
+    for label, results in [*((str(k), v) for k, v in runs.items()), ("all", pool(runs))]:
+        s = summary(results, requests, clear)
+        lines.append(f"| {label} | " + " | ".join(
+            f"{s[c]['mean_share']:.3f} ({s[c]['songs_clear']}/{s[c]['songs']})" for c in cols) + " |")
+    return "\n".join(lines)
+
+
+def pool(runs: dict[int, dict[str, dict]]) -> dict[str, dict]:
+    """One results dict of several seeds' (``{seed: results}``): every song-seed a row."""
+    return {f"{name} seed {seed}": row for seed, results in runs.items() for name, row in results.items()}
+
+
+def run(checkpoint: str, data_root: str | Path, cache_dir: str | Path | None, seeds: Sequence[int] = (0,),
+        requests: Sequence[str | None] = REQUESTS, log=print) -> tuple[dict[int, dict[str, dict]], list[str]]:
+    """Load, generate and classify (see the module docstring) once per seed; returns
+    (``{seed: results}``, class names)."""
     import torch
 
     from models.errors import ConfigError
@@ -149,16 +174,17 @@ def run(checkpoint: str, data_root: str | Path, cache_dir: str | Path | None, se
     classifier = style_classifier(train, opts.classifier_epochs, opts.seed, cache_dir)
     clips = {c.name: c for c in load_clips(data_root, val_names, lm.features, opts)}
 
-    def generate(name: str, style: str | None) -> np.ndarray:
+    def generate(seed: int, name: str, style: str | None) -> np.ndarray:
         c = clips[name]
-        log(f"  {name}: {style or 'auto'}")
+        log(f"  {name}: {style or 'auto'}, seed {seed}")
         with torch.no_grad():
             return positions(run_model(lm.model, c.features, opts.window, opts.hop, seed=seed, style=style,
                                        **_audio_kw(lm.model, data_root, c)))
 
-    log(f"generating {len(val_names)} validation dances x {len(REQUESTS)} styles...")
+    log(f"generating {len(val_names)} validation dances x {len(requests)} styles x {len(seeds)} seeds...")
     songs = [(n, clips[n].style, positions(clips[n].poses)) for n in val_names]
-    return measure(classifier, songs, generate), list(classifier.class_names)
+    return ({seed: measure(classifier, songs, functools.partial(generate, seed), requests) for seed in seeds},
+            list(classifier.class_names))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -171,7 +197,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--data", required=True, metavar="DIR", help="the DWM dataset directory (holds DANCE_* dirs)")
     p.add_argument("--cache", default=".cache/corpus", metavar="DIR",
                    help="corpus and style-classifier cache (default .cache/corpus)")
-    p.add_argument("--seed", type=int, default=0, help="generation seed (default 0)")
+    p.add_argument("--seed", type=int, nargs="+", default=[0],
+                   help="generation seeds (default 0); several: a summary per seed and their pool")
+    p.add_argument("--styles", nargs="+", choices=[r or "auto" for r in REQUESTS], metavar="STYLE",
+                   help="request only these styles (auto, chacha, rumba, waltz; default all)")
+    p.add_argument("--guidance", type=float, metavar="G",
+                   help="STYLE_GUIDANCE for this run (default: the shipped one; 1: no guidance)")
     p.add_argument("--margin", type=float, default=0.2,
                    help="a style wins a song 'clearly' when its share beats every other style's by this "
                         "much (default 0.2)")
@@ -182,24 +213,41 @@ def main(argv: list[str] | None = None) -> int:
         p.error("--margin must be in [0, 1)")
     if a.threads < 1:
         p.error("--threads must be >= 1")
+    if a.guidance is not None and not a.guidance > 0:
+        p.error("--guidance must be > 0")
     import torch
 
+    import models.networks.dance_stream as ds
     from models.errors import PerformerError
 
+    requests = [r for r in REQUESTS if (r or "auto") in (a.styles or [r or "auto"])]
+    shipped = ds.STYLE_GUIDANCE
+    guidance = shipped if a.guidance is None else a.guidance
     torch.set_num_threads(a.threads)
     try:
-        results, classes = run(a.checkpoint, a.data, a.cache, a.seed, log=lambda m: print(m, file=sys.stderr))
+        ds.STYLE_GUIDANCE = guidance  # read by every code step of this run's streams
+        runs, classes = run(a.checkpoint, a.data, a.cache, a.seed, requests, log=lambda m: print(m, file=sys.stderr))
     except (PerformerError, OSError) as e:
         print(f"style_control.py: {e}", file=sys.stderr)
         return 2
+    finally:
+        ds.STYLE_GUIDANCE = shipped
+    seeds = " ".join(map(str, a.seed))
     print(f"Style classifier's share of each generated dance's windows for the target style "
-          f"(in brackets: margin over the most frequent other style); {a.checkpoint}, seed {a.seed}\n")
-    print(table(results, clear=a.margin))
+          f"(in brackets: margin over the most frequent other style); {a.checkpoint}, seed {seeds}, "
+          f"STYLE_GUIDANCE {guidance:g}\n")
+    if len(runs) == 1:
+        print(table(next(iter(runs.values())), requests, clear=a.margin))
+    else:
+        print(f"Mean share of the target style (songs won by >= {a.margin:g})\n")
+        print(seeds_table(runs, requests, clear=a.margin))
     if a.json:
         Path(a.json).parent.mkdir(parents=True, exist_ok=True)
         Path(a.json).write_text(json.dumps({
-            "checkpoint": a.checkpoint, "seed": a.seed, "classes": classes, "margin": a.margin,
-            "songs": results, "summary": summary(results, clear=a.margin)}, indent=1) + "\n", encoding="utf-8")
+            "checkpoint": a.checkpoint, "seeds": a.seed, "guidance": guidance, "classes": classes,
+            "margin": a.margin, "runs": {str(k): {"songs": v, "summary": summary(v, requests, a.margin)}
+                                         for k, v in runs.items()},
+            "summary": summary(pool(runs), requests, a.margin)}, indent=1) + "\n", encoding="utf-8")
         print(f"wrote {a.json}")
     return 0
 
