@@ -233,7 +233,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--grid", nargs="+", metavar="LEAD,TAU",
                    help="other DRIFT_LEAD,DRIFT_TAU (frames) pairs: the ramp's lag and the wander each adds")
     p.add_argument("--stretch-motion", action="store_true",
-                   help="the stretch set's figures (benchmarks/listening.py, seeds 0-5), lead off and on")
+                   help="the stretch set's figures (benchmarks/listening.py), lead off and on")
+    p.add_argument("--stretch-seeds", type=int, nargs="+", default=None, metavar="SEED",
+                   help="--stretch-motion's sampling seeds (default: the benchmark's, 0-5)")
     a = p.parse_args(argv)
     import torch
 
@@ -242,7 +244,8 @@ def main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(1)
     data = Path(a.data)
-    opts = L.Options(dwm=data / "dwm", music=data / "music", cache_dir=a.cache, progress=False, sets=("ramp",))
+    opts = L.Options(dwm=data / "dwm", music=data / "music", cache_dir=a.cache, progress=False, sets=("ramp",),
+                     seeds=tuple(a.stretch_seeds or L.SEEDS))
     lm = load_model(a.checkpoint)
     cache = L.AudioCache(opts.cache_dir)
     songs = L.stretch_songs(cache, opts)
@@ -283,7 +286,8 @@ def main(argv: list[str] | None = None) -> int:
             print("| {:.0f} | {:.0f} | {:.2f} | {:.2f} | {:.2f} |".format(*row))
     if a.stretch_motion:
         got = stretch_motion(lm, cache, songs, opts)
-        print("\nThe stretch set (seeds 0-5), lead off and on\n\n| figure | off | on |\n| --- | ---: | ---: |")
+        print(f"\nThe stretch set (seeds {', '.join(map(str, opts.seeds))}), lead off and on\n\n"
+              "| figure | off | on |\n| --- | ---: | ---: |")
         for k in MOTION_KEYS:
             print(f"| {k} | {got[False][k]:.3f} | {got[True][k]:.3f} |")
     return 0
