@@ -157,7 +157,8 @@ def test_perform_is_generate_and_reads_the_idle_weight(shipped):
     assert poses.shape == ref.shape and len(w) == len(y) // HOP
     assert np.allclose(poses, ref, atol=1e-5)
     assert w[0] > 0.9 and w[int(3.5 * FPS)] == 0.0 and w[-1] == 1.0  # starts at rest, dances, settles on silence
-    assert L.settle_back(w, 6 * FPS, len(w), len(w))["settle_s"] <= 2.0
+    # silence after a song: held as a break for 2.33 s, fully idle within 3 s (issue 43)
+    assert L.settle_back(w, 6 * FPS, len(w), len(w))["settle_s"] <= 3.0
     # the recording sounds up to the end of the music (a frame's window reaches 2048 samples back)
     assert 6 * FPS <= L.sounding_frames(shipped, extract_features(y, shipped.features)) <= 6 * FPS + 3
     trace: dict = {}
