@@ -133,16 +133,22 @@ def test_default_checkpoint_wins_its_styles_on_the_validation_split(dwm_root, tm
 
 @pytest.mark.slow
 @pytest.mark.data
-def test_the_guidance_doubles_the_cha_cha_songs_won(dwm_root, tmp_path):
-    """Cha-cha requested on the 6 validation songs with seeds 0-4 (30 song-seeds): with the
-    classifier-free guidance (``STYLE_GUIDANCE = 3``) it wins 13 by at least 0.2, without it
-    (``--guidance 1``: the style prior and the style's own dancers still on) 6
-    (docs/training.md, "Style"). This test fails when the guidance is switched off."""
+def test_the_guidance_makes_cha_cha_win_more_songs(dwm_root, tmp_path):
+    """Cha-cha requested on the 6 validation songs with seeds 0-4 (30 song-seeds), with the
+    shipped classifier-free guidance and without it (``--guidance 1``; the style prior and the
+    style's own dancers on in both): with it the cha-cha share is at least 0.02 higher and more
+    songs are won by 0.2 (0.622 against 0.578, 15 against 11; docs/training.md, "Style"). Fails
+    when ``STYLE_GUIDANCE`` is 1.0: the two runs are then the same."""
     import json
 
-    out = tmp_path / "g.json"
     argv = ["--data", str(dwm_root), "--cache", str(REPO / ".cache" / "corpus"), "--styles", "chacha",
-            "--seed", "0", "1", "2", "3", "4", "--json", str(out)]
-    assert sc.main(argv) == 0
-    s = json.loads(out.read_text())["summary"]["chacha"]
-    assert s["songs"] == 30 and s["songs_clear"] >= 10, s
+            "--seed", "0", "1", "2", "3", "4"]
+    chacha = {}
+    for name, extra in (("guided", []), ("unguided", ["--guidance", "1"])):
+        out = tmp_path / f"{name}.json"
+        assert sc.main([*argv, *extra, "--json", str(out)]) == 0
+        chacha[name] = json.loads(out.read_text())["summary"]["chacha"]
+    with_, without = chacha["guided"], chacha["unguided"]
+    assert with_["songs"] == without["songs"] == 30
+    assert with_["mean_share"] >= without["mean_share"] + 0.02, chacha
+    assert with_["songs_clear"] > without["songs_clear"], chacha

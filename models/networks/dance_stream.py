@@ -133,8 +133,8 @@ BONE_CAP: float = 0.999
 #: Classifier-free guidance of a requested style (Ho & Salimans 2021): the logits move from
 #: the music-only ones ("auto") past the style-conditioned ones by this factor. The predictor
 #: was trained with the style token dropped to "auto" 40 % of the time, which is what it needs.
-#: It costs a second prefix (the window in "auto"); cha-cha wins 13 of the 30 validation
-#: song-seeds with it, 6 at 1.0 (benchmarks/studies/style_control.py --guidance; docs/training.md).
+#: It costs a second prefix (the window in "auto"); cha-cha wins 15 of the 30 validation
+#: song-seeds with it, 11 at 1.0 (benchmarks/studies/style_control.py --guidance; docs/training.md).
 STYLE_GUIDANCE: float = 3.0
 #: Weight of the style prior (``DanceVQ.style_prior``: how much likelier each code is in the
 #: requested style's training dances) added to a requested style's logits.
