@@ -78,6 +78,29 @@ def first_frame(dance: Dance, tempo: float = 1.0) -> int:
     return int(np.argmax(tempo * frame_time_s(f) >= t0))
 
 
+def clip_motion(dance: Dance, n_frames: int, tempo: float = 1.0) -> tuple:
+    """The motion of a clip of ``dance`` at a tempo factor whose stretched song has
+    ``n_frames`` feature frames: (the retargeted, **not** canonicalised
+    :class:`~models.rig.motion.Motion` of clip frames ``f0 .. f1 - 1``, valid (T,) bool, f0, f1).
+    :func:`make_clip` canonicalises it; models.training.travel_memory reads the root's travel
+    and heading from it."""
+    ts = motion_timestamps(dance)  # (N,) seconds of original audio time
+    spline = CubicSpline(ts, dance.world_positions_m(), axis=0)
+    # frame f (stretched song) ends at frame_time_s(f); original time = tempo * that.
+    orig_t = tempo * frame_time_s(np.arange(n_frames))
+    keep = np.flatnonzero((orig_t >= ts[0]) & (orig_t <= ts[-1]))
+    if len(keep) < 2:
+        raise ValueError(f"{dance.name}: motion does not overlap the audio")
+    f0, f1 = int(keep[0]), int(keep[-1]) + 1
+    positions = spline(orig_t[f0:f1])
+    motion = retarget(positions, load_default_skeleton(), source=dance.name)
+    valid = np.ones(f1 - f0, dtype=bool)
+    for first, length in held_runs(dance):  # the mocap froze here: not a target to learn
+        lo, hi = ts[max(first - 2, 0)], ts[min(first + length, len(ts) - 1)]
+        valid &= ~((orig_t[f0:f1] >= lo) & (orig_t[f0:f1] <= hi))
+    return motion, valid, f0, f1
+
+
 def make_clip(dance: Dance, cfg: FeatureConfig, tempo: float = 1.0, audio: np.ndarray | None = None) -> Clip:
     """Build one clip from a dance at a tempo factor (no cache). ``audio``: the song at 22050 Hz."""
     import librosa
@@ -87,21 +110,8 @@ def make_clip(dance: Dance, cfg: FeatureConfig, tempo: float = 1.0, audio: np.nd
     if tempo != 1.0:
         audio = librosa.effects.time_stretch(audio, rate=tempo).astype(np.float32)
     feats = extract_features(audio, cfg)
-    ts = motion_timestamps(dance)  # (N,) seconds of original audio time
-    spline = CubicSpline(ts, dance.world_positions_m(), axis=0)
-    # frame f (stretched song) ends at frame_time_s(f); original time = tempo * that.
-    orig_t = tempo * frame_time_s(np.arange(len(feats)))
-    keep = np.flatnonzero((orig_t >= ts[0]) & (orig_t <= ts[-1]))
-    if len(keep) < 2:
-        raise ValueError(f"{dance.name}: motion does not overlap the audio")
-    f0, f1 = int(keep[0]), int(keep[-1]) + 1
-    positions = spline(orig_t[f0:f1])
-    motion = canonicalize(retarget(positions, load_default_skeleton(), source=dance.name))
-    valid = np.ones(f1 - f0, dtype=bool)
-    for first, length in held_runs(dance):  # the mocap froze here: not a target to learn
-        lo, hi = ts[max(first - 2, 0)], ts[min(first + length, len(ts) - 1)]
-        valid &= ~((orig_t[f0:f1] >= lo) & (orig_t[f0:f1] <= hi))
-    poses = motion.to_vector()
+    motion, valid, f0, f1 = clip_motion(dance, len(feats), tempo)
+    poses = canonicalize(motion).to_vector()
     q = poses[:, 3:].reshape(len(poses), -1, 4)
     q *= np.where(q[..., 3:] < 0, -1.0, 1.0).astype(np.float32)  # canonical hemisphere w >= 0
     return Clip(dance.name, dance.style, float(tempo), feats[f0:f1].astype(np.float32), poses, valid, f0)

@@ -334,12 +334,19 @@ class DanceVQ(nn.Module):
         # as the live beat tracker hears it (0: unknown, played at its own pace). DanceStream plays
         # a member at the ratio of the music's tempo to this one (models.networks.dance_stream).
         self.register_buffer("member_period", torch.zeros(c.codebook, c.members))
+        # where each member travels (models.training.travel_memory): per frame of its window, the
+        # root's horizontal displacement (x, z, metres) and the Hips' heading change (radians about
+        # +Y) since the window's first frame, in that frame's heading frame (+Z its facing), from
+        # the dancers' own motion, which the canonical poses above drop (models.data.canonical).
+        # float16; zeros (checkpoints from before it): every movement in place. The stage part
+        # integrates them into a world position and heading (models.networks.stage).
+        self.register_buffer("member_travel", torch.zeros(c.codebook, c.members, 2 * c.seg, 3, dtype=torch.float16))
 
     def _load_from_state_dict(self, state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys,
                               error_msgs) -> None:
-        """Checkpoints saved before the style or tempo memory or the presence detector existed
-        load without them (zeros: unknown, not fitted)."""
-        for name in ("member_style", "style_prior", "member_period", "presence", "presence_stop"):
+        """Checkpoints saved before the style, tempo or travel memory or the presence detector
+        existed load without them (zeros: unknown, not fitted, in place)."""
+        for name in ("member_style", "style_prior", "member_period", "member_travel", "presence", "presence_stop"):
             state_dict.setdefault(prefix + name, torch.zeros_like(getattr(self, name)))
         super()._load_from_state_dict(state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys,
                                       error_msgs)

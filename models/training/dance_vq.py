@@ -267,18 +267,33 @@ def clip_periods(model: DanceVQ, clips: list) -> dict[int, float]:
 
 
 @torch.no_grad()
-def fit_members(model: DanceVQ, clips: list, phases: tuple[int, ...] = (0, 4), progress: bool = False) -> dict[str, float]:
+def window_travel(track: np.ndarray) -> np.ndarray:
+    """(F, 3) float32 travel of one window from its root track (F, 3): x, z (m) and unwrapped
+    heading (rad) per frame: each frame's horizontal displacement from frame 0 turned into
+    frame 0's heading frame (+Z its facing), and its heading change since frame 0
+    (``DanceVQ.member_travel``)."""
+    d = track[:, :2] - track[:1, :2]
+    c, s = np.cos(track[0, 2]), np.sin(track[0, 2])
+    return np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1], track[:, 2] - track[0, 2]], 1).astype(np.float32)
+
+
+@torch.no_grad()
+def fit_members(model: DanceVQ, clips: list, phases: tuple[int, ...] = (0, 4), progress: bool = False,
+                travel: list | None = None) -> dict[str, float]:
     """Fill the choreographic memory: for every code, the ``members`` real windows of
     ``2 * seg`` valid frames (the code's movement and its continuation) whose encoding
     lies nearest the code vector, from every clip at the grid ``phases``, and each member's
-    style token (``member_style``: the style of the dance it comes from). Returns how many
-    codes got at least one member and how many windows were searched."""
+    style token (``member_style``: the style of the dance it comes from). ``travel``: per
+    clip its root track (T, 3: x, z, unwrapped heading of the motion before canonicalisation,
+    models.training.travel_memory), which fills ``member_travel`` (:func:`window_travel`;
+    None: zeros, in place). Returns how many codes got at least one member and how many
+    windows were searched."""
     model.eval()
     c = model.config
     s = c.seg
-    z_all, windows, styles, periods = [], [], [], []
+    z_all, windows, styles, periods, travels = [], [], [], [], []
     period = clip_periods(model, clips)
-    for clip in clips:
+    for ci, clip in enumerate(clips):
         for p in phases:
             n = (clip.num_frames - p) // s
             if n < 3:
@@ -290,16 +305,20 @@ def fit_members(model: DanceVQ, clips: list, phases: tuple[int, ...] = (0, 4), p
                 windows.append(clip.poses[p + k * s: p + (k + 2) * s])
                 styles.append(STYLE_TOKEN.get(clip.style, 0))
                 periods.append(period[id(clip)])
+                if travel is not None:
+                    travels.append(window_travel(travel[ci][p + k * s: p + (k + 2) * s]))
     z = torch.stack(z_all)
     codes = model.quantizer.codes(z.T[None])[0]
     dist = (z - model.quantizer.embed[codes]).pow(2).sum(1)
     poses = np.stack(windows)
     style = torch.tensor(styles, dtype=torch.int64)
     period_t = torch.tensor(periods, dtype=torch.float32)
+    travel_t = torch.from_numpy(np.stack(travels)) if travel is not None else None
     model.member_poses.zero_()
     model.member_count.zero_()
     model.member_style.zero_()
     model.member_period.zero_()
+    model.member_travel.zero_()
     for code in codes.unique().tolist():
         idx = torch.nonzero(codes == code)[:, 0]
         keep = idx[dist[idx].argsort()[: c.members]].numpy()
@@ -307,6 +326,8 @@ def fit_members(model: DanceVQ, clips: list, phases: tuple[int, ...] = (0, 4), p
         model.member_count[code] = len(keep)
         model.member_style[code, : len(keep)] = style[keep]
         model.member_period[code, : len(keep)] = period_t[keep]
+        if travel_t is not None:
+            model.member_travel[code, : len(keep)] = travel_t[keep].half()
     have = torch.nonzero(model.member_count > 0)[:, 0]
     emb = model.quantizer.embed
     for code in torch.nonzero(model.member_count == 0)[:, 0].tolist():  # a code no window chose: its nearest neighbour's
@@ -315,6 +336,7 @@ def fit_members(model: DanceVQ, clips: list, phases: tuple[int, ...] = (0, 4), p
         model.member_count[code] = model.member_count[near]
         model.member_style[code] = model.member_style[near]
         model.member_period[code] = model.member_period[near]
+        model.member_travel[code] = model.member_travel[near]
     model.train()
     out = {"codes_with_members": len(have), "windows": len(windows)}
     if progress:

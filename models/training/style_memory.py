@@ -51,6 +51,27 @@ def add_style_memory(model: DanceVQ, motion_clips: list) -> np.ndarray:
     return fit_style_prior(model, motion_clips)
 
 
+def load_dance_vq(path: str, what: str):
+    """:func:`models.generate.load_model` of ``path``; PerformerError unless it is a dance_vq
+    model (``what``: what the caller adds to it, for the message)."""
+    from models.errors import PerformerError
+    from models.generate import load_model
+
+    lm = load_model(path)
+    if not isinstance(lm.model, DanceVQ):
+        raise PerformerError(f"{lm.path} is a {lm.name!r} model; {what} is dance_vq's")
+    return lm
+
+
+def save_as_loaded(lm, out: str) -> None:
+    """Save ``lm.model`` to ``out`` with the metadata it was loaded with (model name, features, rig, extra)."""
+    from models.networks.checkpoint import save_checkpoint
+
+    meta = lm.meta
+    save_checkpoint(out, lm.model, model_name=meta["model_name"], generator_config=lm.model.config,
+                    feature_config=meta["feature_config"], rig=meta["rig"], extra=meta.get("extra"))
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\nExit status")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -62,24 +83,18 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
 
     from models.errors import PerformerError
-    from models.generate import load_model
-    from models.networks.checkpoint import save_checkpoint
     from models.training.config import TrainConfig
     from models.training.dance_vq import training_clips
 
     torch.set_num_threads(1)
     try:
-        lm = load_model(a.checkpoint)
-        if not isinstance(lm.model, DanceVQ):
-            raise PerformerError(f"{lm.path} is a {lm.name!r} model; the style memory is dance_vq's")
+        lm = load_dance_vq(a.checkpoint, "the style memory")
         if lm.features.beat_phase and lm.model.config.onset_col < 0:  # saved before the tempo memory
             lm.model.config = dataclasses.replace(lm.model.config, onset_col=lm.features.base_dim - 1)
         cfg = TrainConfig.from_toml(a.config)
         _, motion = training_clips(cfg, lm.features, a.data, a.cache, progress=True)
         counts = add_style_memory(lm.model, motion)
-        meta = lm.meta
-        save_checkpoint(a.out, lm.model, model_name=meta["model_name"], generator_config=lm.model.config,
-                        feature_config=meta["feature_config"], rig=meta["rig"], extra=meta.get("extra"))
+        save_as_loaded(lm, a.out)
     except (PerformerError, OSError) as e:
         print(f"style_memory: {e}", file=sys.stderr)
         return 2
