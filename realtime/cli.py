@@ -26,6 +26,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "realtime.commands.devices",
     "realtime.commands.train",
     "realtime.commands.data",
+    "realtime.commands.library",
     "realtime.commands.generate",
     "realtime.commands.evaluate",
     "realtime.commands.bench",

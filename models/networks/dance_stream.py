@@ -44,6 +44,8 @@ from models.networks.dance_jit import (joint_speed, match_exemplar, push_history
                                        warp_pose)
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 from models.networks.dance_vq import DanceVQ, style_token
+from models.networks import feet as feet_part
+from models.networks.feet import FeetLock
 from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate
 from models.networks.streaming import FEATURE_LIMIT
 from models.networks.tempo import DENSITY_WINDOW, TEMPO_RANGE, TempoFollower, danced_beat, onset_density
@@ -209,6 +211,12 @@ REPEAT_FREE: int = 4
 REPEAT_WINDOW: int = 8
 REPEAT_PENALTY: float = 1.0
 REPEAT_CALM: float = 1.0
+#: Feet on the floor (:mod:`models.networks.feet`, the stream's last step on every frame): the
+#: feet the played exemplar has on the floor stay put in the world by two-bone leg IK, no knee
+#: bends past straight, no foot goes under the floor (validation songs: foot-skating ratio 0.71
+#: -> 0.08; benchmarks/studies/foot_skating.py). The stream's ``feet`` argument overrides it.
+#: False: the legs as the memory plays them.
+FEET_LOCK: bool = True
 #: The energy control's range.
 ENERGY_RANGE: tuple[float, float] = (0.0, 2.0)
 #: The lead control's range, ms (:meth:`DanceStream.set_lead`): a display chain's delay
@@ -496,6 +504,18 @@ def _cached_bone_cap(model: DanceVQ, members: np.ndarray, counts: np.ndarray) ->
     return cached[1]
 
 
+def _cached_contacts(model: DanceVQ, members: np.ndarray) -> tuple[np.ndarray, float]:
+    """(:func:`models.networks.feet.member_contacts` of ``model``'s exemplars ``members`` (K, M, 2 seg, 3);
+    the memory's floor, m), kept on the model like :func:`_cached_members`."""
+    key = (_weights_key([model.member_poses, model.member_count]), feet_part.CONTACT_HEIGHT, feet_part.CONTACT_SPEED,
+           feet_part.FLOOR_PERCENTILE)
+    cached = getattr(model, "_contacts_cache", None)
+    if cached is None or cached[0] != key:
+        cached = (key, feet_part.member_contacts(member_positions(members), model.member_count.numpy()))
+        model._contacts_cache = cached
+    return cached[1]
+
+
 def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton products a b of quaternion rows (..., 4), (x, y, z, w) order (SciPy's). All of a
     pose's bones in one NumPy expression for :meth:`DanceStream._fade`, which runs on the audio
@@ -539,7 +559,7 @@ class DanceStream:
     """
 
     def __init__(self, model: DanceVQ, seed: int = 0, style: str | None = None, energy: float = 1.0,
-                 lead_ms: float = 0.0) -> None:
+                 lead_ms: float = 0.0, feet: bool | None = None) -> None:
         if not isinstance(model, DanceVQ):
             raise ConfigError(f"DanceStream needs a dance_vq model, got {type(model).__name__}")
         self.model = model.eval()
@@ -558,6 +578,9 @@ class DanceStream:
         self._style_prior = model.style_prior.numpy().astype(np.float32)  # (K, 4)
         self._member_style = model.member_style.numpy()  # (K, M): 0 unknown, else a style token
         self._dips = _cached_dips(model, self._members, self.seg)  # (K, M, seg)
+        # feet on the floor (models/networks/feet.py): each exemplar frame's contacts, played along
+        self._contacts, floor = _cached_contacts(model, self._members)  # (K, M, 2 seg, 3): contacts, lift (m)
+        self._feet = FeetLock(floor) if (FEET_LOCK if feet is None else feet) else None
         self._code_energy, speed = _cached_energy(model, self._members, self.seg)  # (K,) z-scores, (K, M) m/frame
         real = np.arange(speed.shape[1])[None, :] < self._counts[:, None]
         # how fast a movement may be sped up to (m/frame), and the memory's mean tempo (frames per beat)
@@ -599,6 +622,7 @@ class DanceStream:
         base = model.destandardize_poses(model.pose_mean * 0)  # the mean pose, unit quaternions
         self._idle_base = base.numpy().astype(np.float32)
         self._sway = IdleSway(self._idle_base)
+        self._idle_lift = self._feet.lift_of(self._idle_base) if self._feet is not None else 0.0
         self.reset()
 
     # -- controls ----------------------------------------------------------------------------
@@ -627,6 +651,10 @@ class DanceStream:
         self._lag = WARP_LAG  # exemplar frames the beat warp plays behind the movement
         self._has_cont = False  # the playing movement has a real continuation to match the next one to
         self._idle.reset()  # no music, fully idle: a stream starts at rest and fades in on music
+        self._played_contact = np.zeros((3 * self.seg, 3), np.float32)  # each foot's contact and the lift, as _played
+        self._at = float(self.seg)  # where in _played the last frame was read
+        if self._feet is not None:
+            self._feet.reset()
         self._fade_prev: np.ndarray | None = None  # the fade's last rotation vectors, dance -> idle (J, 3)
         self._prev_quat: np.ndarray | None = None
         self.codes_drawn: list[int] = []
@@ -768,7 +796,7 @@ class DanceStream:
             segment = m.decode_last(np.fromiter(self._codes, np.int64))
             self._codes.pop()
             window = np.concatenate([segment, np.repeat(segment[-1:], self.seg, axis=0)])
-            self._play(window, 1.0)  # no continuation to play into: its own pace
+            self._play(window, 1.0)  # no continuation to play into: its own pace (no contacts known)
             self._own_speed = 0.0
             self._commit(draws[0])
             self._has_cont = False
@@ -798,7 +826,7 @@ class DanceStream:
         rate = self._rate_for(*pairs[i])
         if self._has_cont and SPEED_MATCH > 0.0:  # the speed the bend adds or takes away, undone
             rate = self._speed_matched(cands[i], best, rate)
-        self._play(best, rate, self._bone_limit(best, max(rate, self._rate)))
+        self._play(best, rate, self._bone_limit(best, max(rate, self._rate)), self._contacts[pairs[i]])
         self._own_speed = float(self._member_speed[pairs[i]])
         self._commit(pairs[i][0])
         self._has_cont = True
@@ -872,16 +900,20 @@ class DanceStream:
         peak = math.degrees(2.0 * math.acos(min(dot, 1.0)))
         return max(1.0, self._bone_cap / peak) if peak > 0.0 else np.inf
 
-    def _play(self, window: np.ndarray, rate: float, limit: float = np.inf) -> None:
+    def _play(self, window: np.ndarray, rate: float, limit: float = np.inf, contact: np.ndarray | None = None) -> None:
         """Start playing ``window`` (2 seg, P), the next movement and its continuation, at ``rate``
         (and the rate it takes over from the current movement) at most ``limit``: the seg frames
-        before it are those the current movement would have played next."""
+        before it are those the current movement would have played next. ``contact`` (2 seg, 3):
+        its exemplar's foot contacts and lift (:func:`models.networks.feet.member_contacts`; None: none known)."""
         if not self.codes_drawn:  # before the first movement there is only its first pose
             self._played[: self.seg] = window[0]
+            self._played_contact[: self.seg] = contact[0] if contact is not None else 0.0
         else:
             at = self._advance(self.seg)  # the current movement's end, seg frames back
             self._played[: self.seg] = [warp_pose(self._played, at + i) for i in range(self.seg)]
+            self._played_contact[: self.seg] = [self._contact_at(at + i) for i in range(self.seg)]
         self._played[self.seg:] = window
+        self._played_contact[self.seg:] = contact if contact is not None else 0.0
         rate = min(rate, limit)
         self._rate_from = min(self._rate, limit) if self.codes_drawn else rate
         self._rate = rate
@@ -925,6 +957,7 @@ class DanceStream:
         :data:`BEAT_WARP`)."""
         x = self.seg + self._advance(j)
         if self._beat_cols is None or BEAT_WARP <= 0.0:  # no beat tracker, or no warp: the movement as it is
+            self._at = x
             return warp_pose(self._played, x)
         ccos, csin, clarity, logp = (float(self._raw[c]) for c in self._beat_cols)
         depth = BEAT_WARP * min(1.0, max(clarity, 0.0) / WARP_CLARITY)
@@ -933,7 +966,20 @@ class DanceStream:
         rate = self._advance(j + 1) - self._advance(j)  # exemplar frames this frame plays
         lag = self._lag + rate * depth * cos - WARP_PULL * (self._lag - WARP_LAG)
         self._lag = min(max(lag, 0.0), 2.0 * WARP_LAG)
-        return warp_pose(self._played, x - self._lag)
+        self._at = x - self._lag
+        return warp_pose(self._played, self._at)
+
+    def _contact_at(self, x: float) -> tuple[float, float, float]:
+        """Each foot's contact (left, right; 0..1) and the exemplar's lift (m) at fractional frame
+        ``x`` of ``self._played`` (:func:`models.networks.feet.member_contacts`), linearly between
+        two frames (as ``warp_pose`` reads the poses)."""
+        c = self._played_contact
+        i = min(max(int(math.floor(x)), 0), len(c) - 1)
+        f = min(max(x - i, 0.0), 1.0) if i + 1 < len(c) else 0.0
+        if f < 1e-6:
+            return float(c[i, 0]), float(c[i, 1]), float(c[i, 2])
+        a, b = c[i], c[i + 1]
+        return (float(a[0] + f * (b[0] - a[0])), float(a[1] + f * (b[1] - a[1])), float(a[2] + f * (b[2] - a[2])))
 
     def _fade(self, pose: np.ndarray, idle: np.ndarray, e: float) -> np.ndarray:
         """The dance ``pose`` (P,) -> the ``idle`` pose by weight ``e`` in (0, 1]: the root lerped,
@@ -1011,11 +1057,16 @@ class DanceStream:
                                 pre.step()  # (models/networks/dance_numpy.py)
             pose = self._warped(t % self.seg)
             w = self._idle.step(x[i])
+            e = 0.0
             if w <= 0.0:
                 self._fade_prev = None
             else:
                 e = w * w * (3 - 2 * w)  # smoothstep: no kink where the fade starts or ends
                 pose = self._fade(pose, self._sway(np.array([t]))[0], e)
+            if self._feet is not None:  # the last step: planted feet stay put (models/networks/feet.py)
+                left, right, lift = self._contact_at(self._at)  # the idle stands on both feet
+                pose = self._feet.step(pose, left + e * (1.0 - left), right + e * (1.0 - right),
+                                       lift + e * (self._idle_lift - lift))
             out[i] = pose
             self.frame += 1
         if k == 0:

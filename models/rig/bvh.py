@@ -224,7 +224,16 @@ def read_bvh(path: str | Path) -> BvhFile:
         raise DataError("BVH file not found", source=path) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise DataError(f"cannot read BVH file ({exc})", source=path) from None
-    tok = _Tokens(text, path)
+    # The tokenizer reads the hierarchy and the three MOTION header lines; the frame rows, which
+    # are most of a long file, are split line by line and converted by numpy in one go.
+    motion = re.search(r"^[ \t]*MOTION\b", text, re.M)
+    cut = len(text) if motion is None else motion.start()
+    head_lines = text[:cut].count("\n")
+    tail = text[cut:].splitlines()
+    n_head = 0
+    while n_head < len(tail) and sum(len(ln.split()) for ln in tail[:n_head]) < 6:
+        n_head += 1  # MOTION, Frames: N, Frame Time: x
+    tok = _Tokens(text[:cut] + "\n".join(tail[:n_head]), path)
     names: list[str] = []
     parents: list[int] = []
     offsets: list[list[float]] = []
@@ -279,18 +288,26 @@ def read_bvh(path: str | Path) -> BvhFile:
         raise tok.error(f"Frame Time must be at least 1e-6 s, got {frame_time}")
     width = sum(len(c) for c in channels)
     rows: dict[int, list[str]] = {}
-    for word, line in tok.items[tok.i :]:
+    for word, line in tok.items[tok.i :]:  # anything after Frame Time on its own line
         rows.setdefault(line, []).append(word)
+    for n, ln in enumerate(tail[n_head:], head_lines + n_head + 1):
+        words = ln.split()
+        if words:
+            rows[n] = words
     if len(rows) != num_frames:
         raise DataError(f"'Frames: {num_frames}' but {len(rows)} frame lines follow", source=path)
-    values = np.empty((num_frames, width))
-    for f, (line, words) in enumerate(rows.items()):
+    for line, words in rows.items():
         if len(words) != width:
             raise DataError(f"line {line}: {len(words)} values, the hierarchy has {width} channels", source=path)
-        try:
-            values[f] = [float(w) for w in words]
-        except ValueError:
-            raise DataError(f"line {line}: non-numeric value in frame {f}", source=path) from None
+    try:
+        values = np.array([w for words in rows.values() for w in words], dtype=np.float64).reshape(num_frames, width)
+    except ValueError:
+        for f, (line, words) in enumerate(rows.items()):
+            try:
+                [float(w) for w in words]
+            except ValueError:
+                raise DataError(f"line {line}: non-numeric value in frame {f}", source=path) from None
+        raise
     if not np.isfinite(values).all():
         raise DataError("non-finite channel values", source=path)
     return BvhFile(

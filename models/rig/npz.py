@@ -43,15 +43,21 @@ def save_npz(path: str | Path, motion: Motion, **extra: object) -> None:
         )
 
 
-def _open(path: Path) -> dict[str, np.ndarray]:
+def read_arrays(path: Path, what: str = "motion file") -> dict[str, np.ndarray]:
+    """Every array of an .npz archive, read without pickle; :class:`DataError` naming the file
+    if it is missing or not a readable archive."""
     if not path.is_file():
-        raise DataError("motion file not found", source=path)
+        raise DataError(f"{what} not found", source=path)
     try:
         with np.load(path, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
+            return {k: z[k] for k in z.files}
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError,
             RuntimeError) as exc:  # RuntimeError: zipfile's "File ... is encrypted, password required"
         raise DataError(f"not a readable .npz archive ({exc})", source=path) from None
+
+
+def _open(path: Path) -> dict[str, np.ndarray]:
+    data = read_arrays(path)
     missing = [k for k in _RESERVED if k not in data]
     if missing:
         raise DataError(f"not a motion archive: missing {missing}", source=path)

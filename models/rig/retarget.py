@@ -145,7 +145,13 @@ def fit_skeleton(world_positions_m: np.ndarray, *, symmetric: bool = False, per_
     ``rest``), so they do not depend on the measured offsets: those only absorb the
     markers' non-rigid motion relative to their bone.
     """
-    tgt = dwm_targets(world_positions_m)
+    return fit_skeleton_to_targets(dwm_targets(world_positions_m), symmetric=symmetric, per_frame=per_frame)
+
+
+def fit_skeleton_to_targets(tgt: np.ndarray, *, symmetric: bool = False, per_frame: bool = False) -> Skeleton:
+    """:func:`fit_skeleton` from rig-point targets (T, NUM_POINTS, 3) in metres, whatever made them
+    (DWM joints through ``joint_map``, or another rig's joints, :mod:`models.data.bvh_import`);
+    every point but the toe ends needs a target."""
     local = _local_offsets(tgt)
     rest = np.median(local, axis=0)
     rest[_I["Hips"]] = 0.0
@@ -317,7 +323,13 @@ def retarget(
     rate differs by style; resampling is :mod:`models.data.alignment`'s job). Raises
     :class:`RigError` naming ``source`` for bad input.
     """
-    tgt = dwm_targets(world_positions_m, source)
+    return retarget_targets(dwm_targets(world_positions_m, source), skeleton, fps)
+
+
+def retarget_targets(tgt: np.ndarray, skeleton: Skeleton, fps: float = FPS) -> Motion:
+    """:func:`retarget` from rig-point targets (T, NUM_POINTS, 3) in metres, whatever made them
+    (DWM joints through ``joint_map``, or another rig's joints, :mod:`models.data.bvh_import`);
+    every point but the toe ends needs a target."""
     if skeleton.per_frame and skeleton.offsets.shape[0] != tgt.shape[0]:
         raise RigError(f"per-frame skeleton has {skeleton.offsets.shape[0]} frames, positions have {tgt.shape[0]}")
     glob = _solve(tgt, skeleton)

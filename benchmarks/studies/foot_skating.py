@@ -1,0 +1,127 @@
+"""Feet on the floor (issue 39): LODGE's foot-skating ratio of the performer and the dancers.
+
+For the validation dances (``models.data.split.VAL_DANCES``, or ``--dances``) prints
+:func:`models.evaluation.foot_skating.foot_skating` per dance and pooled, for
+
+- ``performer``: the checkpoint's live stream run on the song's features
+  (:func:`models.networks.dance_stream.generate`, seed ``--seed``), as it comes out (in
+  place unless the stream travels); ``--no-feet`` runs it with the feet step switched off;
+- ``dancers in place``: the dancers' own motion as the corpus keeps it (canonical: root
+  x/z zeroed, heading removed; the tempo-1 clip on the 30 fps grid);
+- ``dancers travelling``: the same motion with its root position and heading
+  (``--travel``; retargeted from the mocap the same way, not canonicalised).
+
+::
+
+    .venv/bin/python benchmarks/studies/foot_skating.py --data ../shared/data/dwm --travel
+
+Exit status 2 on a missing or unreadable checkpoint or dataset.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+if str(REPO) not in sys.path:  # run as a script from anywhere
+    sys.path.insert(0, str(REPO))
+
+import numpy as np  # noqa: E402
+
+COLUMNS = ("fsr", "contact_speed", "contact_share", "below_floor_cm", "below_1cm_frames", "knee_min_deg",
+           "knee_past_straight")
+
+
+def travelling_poses(data_root: str | Path, name: str, frames: int, first: int) -> np.ndarray:
+    """(frames, 87) poses of dance ``name`` on the corpus clip's 30 fps grid (clip frame t is
+    song frame ``first + t``), retargeted like the corpus but keeping the root's travel and heading."""
+    from scipy.interpolate import CubicSpline
+
+    from models.data.alignment import motion_timestamps
+    from models.data.dwm import load_dance
+    from models.features.spectral import frame_time_s
+    from models.rig.retarget import retarget
+    from models.rig.skeleton import load_default_skeleton
+
+    dance = load_dance(Path(data_root) / name)
+    ts = motion_timestamps(dance)
+    t = frame_time_s(np.arange(first, first + frames))
+    pos = CubicSpline(ts, dance.world_positions_m(), axis=0)(np.clip(t, ts[0], ts[-1]))
+    return retarget(pos, load_default_skeleton(), source=name).to_vector()
+
+
+def rows_for(data_root: str, checkpoint: str, dances: list[str] | None, seed: int, travel: bool,
+             feet: bool, cache: str | None) -> tuple[dict[str, dict[str, dict]], dict[str, dict[str, float]]]:
+    """({row label: {dance: foot_skating dict}}, {row label: motion against the dancers in place:
+    band_amp, jitter (:func:`models.evaluation.metrics.band_ratios`), jerk ratio})."""
+    import torch
+
+    from models.evaluation.evaluate import EvalOptions, load_clips, positions, validation_names
+    from models.evaluation.foot_skating import foot_skating
+    from models.evaluation.metrics import band_ratios, jerk
+    from models.generate import load_model
+    from models.networks import dance_stream
+
+    lm = load_model(checkpoint)
+    opts = EvalOptions(cache_dir=cache, progress=False)
+    names = validation_names(data_root, dances, opts)
+    clips = load_clips(data_root, names, lm.features, opts)
+    label = "performer" + ("" if feet else " (feet off)")
+    out: dict[str, dict[str, dict]] = {label: {}, "dancers in place": {}}
+    pos: dict[str, list] = {label: [], "dancers in place": []}
+    if travel:
+        out["dancers travelling"] = {}
+    for clip in clips:
+        with torch.no_grad():
+            poses = dance_stream.DanceStream(lm.model, seed=seed, feet=feet).push(clip.features)
+        for row, p in ((label, poses), ("dancers in place", clip.poses)):
+            pos[row].append(positions(p))
+            out[row][clip.name] = foot_skating(p, pos[row][-1])
+        if travel:
+            world = travelling_poses(data_root, clip.name, clip.num_frames, clip.first_frame)
+            out["dancers travelling"][clip.name] = foot_skating(world)
+    real = pos["dancers in place"]
+    bands = band_ratios(pos[label], real)
+    motion = {label: {"band_amp": bands["band_amp"], "jitter": bands["jitter"], "jerk": jerk(pos[label]) / jerk(real)}}
+    return out, motion
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\nExit status")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--checkpoint", default="models/assets/default.pt", metavar="CKPT",
+                   help="the checkpoint (default models/assets/default.pt)")
+    p.add_argument("--data", required=True, metavar="DIR", help="the DWM dataset directory (holds DANCE_* dirs)")
+    p.add_argument("--dances", nargs="*", metavar="NAME", help="validation dances to use (default: all six)")
+    p.add_argument("--seed", type=int, default=0, help="the stream's seed (default 0)")
+    p.add_argument("--travel", action="store_true", help="also the dancers with their travel and heading")
+    p.add_argument("--no-feet", action="store_true", help="the performer with its feet step switched off")
+    p.add_argument("--cache", default=".cache/corpus", metavar="DIR", help="corpus cache (default .cache/corpus)")
+    a = p.parse_args(argv)
+    import torch
+
+    from models.errors import PerformerError
+    from models.evaluation.foot_skating import pooled
+
+    torch.set_num_threads(1)
+    try:
+        rows, motion = rows_for(a.data, a.checkpoint, a.dances, a.seed, a.travel, not a.no_feet, a.cache)
+    except (PerformerError, OSError) as e:
+        print(f"foot_skating.py: {e}", file=sys.stderr)
+        return 2
+    print(f"{'row':<22} {'dance':<11} " + " ".join(f"{c:>18}" for c in COLUMNS))
+    for label, per in rows.items():
+        for name, r in per.items():
+            print(f"{label:<22} {name:<11} " + " ".join(f"{r[c]:>18.3f}" for c in COLUMNS))
+        tot = pooled(list(per.values()))
+        print(f"{label:<22} {'pooled':<11} " + " ".join(f"{tot[c]:>18.3f}" for c in COLUMNS))
+    for label, m in motion.items():
+        print(f"{label}, motion against the dancers in place (1 = theirs): " +
+              ", ".join(f"{k} {v:.3f}" for k, v in m.items()))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,314 @@
+"""Feet on the floor (issue 39, item 3): a planted foot stays put in the world, by two-bone leg IK.
+
+The stream's last step on every frame (:meth:`FeetLock.step`, called by
+:meth:`models.networks.dance_stream.DanceStream.push` just before a pose goes out). It
+works in the world frame the final pose defines (its root position ``pose[0:3]`` and the
+Hips rotation, travel and heading included), so it is the same whether the performer
+dances in place or travels.
+
+**Where a foot is in contact** is read from the memory, not guessed from the output:
+every exemplar frame of the model's memory carries, per foot, whether the dancer's foot
+was on the floor there (:func:`member_contacts`: its lowest point, heel or toe, at most
+:data:`CONTACT_HEIGHT` above the lowest of its window, and its heel-toe midpoint moving at
+most :data:`CONTACT_SPEED` horizontally), computed once per model and kept on it
+(``dance_stream._cached_contacts``). The stream plays these flags along with the poses (the same
+frame of the same exemplar, at the player's rate and warp) and hands this step the
+value at the frame it plays (between 0 and 1: two frames interpolated; the idle counts as
+standing).
+
+**The state** (:class:`FeetLock`, per foot, left first; ``reset()`` clears it):
+
+- ``planted`` (2,) 1 while the foot is planted: the memory's contact value is over 0.5;
+- ``plant`` (2, 3) the planted heel-toe midpoint in the world (x and z are held; the
+  height follows the dance, so a heel or toe lift still shows);
+- ``weight`` (2,) the IK blend weight: 1 while planted; from the frame the exemplar lifts
+  the foot it falls to 0 over :data:`RELEASE_FRAMES` (smoothstep), so the foot is handed
+  back to the dance without a jump. A foot planted anew starts where it is shown, so
+  planting never jumps either.
+
+**Every frame, per leg** (one compiled call, :func:`feet_kernel`; about 10 µs for both):
+the dance's heel-toe midpoint is moved by ``weight`` towards the plant horizontally; a
+plant more than :data:`LEASH` from the dance's foot is dragged after it (the foot slides
+rather than the leg being torn: what a dancer travelling in place asks of it); the ankle
+target follows from the foot's own orientation, which is kept; a target that would put
+the heel or toe under the floor (:data:`FLOOR_PERCENTILE` of the memory's lowest foot
+points) is raised onto it. Two-bone IK then bends the knee about the thigh's own hinge
+axis (its local X, as the rig bends knees) to the hip-target distance, always forwards
+and at least :data:`KNEE_MIN_DEG` (never past straight: a dance's hyper-extended knee is
+bent the other way, its ankle where it was), swings the thigh onto the target, and turns
+the foot back to its world orientation. A leg with nothing to do (no weight, above the
+floor, knee bent forwards) is left bit for bit as it was.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from models.rig.humanoid import BONE_INDEX
+from models.rig.skeleton import END_SITES, POINT_INDEX, load_default_skeleton
+
+#: Exemplar frames whose foot's lowest point (heel or toe) is at most this high above the
+#: memory's floor (m) are contacts (the issue's metric counts 5 cm).
+CONTACT_HEIGHT: float = 0.05
+#: ... and whose heel-toe midpoint moves at most this fast horizontally (m a frame; 0.05 = 1.5
+#: m/s: the memory is in place, so a dancer's travelling stance foot slides backwards under
+#: the body in it and still counts).
+CONTACT_SPEED: float = 0.05
+#: Percentile of the memory's lowest foot points (both feet, every exemplar frame) that is the floor.
+FLOOR_PERCENTILE: float = 2.0
+#: Frames over which a released foot is handed back to the dance.
+RELEASE_FRAMES: int = 10
+#: Frames over which a foot newly planted comes to rest (its hold grows, smoothstep): no sudden stop.
+PLANT_FRAMES: int = 3
+#: The most a planted foot may lie from the dance's foot horizontally (m) before it is dragged.
+LEASH: float = 0.3
+#: The least knee flexion the IK leaves (degrees): never past straight.
+KNEE_MIN_DEG: float = 0.5
+#: Grounding: the body's height is moved by the played exemplar's lift (what puts its window's
+#: lowest foot point on the floor, :func:`member_contacts`) through two one-pole low-passes of
+#: this rate a frame (so its speed has no kink either): the memory's dancers stand at
+#: different heights on the default skeleton, and their exemplars take turns.
+#: 0: the height as the dance has it.
+GROUND_RATE: float = 0.2
+
+_SIDES = ("Left", "Right")
+
+
+def member_feet(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lowest point height (..., 2) m, heel-toe midpoint (..., 2, 3)) of FK points (..., 30, 3), left first."""
+    heel = positions[..., [POINT_INDEX["LeftHeel"], POINT_INDEX["RightHeel"]], :]
+    toe = positions[..., [POINT_INDEX["LeftToes"], POINT_INDEX["RightToes"]], :]
+    return np.minimum(heel[..., 1], toe[..., 1]), 0.5 * (heel + toe)
+
+
+def member_contacts(positions: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, float]:
+    """(contacts (K, M, F, 3) float32; the floor, m) of exemplar windows from their FK points
+    ``positions`` (K, M, F, 30, 3) (``dance_stream.member_positions``), ``counts`` (K,) real
+    ones (empty slots: 0). Channels 0 and 1: 1.0 where the left, right
+    foot is on the floor (see the module docstring); channel 2: the window's lift, m, what
+    puts its lowest foot point on the floor (the same for all its frames).
+
+    Each window's own floor is its lowest foot point: the dancers' hip heights on the default
+    skeleton put their feet at different heights (one dance's stays 9 cm up, another's at 0),
+    so one height for the whole memory would find contacts in the low dancers only, and the
+    stream, taking turns between them, would float and sink (:data:`GROUND_RATE`). The floor
+    returned is the :data:`FLOOR_PERCENTILE` of all the memory's lowest foot points."""
+    k, m, f = positions.shape[:3]
+    low, mid = member_feet(positions)  # (K, M, F, 2), (K, M, F, 2, 3)
+    real = np.arange(m)[None, :] < np.asarray(counts)[:, None]
+    if not real.any():
+        return np.zeros((k, m, f, 3), np.float32), 0.0
+    floor = float(np.percentile(low[real], FLOOR_PERCENTILE))
+    own = low.min(axis=(2, 3), keepdims=True)  # (K, M, 1, 1): each window's floor
+    speed = np.linalg.norm(np.gradient(mid[..., [0, 2]], axis=2), axis=-1)  # (K, M, F, 2) m a frame
+    contact = (low <= own + CONTACT_HEIGHT) & (speed <= CONTACT_SPEED) & real[:, :, None, None]
+    lift = np.where(real[:, :, None, None], floor - own, 0.0)
+    return np.concatenate([contact, np.broadcast_to(lift, (k, m, f, 1))], axis=-1).astype(np.float32), floor
+
+
+# -- the compiled step ---------------------------------------------------------------------------
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _q(p, c):  # pragma: no cover - compiled
+    return (float(p[c]), float(p[c + 1]), float(p[c + 2]), float(p[c + 3]))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _mul(a, b):  # pragma: no cover - compiled
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _conj(q):  # pragma: no cover - compiled
+    return (-q[0], -q[1], -q[2], q[3])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _unitq(q):  # pragma: no cover - compiled
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    n = max(n, 1e-12)
+    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _rot(q, v):  # pragma: no cover - compiled
+    """v rotated by unit quaternion q."""
+    qx, qy, qz, qw = q
+    vx, vy, vz = v
+    tx, ty, tz = 2.0 * (qy * vz - qz * vy), 2.0 * (qz * vx - qx * vz), 2.0 * (qx * vy - qy * vx)
+    return (vx + qw * tx + qy * tz - qz * ty, vy + qw * ty + qz * tx - qx * tz, vz + qw * tz + qx * ty - qy * tx)
+
+
+@njit(cache=True, nogil=True)
+def _leg(pose, f, bones, offs, ang_rest, planted, plant, weight, contact, floor, leash, release, knee_min,
+         plant_rate):  # pragma: no cover - compiled
+    """One leg (f: 0 left, 1 right) of :func:`feet_kernel`."""
+    cu, cl, cf = 3 + 4 * bones[f, 0], 3 + 4 * bones[f, 1], 3 + 4 * bones[f, 2]
+    gh = _unitq(_q(pose, 3))
+    qu, ql, qf = _unitq(_q(pose, cu)), _unitq(_q(pose, cl)), _unitq(_q(pose, cf))
+    gu = _mul(gh, qu)
+    gl = _mul(gu, ql)
+    gf = _mul(gl, qf)
+    o = _rot(gh, (offs[f, 0, 0], offs[f, 0, 1], offs[f, 0, 2]))
+    hip = (float(pose[0]) + o[0], float(pose[1]) + o[1], float(pose[2]) + o[2])
+    ok = (offs[f, 1, 0], offs[f, 1, 1], offs[f, 1, 2])  # knee in the thigh's frame
+    oa = (offs[f, 2, 0], offs[f, 2, 1], offs[f, 2, 2])  # ankle in the shin's frame
+    k = _rot(gu, ok)
+    a = _rot(gl, oa)
+    ax, ay, az = hip[0] + k[0] + a[0], hip[1] + k[1] + a[1], hip[2] + k[2] + a[2]  # the dance's ankle
+    heel = _rot(gf, (offs[f, 3, 0], offs[f, 3, 1], offs[f, 3, 2]))
+    toe = _rot(gf, (offs[f, 4, 0], offs[f, 4, 1], offs[f, 4, 2]))
+    mx, mz = ax + 0.5 * (heel[0] + toe[0]), az + 0.5 * (heel[2] + toe[2])  # the dance's heel-toe midpoint
+    # the state: plant, release, leash
+    w = weight[f]
+    if contact[f] > 0.5:
+        if planted[f] == 0:  # planted where it is shown now
+            if w > 0.0:  # mid-release (between plant and dance): held at once
+                e = w * w * (3.0 - 2.0 * w)
+                plant[f, 0] = mx + e * (plant[f, 0] - mx)
+                plant[f, 2] = mz + e * (plant[f, 2] - mz)
+                w = 1.0
+            else:  # the dance's foot: the hold grows over plant_rate's frames, the foot slows to it
+                plant[f, 0], plant[f, 2] = mx, mz
+            planted[f] = 1
+        w = min(1.0, w + plant_rate)
+    else:
+        planted[f] = 0
+        w = max(0.0, w - release)
+    weight[f] = w
+    dx, dz = plant[f, 0] - mx, plant[f, 2] - mz
+    if planted[f] == 1:
+        d = math.sqrt(dx * dx + dz * dz)
+        if d > leash:  # dragged after the dance's foot
+            plant[f, 0] = mx + dx * leash / d
+            plant[f, 2] = mz + dz * leash / d
+            dx, dz = plant[f, 0] - mx, plant[f, 2] - mz
+    e = w * w * (3.0 - 2.0 * w)
+    tx, ty, tz = ax + e * dx, ay, az + e * dz
+    lift = floor - (ty + min(heel[1], toe[1]))
+    if lift > 0.0:  # onto the floor
+        ty += lift
+    # the knee: its flexion now, about the thigh's X axis
+    v = _rot(ql, oa)  # the shin in the thigh's frame
+    phi0 = math.atan2(-v[2], -v[1]) - ang_rest[f]
+    phi0 = (phi0 + math.pi) % (2.0 * math.pi) - math.pi
+    if e == 0.0 and lift <= 0.0 and phi0 >= knee_min:
+        return  # nothing to do: the leg as the dance has it
+    hx, hy, hz = tx - hip[0], ty - hip[1], tz - hip[2]
+    dist = math.sqrt(hx * hx + hy * hy + hz * hz)
+    l1sq = ok[0] * ok[0] + ok[1] * ok[1] + ok[2] * ok[2]
+    l2sq = oa[0] * oa[0] + oa[1] * oa[1] + oa[2] * oa[2]
+    # |ok + Rx(delta) v|^2 = l1^2 + l2^2 + 2 (c0 + p cos delta + q sin delta)
+    c0 = ok[0] * v[0]
+    p = ok[1] * v[1] + ok[2] * v[2]
+    q = -ok[1] * v[2] + ok[2] * v[1]
+    r = math.sqrt(p * p + q * q)
+    psi = math.atan2(q, p)  # delta that straightens the leg (the longest reach)
+    c = (0.5 * (dist * dist - l1sq - l2sq) - c0) / max(r, 1e-12)
+    alpha = math.acos(min(1.0, max(-1.0, c)))
+    phi1 = (phi0 + psi + alpha + math.pi) % (2.0 * math.pi) - math.pi  # the flexion bent forwards, in [-pi, pi)
+    delta = max(phi1, knee_min) - phi0
+    h = 0.5 * delta
+    rx = (math.sin(h), 0.0, 0.0, math.cos(h))
+    ql2 = _mul(rx, ql)
+    v2 = _rot(rx, v)
+    al = (ok[0] + v2[0], ok[1] + v2[1], ok[2] + v2[2])  # the ankle in the thigh's frame
+    aw = _rot(gu, al)
+    # the thigh swung (the shortest way) so the ankle points at the target
+    na = math.sqrt(aw[0] * aw[0] + aw[1] * aw[1] + aw[2] * aw[2])
+    if dist > 1e-9 and na > 1e-9:
+        ux, uy, uz = aw[0] / na, aw[1] / na, aw[2] / na
+        bx, by, bz = hx / dist, hy / dist, hz / dist
+        s = _unitq((uy * bz - uz * by, uz * bx - ux * bz, ux * by - uy * bx, 1.0 + ux * bx + uy * by + uz * bz))
+        gu = _mul(s, gu)
+    qu2 = _unitq(_mul(_conj(gh), gu))
+    gl2 = _mul(gu, ql2)
+    qf2 = _unitq(_mul(_conj(gl2), gf))  # the foot keeps its orientation in the world
+    for i in range(4):
+        pose[cu + i] = qu2[i]
+        pose[cl + i] = ql2[i]
+        pose[cf + i] = qf2[i]
+
+
+@njit(cache=True, nogil=True)
+def _lowest(pose, f, bones, offs):  # pragma: no cover - compiled
+    """The height (m) of the lower of foot f's heel and toe in ``pose``."""
+    gh = _unitq(_q(pose, 3))
+    gu = _mul(gh, _unitq(_q(pose, 3 + 4 * bones[f, 0])))
+    gl = _mul(gu, _unitq(_q(pose, 3 + 4 * bones[f, 1])))
+    gf = _mul(gl, _unitq(_q(pose, 3 + 4 * bones[f, 2])))
+    y = float(pose[1]) + _rot(gh, (offs[f, 0, 0], offs[f, 0, 1], offs[f, 0, 2]))[1]
+    y += _rot(gu, (offs[f, 1, 0], offs[f, 1, 1], offs[f, 1, 2]))[1]
+    y += _rot(gl, (offs[f, 2, 0], offs[f, 2, 1], offs[f, 2, 2]))[1]
+    return y + min(_rot(gf, (offs[f, 3, 0], offs[f, 3, 1], offs[f, 3, 2]))[1],
+                   _rot(gf, (offs[f, 4, 0], offs[f, 4, 1], offs[f, 4, 2]))[1])
+
+
+@njit(cache=True, nogil=True)
+def feet_kernel(pose, bones, offs, ang_rest, planted, plant, weight, ground, contact, floor, leash, release,
+                knee_min, ground_rate, plant_rate):  # pragma: no cover - compiled
+    """Both legs of ``pose`` (P,) float32, in place; the state arrays updated (see :class:`FeetLock`)."""
+    if ground_rate > 0.0:  # the body lowered or raised by the exemplar's lift, low-passed twice (no kink)
+        ground[1] += ground_rate * (contact[2] - ground[1])
+        ground[0] += ground_rate * (ground[1] - ground[0])
+        pose[1] = pose[1] + ground[0]
+    for f in range(2):
+        _leg(pose, f, bones, offs, ang_rest, planted, plant, weight, contact, floor, leash, release, knee_min,
+             plant_rate)
+
+
+class FeetLock:
+    """The feet part of the stream (see the module docstring): ``step(pose, contact)`` per frame.
+
+    floor: the floor height (m; the memory's, :func:`member_contacts`). The skeleton is the
+    default one, as everywhere the stream computes positions.
+    """
+
+    def __init__(self, floor: float) -> None:
+        skel = load_default_skeleton()
+        off, end = skel.offsets, skel.end_offsets
+        self.floor = float(floor)
+        self._bones = np.array([[BONE_INDEX[f"{s}{b}"] for b in ("UpperLeg", "LowerLeg", "Foot")] for s in _SIDES],
+                               np.int64)
+        self._offs = np.array([[off[BONE_INDEX[f"{s}UpperLeg"]], off[BONE_INDEX[f"{s}LowerLeg"]],
+                                off[BONE_INDEX[f"{s}Foot"]], end[END_SITES.index(f"{s}Heel")],
+                                off[BONE_INDEX[f"{s}Toes"]]] for s in _SIDES], np.float64)  # (2, 5, 3)
+        shin = self._offs[:, 2]
+        self._ang_rest = np.arctan2(-shin[:, 2], -shin[:, 1])  # the straight shin's angle (0 for this rig)
+        self._release = 1.0 / max(RELEASE_FRAMES, 1)
+        self._plant = 1.0 / max(PLANT_FRAMES, 1)
+        self._knee_min = math.radians(KNEE_MIN_DEG)
+        self.planted = np.zeros(2, np.int64)
+        self.plant = np.zeros((2, 3), np.float64)
+        self.weight = np.zeros(2, np.float64)
+        self.ground = np.zeros(2, np.float64)  # the body's height offset (m, GROUND_RATE) and its first low-pass
+        self._contact = np.zeros(3, np.float64)
+        self.reset()
+
+    def reset(self) -> None:
+        """No foot planted, nothing to hand back."""
+        self.planted[:] = 0
+        self.plant[:] = 0.0
+        self.weight[:] = 0.0
+        self.ground[:] = 0.0
+
+    def step(self, pose: np.ndarray, left: float, right: float, lift: float = 0.0) -> np.ndarray:
+        """``pose`` (P,) float32 with its legs put on the floor, in place (and returned); ``left``,
+        ``right``: the memory's contact value of each foot at the frame played (0..1); ``lift``:
+        the exemplar's lift there (m, :func:`member_contacts`)."""
+        self._contact[0], self._contact[1], self._contact[2] = left, right, lift
+        feet_kernel(pose, self._bones, self._offs, self._ang_rest, self.planted, self.plant, self.weight, self.ground,
+                    self._contact, self.floor, LEASH, self._release, self._knee_min, GROUND_RATE, self._plant)
+        return pose
+
+    def lift_of(self, pose: np.ndarray) -> float:
+        """The lift (m) that puts the lower foot point of ``pose`` (P,) on the floor (the idle's)."""
+        p = np.ascontiguousarray(pose, np.float32)
+        return self.floor - min(_lowest(p, 0, self._bones, self._offs), _lowest(p, 1, self._bones, self._offs))

@@ -1,0 +1,145 @@
+"""Feet on the floor (models/networks/feet.py, issue 39 item 3): the leg IK, the knee, the
+floor, and the stream's foot-skating ratio with the feet step and without it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from models.evaluation.foot_skating import foot_points, foot_skating, knee_flexion_deg
+from models.networks.feet import FeetLock
+from models.rig.humanoid import BONE_INDEX, NUM_BONES
+from models.rig.kinematics import fk
+from models.rig.motion import Motion
+from models.rig.skeleton import load_default_skeleton
+
+SKEL = load_default_skeleton()
+
+
+def positions(poses: np.ndarray) -> np.ndarray:
+    return fk(Motion.from_vector(np.asarray(poses, np.float32)), SKEL)
+
+
+def random_poses(n: int, seed: int = 0, knee_deg: tuple[float, float] = (5.0, 100.0)) -> np.ndarray:
+    """(n, 87) poses: a tilted, turned body with swung thighs, bent knees (flexion in ``knee_deg``),
+    turned feet; every other bone at rest."""
+    rng = np.random.default_rng(seed)
+    q = np.tile([0.0, 0.0, 0.0, 1.0], (n, NUM_BONES, 1))
+    q[:, BONE_INDEX["Hips"]] = Rotation.from_euler("yxz", np.c_[rng.uniform(-180, 180, n), rng.uniform(-15, 15, (n, 2))],
+                                                   degrees=True).as_quat()
+    for side in ("Left", "Right"):
+        q[:, BONE_INDEX[f"{side}UpperLeg"]] = Rotation.from_euler(
+            "xzy", np.c_[rng.uniform(-60, 30, n), rng.uniform(-20, 20, n), rng.uniform(-30, 30, n)], degrees=True).as_quat()
+        q[:, BONE_INDEX[f"{side}LowerLeg"]] = Rotation.from_euler("x", rng.uniform(*knee_deg, n)[:, None], degrees=True).as_quat()
+        q[:, BONE_INDEX[f"{side}Foot"]] = Rotation.from_euler("xy", rng.uniform(-30, 30, (n, 2)), degrees=True).as_quat()
+    root = np.c_[rng.uniform(-2, 2, n), rng.uniform(0.85, 1.0, n), rng.uniform(-2, 2, n)]
+    return np.concatenate([root, q.reshape(n, -1)], 1).astype(np.float32)
+
+
+def midpoints(pos: np.ndarray) -> np.ndarray:
+    heel, toe = foot_points(pos)
+    return 0.5 * (heel + toe)  # (T, 2, 3)
+
+
+def test_leg_ik_puts_a_planted_foot_on_its_target_within_1_cm_where_the_leg_reaches():
+    poses = random_poses(300)
+    before = midpoints(positions(poses))
+    rng = np.random.default_rng(1)
+    target = before + np.pad(rng.uniform(-0.15, 0.15, (len(poses), 2, 2)), ((0, 0), (0, 0), (0, 1)))[..., [0, 2, 1]]
+    out = np.empty_like(poses)
+    for t, p in enumerate(poses):
+        feet = FeetLock(floor=-10.0)
+        feet.planted[:] = 1
+        feet.weight[:] = 1.0
+        feet.plant[:] = target[t]
+        out[t] = feet.step(p.copy(), 1.0, 1.0)
+    pos = positions(out)
+    err = np.linalg.norm((midpoints(pos) - target)[..., [0, 2]], axis=-1)  # held horizontally; the height is the dance's
+    hip = pos[:, [BONE_INDEX["LeftUpperLeg"], BONE_INDEX["RightUpperLeg"]]]
+    ankle_target = pos[:, [BONE_INDEX["LeftFoot"], BONE_INDEX["RightFoot"]]] + (target - midpoints(pos)) * [1, 0, 1]
+    reach = np.linalg.norm(ankle_target - hip, axis=-1)
+    legs = SKEL.offsets[BONE_INDEX["LeftLowerLeg"], 1] + SKEL.offsets[BONE_INDEX["LeftFoot"], 1]
+    reachable = reach < abs(legs) - 0.005
+    assert reachable.mean() > 0.6
+    assert err[reachable].max() < 0.01
+    assert (knee_flexion_deg(out) >= 0.0).all()
+    for side in ("Left", "Right"):  # the foot keeps its world orientation
+        before_after = []
+        for x in (poses, out):
+            g = Rotation.from_quat(x[:, 3:7])  # the Hips
+            for b in ("UpperLeg", "LowerLeg", "Foot"):
+                c = 3 + 4 * BONE_INDEX[f"{side}{b}"]
+                g = g * Rotation.from_quat(x[:, c: c + 4])
+            before_after.append(g)
+        assert (before_after[0].inv() * before_after[1]).magnitude().max() < 1e-3
+
+
+def test_no_knee_past_straight_and_the_ankle_stays_where_it_was():
+    poses = random_poses(200, seed=2, knee_deg=(-40.0, 5.0))  # hyper-extended, or nearly straight
+    assert (knee_flexion_deg(poses) < 0).mean() > 0.8
+    feet = FeetLock(floor=-10.0)
+    out = np.stack([feet.step(p.copy(), 0.0, 0.0) for p in poses])
+    assert (knee_flexion_deg(out) >= 0.5 - 1e-3).all()
+    ankles = [BONE_INDEX["LeftFoot"], BONE_INDEX["RightFoot"]]
+    np.testing.assert_allclose(positions(out)[:, ankles], positions(poses)[:, ankles], atol=1e-3)
+    bent = random_poses(50, seed=3, knee_deg=(10.0, 90.0))  # a leg with nothing to do is left as it is
+    np.testing.assert_array_equal(np.stack([feet.step(p.copy(), 0.0, 0.0) for p in bent]), bent)
+
+
+def test_no_foot_goes_under_the_floor():
+    poses = random_poses(200, seed=4)
+    low = lambda x: np.minimum(*[a[..., 1] for a in foot_points(positions(x))])  # noqa: E731
+    floor = float(np.percentile(low(poses), 50))  # half the feet start under it
+    feet = FeetLock(floor=floor)
+    out = np.stack([feet.step(p.copy(), 0.0, 0.0) for p in poses])
+    assert low(out).min() >= floor - 1e-4
+    above = low(poses) > floor + 1e-3  # feet above it are not moved
+    np.testing.assert_allclose(low(out)[above], low(poses)[above], atol=1e-4)
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    from models.features.audio_io import load_audio
+    from models.features.spectral import extract_features
+    from models.generate import load_model
+
+    lm = load_model(None)
+    return lm.model, extract_features(load_audio("models/assets/clip.ogg")[0], lm.features)
+
+
+def test_the_shipped_performer_keeps_its_feet_on_the_floor_and_skates_without_the_feet_step(shipped, monkeypatch):
+    """The bundled clip: foot-skating ratio 0.88 without the feet step (0.10 with it); with it under the issue's
+    0.25, contact feet under 0.25 m/s, no knee past straight, no foot under the floor."""
+    import models.networks.dance_stream as ds
+
+    model, feats = shipped
+    s = ds.DanceStream(model, seed=0)
+    poses = s.push(feats)
+    r = foot_skating(poses)
+    assert r["fsr"] <= 0.25 and r["contact_speed"] <= 0.25, r
+    assert r["knee_min_deg"] >= 0.0 and r["below_1cm_frames"] == 0, r
+    low = np.minimum(*[a[..., 1] for a in foot_points(positions(poses))])
+    assert low.min() >= s._feet.floor - 1e-3
+    monkeypatch.setattr(ds, "FEET_LOCK", False)
+    off = foot_skating(ds.generate(model, feats, seed=0))
+    assert off["fsr"] > 0.5 and off["knee_min_deg"] < 0.0, off
+
+
+def test_feet_stream_the_same_in_any_chunking(shipped):
+    from models.networks.dance_stream import DanceStream, generate
+
+    model, feats = shipped
+    x = feats[:400]
+    whole = generate(model, x, seed=3)
+    s = DanceStream(model, seed=3)
+    assert s._feet is not None
+    rng = np.random.default_rng(0)
+    parts, i = [], 0
+    while i < len(x):
+        k = int(rng.integers(0, 20))
+        parts.append(s.push(x[i: i + k]))
+        i += k
+    np.testing.assert_allclose(np.concatenate(parts), whole, atol=1e-6, rtol=0)
+    s.reset()
+    np.testing.assert_array_equal(s.push(x), whole)
