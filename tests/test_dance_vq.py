@@ -8,6 +8,7 @@ import numpy as np
 
 import pytest
 import torch
+from _streams import push_in_chunks
 
 from models.errors import CheckpointError, ConfigError
 from models.networks.checkpoint import build_model, load_checkpoint, save_checkpoint
@@ -52,15 +53,9 @@ def test_live_stream_equals_the_whole_song_in_any_chunking():
     whole = generate(m, x, seed=5)
     assert whole.shape == (300, POSE_DIM) and whole.dtype == np.float32 and np.isfinite(whole).all()
     np.testing.assert_allclose(np.linalg.norm(whole[:, 3:].reshape(300, -1, 4), axis=-1), 1.0, atol=1e-5)
-    rng = np.random.default_rng(0)
     s = DanceStream(m, seed=5)
-    parts, i = [], 0
-    while i < len(x):
-        k = int(rng.integers(0, 20))
-        parts.append(s.push(x[i: i + k]))
-        i += k
     # the same codes, so the same poses to float32 rounding (the output's renormalisation runs per push)
-    np.testing.assert_allclose(np.concatenate(parts), whole, atol=1e-6, rtol=0)
+    np.testing.assert_allclose(push_in_chunks(s, x), whole, atol=1e-6, rtol=0)
     s.reset()  # same seed again: the same dance
     np.testing.assert_array_equal(s.push(x), whole)
     assert np.all(whole[:, [0, 2]] == 0)  # in place

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _streams import push_in_chunks
 from scipy.spatial.transform import Rotation
 
 from models.evaluation.foot_skating import foot_points, foot_skating, knee_flexion_deg
@@ -134,12 +135,6 @@ def test_feet_stream_the_same_in_any_chunking(shipped):
     whole = generate(model, x, seed=3)
     s = DanceStream(model, seed=3)
     assert s._feet is not None
-    rng = np.random.default_rng(0)
-    parts, i = [], 0
-    while i < len(x):
-        k = int(rng.integers(0, 20))
-        parts.append(s.push(x[i: i + k]))
-        i += k
-    np.testing.assert_allclose(np.concatenate(parts), whole, atol=1e-6, rtol=0)
+    np.testing.assert_allclose(push_in_chunks(s, x), whole, atol=1e-6, rtol=0)
     s.reset()
     np.testing.assert_array_equal(s.push(x), whole)
