@@ -139,6 +139,22 @@ def test_mirrored_file_is_turned_right_handed(tmp_path):
     assert clip.error_max_cm < 3.0 and joint_errors_cm(motion, clip.motion).max() <= 8.0
 
 
+def test_mmd_english_names(tmp_path):
+    """mmd_tools' English names: leg_L is the thigh, knee_L the knee (Mixamo's LeftLeg is a knee)."""
+    from _bvh_exporters import LIMBS, Convention, _sided
+
+    names = {"Hips": "center", "Spine": "lower_body", "Chest": "upper_body", "Neck": "neck", "Head": "head",
+             **_sided(dict(zip(LIMBS, ("shoulder_{S}", "arm_{S}", "elbow_{S}", "wrist_{S}", "leg_{S}", "knee_{S}",
+                                       "ankle_{S}", "toe_{S}"))))}
+    motion = synthetic_dance(4.0)
+    src = write_convention(tmp_path / "mmd.bvh", motion, load_default_skeleton(), Convention(names=names, units_per_m=12.5))
+    out = tmp_path / "lib.npz"
+    run = performer("library", "build", src, "--out", out)
+    assert run.returncode == 0, run.stderr
+    clip = load_library(out)[0]
+    assert clip.units == "mmd" and joint_errors_cm(motion, clip.motion).max() <= 8.0
+
+
 def _bad(case: str, good: str) -> str:
     lines = good.splitlines()
     i = lines.index("MOTION")

@@ -61,7 +61,8 @@ UNITS: dict[str, float] = {"m": 1.0, "cm": 100.0, "mm": 1000.0, "in": 1 / 0.0254
 SYNONYMS: dict[str, frozenset[str]] = {
     "Head": frozenset({"head"}),
     "Neck": frozenset({"neck", "neck1"}),
-    "UpperLeg": frozenset({"upleg", "upperleg", "thigh", "hip", "legupper", "uleg", "femur", "uppleg"}),
+    "UpperLeg": frozenset({"upleg", "upperleg", "thigh", "hip", "legupper", "uleg", "femur", "uppleg", "leg"}),
+    # ("leg" is MMD's thigh; Mixamo's LeftLeg is the knee: the nearest-ancestor rule tells them apart)
     "LowerLeg": frozenset({"leg", "lowerleg", "knee", "shin", "calf", "leglower", "loleg", "lowleg", "tibia", "lleg"}),
     "Foot": frozenset({"foot", "ankle"}),
     "UpperArm": frozenset({"arm", "upperarm", "uparm", "shldr", "shoulder", "humerus", "armupper", "uarm", "upparm"}),
@@ -121,7 +122,7 @@ def read_map(path: str | Path) -> dict[str, str]:
     """
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise DataError("map file not found", source=path) from None
     except (OSError, UnicodeDecodeError) as exc:
