@@ -63,6 +63,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--style", default=None, help="a requested style (performer run --style; default: auto)")
     p.add_argument("--guidance", type=float, default=None,
                    help="STYLE_GUIDANCE for this run (default: the shipped one; 1: a style without guidance)")
+    p.add_argument("--stage", default=None, metavar="WxD",
+                   help="a stage to travel on (DanceStream.set_stage, e.g. 3x2; default: as the pipeline builds it)")
+    p.add_argument("--facing", default=None, help="free or audience (DanceStream.set_facing; default free)")
     args = p.parse_args(argv)
     if args.guidance is not None and not args.guidance > 0:
         p.error("--guidance must be > 0")
@@ -74,6 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     import models.networks.dance_numpy as dance_numpy
     import models.networks.dance_stream as dance_stream
     import models.networks.dance_vq as dance_vq
+    import models.networks.stage as stage
     from models.errors import PerformerError
     from models.features.audio_io import bundled_clip_path, load_audio
     from realtime.audio_input import FileSource
@@ -96,6 +100,7 @@ def main(argv: list[str] | None = None) -> int:
         (dance_numpy.NumpyPredictor, "logits_after", "dance_vq: code step: new row + head"),
         (dance_vq.DanceVQ, "sample", "dance_vq: code step: sampling"),
         (dance_numpy.Prefix, "step", "dance_vq: prefix piece"),
+        (stage.Stage, "step", "dance_vq: stage step (every frame)"),
         (Engine, "_sanitize", "engine: block check"),
         (Engine, "_emit", "engine: emit (guard, smoothing, sends)"),
         (OscSink, "send", "outputs: VMC send"),
@@ -114,6 +119,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"hop_profile: {exc}", file=sys.stderr)
         return 2
     model = pipe.model
+    try:
+        if args.stage is not None:
+            model.set_stage(args.stage)
+        if args.facing is not None:
+            model.set_facing(args.facing)
+    except (PerformerError, AttributeError) as exc:
+        print(f"hop_profile: --stage/--facing: {exc}", file=sys.stderr)
+        return 2
     push = model.push
     model.push = _timed(t, "model: push (every frame)", push)
 

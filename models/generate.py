@@ -123,7 +123,7 @@ def _pad_end(x: np.ndarray, n: int) -> np.ndarray:
 
 def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, seed: int | None = None,
               audio: np.ndarray | None = None, style: str | None = None, energy: float = 1.0,
-              lead: float = 0.0) -> np.ndarray:
+              lead: float = 0.0, stage=0, facing: str = "free") -> np.ndarray:
     """Poses ``(T, POSE_DIM)`` float32 for features ``(T, D)`` at 30 fps, one per frame.
 
     ``window``/``hop`` (frames) apply to causal U-Nets only (see the module docstring
@@ -142,7 +142,10 @@ def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, see
     the same models' energy control, 0..2 (1: as the music asks; ConfigError out of range, or
     other than 1 for any other model). ``lead``: the same models' lead, ms, 0..200 (the poses
     sent that far ahead of the audio for a display chain's delay; ConfigError out of range,
-    or other than 0 for any other model).
+    or other than 0 for any other model). ``stage``, ``facing``: the same models' stage
+    (``"WxD"`` metres, or 0: in place, facing +Z) and facing (free, audience;
+    models/networks/stage.py); ConfigError for a bad value, or a stage other than 0 or
+    facing other than free for any other model.
     """
     import torch
 
@@ -162,6 +165,10 @@ def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, see
         raise ConfigError(f"model {type(model).__name__} has no energy control; --energy works with dance_vq models")
     if lead != 0.0 and not takes_style:
         raise ConfigError(f"model {type(model).__name__} has no lead control; --lead works with dance_vq models")
+    from models.networks.stage import check_facing, parse_stage
+
+    if (parse_stage(stage) != (0.0, 0.0) or check_facing(facing) != "free") and not takes_style:
+        raise ConfigError(f"model {type(model).__name__} dances in place; --stage and --facing work with dance_vq models")
     if isinstance(model, CausalGenerator):
         return offline_windowed(model, x, window=window, hop=hop)
     x, _ = sanitize_features(x)
@@ -170,7 +177,8 @@ def run_model(model, features: np.ndarray, window: int = 128, hop: int = 64, see
     if isinstance(model, DanceVQ):  # its live stream, every frame at once
         from models.networks.dance_stream import generate as stream_generate
 
-        return stream_generate(model, x, seed=int(seed or 0), style=style, energy=energy, lead=lead)
+        return stream_generate(model, x, seed=int(seed or 0), style=style, energy=energy, lead=lead, stage=stage,
+                               facing=facing)
     if callable(getattr(model, "generate", None)):  # a whole-song procedure of its own (dtm)
         kw = {"seed": int(seed or 0)} if getattr(model, "stochastic", False) else {}
         return model.generate(x, **kw)
@@ -255,9 +263,11 @@ def generate(
     style: str | None = None,
     energy: float = 1.0,
     lead: float = 0.0,
+    stage=0,
+    facing: str = "free",
 ) -> Generation:
     """Generate motion for a whole audio file with a loaded model and write it to ``out``
-    (``seed``, ``style``, ``energy``, ``lead``: as :func:`run_model` takes them).
+    (``seed``, ``style``, ``energy``, ``lead``, ``stage``, ``facing``: as :func:`run_model` takes them).
 
     Raises :class:`AudioError` naming the file if it cannot be read, holds NaN/inf
     samples, or is shorter than one frame (735 samples at 22050 Hz, 33 ms);
@@ -282,7 +292,7 @@ def generate(
     timings["features"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     poses = run_model(loaded.model, feats, window=window, hop=hop, audio=audio, seed=seed, style=style,
-                      energy=energy, lead=lead)
+                      energy=energy, lead=lead, stage=stage, facing=facing)
     timings["model"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     export_motion(poses, out, source_audio=str(audio_path), checkpoint=str(loaded.path), model_name=loaded.name)

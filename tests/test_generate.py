@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from models.networks.dance_stream import generate as stream_generate
+from models.networks.stage import DEFAULT_STAGE
 import pytest
 import soundfile as sf
 import torch
@@ -125,7 +126,7 @@ def test_lead_reaches_the_dancing_model_and_other_models_refuse_it(tmp_path, cap
     assert code == 0, err
     lm = load_model(None)
     feats = extract_features(load_audio(clip, SAMPLE_RATE)[0], lm.features)
-    expected = stream_generate(lm.model, feats, seed=0, lead=133.0)
+    expected = stream_generate(lm.model, feats, seed=0, lead=133.0, stage=DEFAULT_STAGE)  # generate's default stage
     np.testing.assert_allclose(poses_of(tmp_path / "l.npz"), expected, atol=1e-5)
     assert not np.allclose(expected, stream_generate(lm.model, feats, seed=0), atol=1e-3)
     code, _, err = run_main(capsys, "generate", clip, "--out", tmp_path / "x.npz", "--lead", "67",
@@ -133,6 +134,25 @@ def test_lead_reaches_the_dancing_model_and_other_models_refuse_it(tmp_path, cap
     assert code == 2 and "has no lead control" in err and "Traceback" not in err
     code, _, err = run_main(capsys, "generate", clip, "--out", tmp_path / "x.npz", "--lead", "500")
     assert code == 2 and "lead must be in [0, 200] ms" in err
+
+
+def test_stage_and_facing_reach_the_dancing_model_and_other_models_refuse_them(tmp_path, capsys, tiny):
+    """performer generate --stage/--facing: the dance_vq default travels on the stage asked for
+    (3x2 unless told), 0 dances in place; bad values and other models get one-line errors."""
+    clip = bundled_clip_path()
+    code, _, err = run_main(capsys, "generate", clip, "--out", tmp_path / "s.npz", "--stage", "1x1", "--facing",
+                            "audience")
+    assert code == 0, err
+    poses = poses_of(tmp_path / "s.npz")
+    assert np.abs(poses[:, [0, 2]]).max() > 0.05 and (np.abs(poses[:, [0, 2]]) <= 0.5 + 1e-6).all()
+    code, _, err = run_main(capsys, "generate", clip, "--out", tmp_path / "0.npz", "--stage", "0")
+    assert code == 0, err
+    np.testing.assert_array_equal(poses_of(tmp_path / "0.npz")[:, [0, 2]], 0.0)
+    for args, msg in ((("--stage", "3y2"), "stage must be WxD"),
+                      (("--facing", "back"), "facing must be one of free, audience"),
+                      (("--stage", "2x2", "--checkpoint", tiny), "dances in place")):
+        code, _, err = run_main(capsys, "generate", clip, "--out", tmp_path / "x.npz", *args)
+        assert code == 2 and msg in err and "Traceback" not in err
 
 
 def test_generate_equals_what_the_engine_streams(tmp_path, tiny):

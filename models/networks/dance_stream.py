@@ -46,6 +46,7 @@ from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_bl
 from models.networks.dance_vq import DanceVQ, style_token
 from models.networks import feet as feet_part
 from models.networks.feet import FeetLock
+from models.networks.stage import Stage, cached_travel
 from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate
 from models.networks.streaming import FEATURE_LIMIT
 from models.networks.tempo import DENSITY_WINDOW, TEMPO_RANGE, TempoFollower, danced_beat, onset_density
@@ -559,7 +560,7 @@ class DanceStream:
     """
 
     def __init__(self, model: DanceVQ, seed: int = 0, style: str | None = None, energy: float = 1.0,
-                 lead_ms: float = 0.0, feet: bool | None = None) -> None:
+                 lead_ms: float = 0.0, feet: bool | None = None, stage=0, facing: str = "free") -> None:
         if not isinstance(model, DanceVQ):
             raise ConfigError(f"DanceStream needs a dance_vq model, got {type(model).__name__}")
         self.model = model.eval()
@@ -608,6 +609,9 @@ class DanceStream:
         self.lead_ms = 0.0
         self._lead_next = 0  # lead in frames from the next code step on (set_lead)
         self.set_lead(lead_ms)
+        # travel and turns on the stage (models/networks/stage.py): each exemplar's, played along
+        self._travel = cached_travel(model, MEMBER_SMOOTH)  # (K, M, 2 seg, 3), shared: never written
+        self._stage = Stage(self.seg, stage, facing)
         cc = c.clarity_col
         self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None
         self._onset_col = c.onset_col if 0 <= c.onset_col < c.feature_dim else None
@@ -659,6 +663,7 @@ class DanceStream:
         self._prev_quat: np.ndarray | None = None
         self.codes_drawn: list[int] = []
         self._lead = self._lead_next  # the lead in frames now (taken up at code steps)
+        self._stage.reset()  # the centre of the stage, facing the audience
 
     def set_style(self, style: str | None) -> None:
         """Dance this style from the next code on: None/"auto", "chacha", "rumba", "waltz" (ConfigError otherwise)."""
@@ -705,6 +710,24 @@ class DanceStream:
             raise ConfigError(f"lead must be in [{lo:g}, {hi:g}] ms, got {lead_ms!r}")
         self._lead_next = int(round(ms * FPS / 1000.0))
         self.lead_ms = ms
+
+    def set_stage(self, stage) -> None:
+        """The stage, ``"WxD"`` metres centred on the origin or 0 (in place, facing +Z), from the
+        next frame on (models/networks/stage.py); ConfigError on a bad value."""
+        self._stage.set_stage(stage)
+
+    def set_facing(self, facing: str) -> None:
+        """``"free"`` (turn as the dancers did) or ``"audience"`` (come back to face +Z); ConfigError otherwise."""
+        self._stage.set_facing(facing)
+
+    def home(self) -> None:
+        """Walk back to the centre of the stage."""
+        self._stage.home()
+
+    @property
+    def stage(self) -> Stage:
+        """The stage part: its size, facing and the performer's place on it (read-only use)."""
+        return self._stage
 
     def _ahead(self, row: np.ndarray) -> np.ndarray:
         """``row`` (D,) with the beat tracker's phase advanced by the lead (a copy): its
@@ -796,6 +819,7 @@ class DanceStream:
             segment = m.decode_last(np.fromiter(self._codes, np.int64))
             self._codes.pop()
             window = np.concatenate([segment, np.repeat(segment[-1:], self.seg, axis=0)])
+            self._stage.handover(self._advance(self.seg), None, not self.codes_drawn)  # in place
             self._play(window, 1.0)  # no continuation to play into: its own pace (no contacts known)
             self._own_speed = 0.0
             self._commit(draws[0])
@@ -826,6 +850,7 @@ class DanceStream:
         rate = self._rate_for(*pairs[i])
         if self._has_cont and SPEED_MATCH > 0.0:  # the speed the bend adds or takes away, undone
             rate = self._speed_matched(cands[i], best, rate)
+        self._stage.handover(self._advance(self.seg), self._travel[pairs[i]], not self.codes_drawn)
         self._play(best, rate, self._bone_limit(best, max(rate, self._rate)), self._contacts[pairs[i]])
         self._own_speed = float(self._member_speed[pairs[i]])
         self._commit(pairs[i][0])
@@ -1063,6 +1088,7 @@ class DanceStream:
             else:
                 e = w * w * (3 - 2 * w)  # smoothstep: no kink where the fade starts or ends
                 pose = self._fade(pose, self._sway(np.array([t]))[0], e)
+            self._stage.step(pose, self._at, e)  # travel and turns, inside the stage (models/networks/stage.py)
             if self._feet is not None:  # the last step: planted feet stay put (models/networks/feet.py)
                 left, right, lift = self._contact_at(self._at)  # the idle stands on both feet
                 pose = self._feet.step(pose, left + e * (1.0 - left), right + e * (1.0 - right),
@@ -1078,7 +1104,8 @@ class DanceStream:
 
 
 def generate(model: DanceVQ, features: np.ndarray, seed: int = 0, style: str | None = None,
-             energy: float = 1.0, lead: float = 0.0) -> np.ndarray:
+             energy: float = 1.0, lead: float = 0.0, stage=0, facing: str = "free") -> np.ndarray:
     """Poses (T, P) float32 for features (T, D) at 30 fps: a fresh stream's frames, all at once
-    (``seed``, ``style``, ``energy``, ``lead`` in ms: as :class:`DanceStream` takes them)."""
-    return DanceStream(model, seed=seed, style=style, energy=energy, lead_ms=lead).push(features)
+    (``seed``, ``style``, ``energy``, ``lead`` in ms, ``stage``, ``facing``: as :class:`DanceStream` takes them)."""
+    return DanceStream(model, seed=seed, style=style, energy=energy, lead_ms=lead, stage=stage,
+                       facing=facing).push(features)

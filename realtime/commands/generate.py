@@ -39,6 +39,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--lead", type=float, default=0.0, metavar="MS",
                    help="dance_vq models: the pose written for audio time t is the one taken at t + MS, "
                         "0..200 ms, for a display chain's delay (default 0; docs/show.md, \"Lead\")")
+    p.add_argument("--stage", metavar="WxD",
+                   help="dance_vq models: travel and turn inside a stage of W x D metres centred on the origin, "
+                        "or 0: dance in place facing +Z (default 3x2; docs/stage.md)")
+    p.add_argument("--facing", default="free", metavar="free|audience",
+                   help="dance_vq models: free turns as the dancers did; audience dances the turns but comes "
+                        "back to face +Z (default free; docs/stage.md)")
     p.add_argument("--seed", type=int, default=0, metavar="N",
                    help="seed of a stochastic model's random choices (default 0)")
     p.add_argument("--threads", type=int, default=1, metavar="N",
@@ -55,11 +61,18 @@ def run(args: argparse.Namespace) -> int:
 
     if args.threads < 1:
         raise ConfigError(f"--threads must be >= 1, got {args.threads}")
+    from models.networks.stage import DEFAULT_STAGE, check_facing, parse_stage
+
     check_output_path(args.out)  # fail before loading anything
+    stage = parse_stage(args.stage) if args.stage is not None else None
+    check_facing(args.facing)
     loaded = load_model(args.checkpoint)
+    if stage is None:  # the default: a small stage for the dancing models, in place for the others
+        stage = DEFAULT_STAGE if getattr(loaded.model, "takes_style", False) else 0
     with torch_threads(args.threads):
         g = generate(args.audio, args.out, loaded, window=args.window, hop=args.hop, seed=args.seed,
-                     style=None if args.style == "auto" else args.style, energy=args.energy, lead=args.lead)
+                     style=None if args.style == "auto" else args.style, energy=args.energy, lead=args.lead,
+                     stage=stage, facing=args.facing)
     t = g.timings
     print(f"{args.out}: {g.num_frames} frames ({g.num_frames / 30:.2f} s at 30 fps) from {g.audio_s:.2f} s of audio, "
           f"model {loaded.name} ({loaded.path})")
