@@ -284,7 +284,8 @@ MAX_SAMPLE: float = 4.0
 LIVE_SETTINGS: tuple[str, ...] = ("offset_ms", "smoothing")
 
 #: Actions of :meth:`Engine.control` (the WebSocket and OSC control inputs use these).
-CONTROL_ACTIONS: tuple[str, ...] = ("reset", "set_offset", "set_smoothing", "idle", "style", "energy", "lead")
+CONTROL_ACTIONS: tuple[str, ...] = ("reset", "set_offset", "set_smoothing", "idle", "style", "energy", "lead", "stage",
+                                    "facing", "home")
 
 #: Longest style name :meth:`Engine.control` passes to a model, characters.
 MAX_STYLE_CHARS: int = 64
@@ -843,9 +844,10 @@ class Engine:
 
         Actions (:data:`CONTROL_ACTIONS`): ``reset``; ``set_offset`` (ms) and
         ``set_smoothing`` (through :meth:`update`); ``idle`` (0/1, see :meth:`set_idle`);
-        ``style`` (a name), ``energy`` and ``lead`` (numbers; the lead in ms), passed to the
-        pose model's ``set_style`` / ``set_energy`` / ``set_lead`` when it has them and refused
-        otherwise. ``performer``: None or ``"*"`` acts on every performer (``reset``: the whole engine, as
+        ``style`` (a name), ``energy`` and ``lead`` (numbers; the lead in ms), ``stage`` ("WxD"
+        metres or 0) and ``facing`` (free, audience), passed to the pose model's ``set_style`` /
+        ``set_energy`` / ``set_lead`` / ``set_stage`` / ``set_facing`` when it has them, and
+        ``home`` (no value) to its ``home``, and refused otherwise (models/networks/stage.py). ``performer``: None or ``"*"`` acts on every performer (``reset``: the whole engine, as
         :meth:`reset`), a name on that one (``reset``: :meth:`reset_performer`). Every value
         is checked, against every performer it goes to, before anything changes; a bad one,
         an unknown action or performer, or a control a model does not offer raises
@@ -875,6 +877,16 @@ class Engine:
             number = check_finite(action, value)
             for fn in fns:
                 fn(number)
+        elif action in ("stage", "facing"):
+            from models.networks.stage import check_facing, parse_stage
+
+            fns = [self._model_control(lane, f"set_{action}", action) for lane in lanes]
+            setting = parse_stage(value) if action == "stage" else check_facing(value)
+            for fn in fns:
+                fn(setting)
+        elif action == "home":
+            for fn in [self._model_control(lane, "home", "home") for lane in lanes]:
+                fn()
         else:
             raise ConfigError(f"unknown control action {short_repr(action)}; use {', '.join(CONTROL_ACTIONS)}")
 

@@ -13,6 +13,9 @@ WebSocket control channel uses too (docs/show.md has the desk setups)::
     /performer/style      s           a style name, for models that offer styles
     /performer/energy     n           a number, for models that offer it
     /performer/lead       n           ms, 0..200, for models that offer it (send poses ahead)
+    /performer/stage      s           "WxD" metres (e.g. "3x2") or "0" (in place), for models that offer it
+    /performer/facing     s           free or audience, for models that offer it
+    /performer/home                   walk back to the centre of the stage (n == 0 does nothing)
 
 In an ensemble (several performers in one ``performer run``) each of these addresses acts
 on every performer, and ``/performer/NAME/reset``, ``/performer/NAME/offset``, ... on the
@@ -64,6 +67,9 @@ ADDRESSES: dict[str, tuple[str, str]] = {
     "/performer/style": ("style", "name"),
     "/performer/energy": ("energy", "number"),
     "/performer/lead": ("lead", "number"),
+    "/performer/stage": ("stage", "name"),
+    "/performer/facing": ("facing", "name"),
+    "/performer/home": ("home", "trigger"),
 }
 _WANT = {"number": "one number", "switch": "one number (0 or 1)", "name": "one string", "trigger": "at most one number"}
 

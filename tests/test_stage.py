@@ -208,3 +208,43 @@ def test_travel_memory_is_added_to_an_older_checkpoint_only_from_its_own_trainin
         add_travel_memory(m, [_Clip(_poses(300, np.random.default_rng(7)), clips[0].features, "R")],
                           [np.zeros((300, 3))])
     assert torch.equal(m.member_travel, travel) and all(torch.equal(v, m.state_dict()[k]) for k, v in kept.items())
+
+
+def test_stage_facing_and_home_are_engine_and_osc_controls():
+    """``Engine.control("stage" | "facing" | "home")``, which the WebSocket and OSC control
+    inputs send: checked first (one line, nothing changed), then passed to the stream; a model
+    without a stage refuses them."""
+    from test_engine import TinyConvModel, extractor, noise
+
+    from models.timebase import SAMPLE_RATE
+    from realtime.audio_input import FileSource
+    from realtime.engine import Engine, EngineConfig
+    from realtime.osc_control import OscControl
+
+    s = DanceStream(walking_model(), seed=0)
+    eng = Engine(FileSource(noise(0.1), SAMPLE_RATE, realtime=False), extractor, s, [], EngineConfig(warmup_s=0))
+    eng.control("stage", "3x2")
+    eng.control("facing", "audience")
+    eng.control("home")
+    assert (s.stage.width, s.stage.depth, s.stage.facing, s.stage.homing) == (3.0, 2.0, "audience", True)
+    for action, value, message in [("stage", "3y2", "stage must be WxD"), ("stage", "9" * 5000, "stage must be WxD"),
+                                   ("stage", float("nan"), "stage must be WxD"), ("stage", "0x3", "stage sides"),
+                                   ("facing", "back", "facing must be one of free, audience"), ("facing", 1, "facing")]:
+        with pytest.raises(ConfigError, match=message) as e:
+            eng.control(action, value)
+        assert "\n" not in str(e.value) and len(str(e.value)) < 200
+    assert (s.stage.width, s.stage.depth, s.stage.facing) == (3.0, 2.0, "audience")  # nothing changed
+    osc = OscControl(control=eng.control)
+    try:
+        assert osc._apply("/performer/stage", "s", ["0"]) and not s.stage.active
+        assert osc._apply("/performer/facing", "s", ["free"]) and s.stage.facing == "free"
+        s.stage._homing = False
+        assert not osc._apply("/performer/home", "i", [0]) and not s.stage.homing  # a button's release
+        assert osc._apply("/performer/home", "", []) and s.stage.homing
+    finally:
+        osc.close()
+    other = Engine(FileSource(noise(0.1), SAMPLE_RATE, realtime=False), extractor, TinyConvModel(), [],
+                   EngineConfig(warmup_s=0))
+    for action, value in (("stage", "3x2"), ("facing", "free"), ("home", None)):
+        with pytest.raises(ConfigError, match=f"^this model offers no {action} control$"):
+            other.control(action, value)

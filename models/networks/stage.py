@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-from models.errors import ConfigError
+from models.errors import ConfigError, short_repr
 from models.timebase import FPS
 
 #: The stage a screen or a small stage suits (width x depth, metres), which ``performer
@@ -84,7 +84,9 @@ HOME_DONE: float = 0.02
 def parse_stage(value) -> tuple[float, float]:
     """``"WxD"`` (metres, e.g. ``"3x2"``), ``"0"`` / 0 (in place) or a (width, depth) pair ->
     (width, depth); ConfigError with one line otherwise."""
-    if isinstance(value, (tuple, list)) and len(value) == 2:
+    if isinstance(value, str) and len(value) > 32:
+        parts = None
+    elif isinstance(value, (tuple, list)) and len(value) == 2:
         parts = list(value)
     elif isinstance(value, (int, float)) and not isinstance(value, bool):
         parts = [value, value] if value == 0 else None
@@ -98,18 +100,19 @@ def parse_stage(value) -> tuple[float, float]:
             raise ValueError
         w, d = float(parts[0]), float(parts[1])
     except (TypeError, ValueError):
-        raise ConfigError(f"stage must be WxD in metres (e.g. 3x2) or 0 (in place), got {value!r}") from None
+        raise ConfigError(f"stage must be WxD in metres (e.g. 3x2) or 0 (in place), got {short_repr(value)}") from None
     if w == 0 and d == 0:
         return 0.0, 0.0
     if not (0 < w <= MAX_SIDE and 0 < d <= MAX_SIDE):  # NaN fails too
-        raise ConfigError(f"stage sides must be in (0, {MAX_SIDE:g}] m (or the stage 0: in place), got {value!r}")
+        raise ConfigError(f"stage sides must be in (0, {MAX_SIDE:g}] m (or the stage 0: in place), "
+                          f"got {short_repr(value)}")
     return w, d
 
 
 def check_facing(mode) -> str:
     """``mode`` if it is one of :data:`FACING`, else ConfigError."""
     if mode not in FACING:
-        raise ConfigError(f"facing must be one of {', '.join(FACING)}, got {mode!r}")
+        raise ConfigError(f"facing must be one of {', '.join(FACING)}, got {short_repr(mode)}")
     return mode
 
 
