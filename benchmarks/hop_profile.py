@@ -63,6 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--style", default=None, help="a requested style (performer run --style; default: auto)")
     p.add_argument("--guidance", type=float, default=None,
                    help="STYLE_GUIDANCE for this run (default: the shipped one; 1: a style without guidance)")
+    p.add_argument("--no-feet", action="store_true",
+                   help="the feet step switched off (dance_stream.FEET_LOCK = False) for this run")
     p.add_argument("--stage", default=None, metavar="WxD",
                    help="a stage to travel on (DanceStream.set_stage, e.g. 3x2; default: as the pipeline builds it)")
     p.add_argument("--facing", default=None, help="free or audience (DanceStream.set_facing; default free)")
@@ -77,6 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     import models.networks.dance_numpy as dance_numpy
     import models.networks.dance_stream as dance_stream
     import models.networks.dance_vq as dance_vq
+    import models.networks.feet as feet
     import models.networks.stage as stage
     from models.errors import PerformerError
     from models.features.audio_io import bundled_clip_path, load_audio
@@ -101,6 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         (dance_vq.DanceVQ, "sample", "dance_vq: code step: sampling"),
         (dance_numpy.Prefix, "step", "dance_vq: prefix piece"),
         (stage.Stage, "step", "dance_vq: stage step (every frame)"),
+        (feet.FeetLock, "step", "dance_vq: feet step (every frame)"),
         (Engine, "_sanitize", "engine: block check"),
         (Engine, "_emit", "engine: emit (guard, smoothing, sends)"),
         (OscSink, "send", "outputs: VMC send"),
@@ -111,6 +115,8 @@ def main(argv: list[str] | None = None) -> int:
         dance_stream.match_exemplar = _timed(t, "dance_vq: code step: motion matching", dance_stream.match_exemplar)
     if args.guidance is not None:  # a script: the module's setting for this one run
         dance_stream.STYLE_GUIDANCE = args.guidance
+    if args.no_feet:
+        dance_stream.FEET_LOCK = False
 
     try:
         pipe = build_pipeline(args.checkpoint, lead=args.lead, style=args.style)

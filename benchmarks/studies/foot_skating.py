@@ -5,7 +5,8 @@ For the validation dances (``models.data.split.VAL_DANCES``, or ``--dances``) pr
 
 - ``performer``: the checkpoint's live stream run on the song's features
   (:func:`models.networks.dance_stream.generate`, seed ``--seed``), as it comes out (in
-  place unless the stream travels); ``--no-feet`` runs it with the feet step switched off;
+  place, or with ``--stage WxD`` travelling on that stage, ``--facing`` free or audience);
+  ``--no-feet`` runs it with the feet step switched off;
 - ``dancers in place``: the dancers' own motion as the corpus keeps it (canonical: root
   x/z zeroed, heading removed; the tempo-1 clip on the 30 fps grid);
 - ``dancers travelling``: the same motion with its root position and heading
@@ -53,7 +54,8 @@ def travelling_poses(data_root: str | Path, name: str, frames: int, first: int) 
 
 
 def rows_for(data_root: str, checkpoint: str, dances: list[str] | None, seed: int, travel: bool,
-             feet: bool, cache: str | None) -> tuple[dict[str, dict[str, dict]], dict[str, dict[str, float]]]:
+             feet: bool, cache: str | None, stage: str | None = None,
+             facing: str | None = None) -> tuple[dict[str, dict[str, dict]], dict[str, dict[str, float]]]:
     """({row label: {dance: foot_skating dict}}, {row label: motion against the dancers in place:
     band_amp, jitter (:func:`models.evaluation.metrics.band_ratios`), jerk ratio})."""
     import torch
@@ -68,14 +70,15 @@ def rows_for(data_root: str, checkpoint: str, dances: list[str] | None, seed: in
     opts = EvalOptions(cache_dir=cache, progress=False)
     names = validation_names(data_root, dances, opts)
     clips = load_clips(data_root, names, lm.features, opts)
-    label = "performer" + ("" if feet else " (feet off)")
+    label = "performer" + (f" on {stage}" if stage else "") + ("" if feet else " (feet off)")
+    where = {k: v for k, v in (("stage", stage), ("facing", facing)) if v is not None}
     out: dict[str, dict[str, dict]] = {label: {}, "dancers in place": {}}
     pos: dict[str, list] = {label: [], "dancers in place": []}
     if travel:
         out["dancers travelling"] = {}
     for clip in clips:
         with torch.no_grad():
-            poses = dance_stream.DanceStream(lm.model, seed=seed, feet=feet).push(clip.features)
+            poses = dance_stream.DanceStream(lm.model, seed=seed, feet=feet, **where).push(clip.features)
         for row, p in ((label, poses), ("dancers in place", clip.poses)):
             pos[row].append(positions(p))
             out[row][clip.name] = foot_skating(p, pos[row][-1])
@@ -98,6 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0, help="the stream's seed (default 0)")
     p.add_argument("--travel", action="store_true", help="also the dancers with their travel and heading")
     p.add_argument("--no-feet", action="store_true", help="the performer with its feet step switched off")
+    p.add_argument("--stage", default=None, metavar="WxD", help="the performer travels on this stage (default: in place)")
+    p.add_argument("--facing", default=None, help="with --stage: free or audience (default: the stream's)")
     p.add_argument("--cache", default=".cache/corpus", metavar="DIR", help="corpus cache (default .cache/corpus)")
     a = p.parse_args(argv)
     import torch
@@ -107,7 +112,8 @@ def main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(1)
     try:
-        rows, motion = rows_for(a.data, a.checkpoint, a.dances, a.seed, a.travel, not a.no_feet, a.cache)
+        rows, motion = rows_for(a.data, a.checkpoint, a.dances, a.seed, a.travel, not a.no_feet, a.cache, a.stage,
+                                a.facing)
     except (PerformerError, OSError) as e:
         print(f"foot_skating.py: {e}", file=sys.stderr)
         return 2

@@ -214,8 +214,9 @@ REPEAT_PENALTY: float = 1.0
 REPEAT_CALM: float = 1.0
 #: Feet on the floor (:mod:`models.networks.feet`, the stream's last step on every frame): the
 #: feet the played exemplar has on the floor stay put in the world by two-bone leg IK, no knee
-#: bends past straight, no foot goes under the floor (validation songs: foot-skating ratio 0.71
-#: -> 0.08; benchmarks/studies/foot_skating.py). The stream's ``feet`` argument overrides it.
+#: bends past straight, no foot goes under the floor (validation songs, foot-skating ratio: in
+#: place 0.71 -> 0.06, on a 6x5 stage 0.81 -> 0.20; benchmarks/studies/foot_skating.py, docs/feet.md).
+#: The stream's ``feet`` argument overrides it.
 #: False: the legs as the memory plays them.
 FEET_LOCK: bool = True
 #: The energy control's range.
