@@ -248,3 +248,27 @@ def test_stage_facing_and_home_are_engine_and_osc_controls():
     for action, value in (("stage", "3x2"), ("facing", "free"), ("home", None)):
         with pytest.raises(ConfigError, match=f"^this model offers no {action} control$"):
             other.control(action, value)
+
+
+def test_stage_0_set_live_walks_back_to_the_centre_and_a_stage_again_starts_there():
+    """Switching the stage off live does not jump the performer to the centre: it walks back
+    and turns to face +Z, then dances in place (the pose untouched); a stage set again starts
+    from there, without a jump."""
+    from models.data.canonical import heading
+    from scipy.spatial.transform import Rotation
+
+    m = walking_model(speed=0.02, turn=0.01)
+    s = DanceStream(m, seed=0, stage="6x5")
+    parts = [s.push(music(400))]
+    assert math.hypot(s.stage.x, s.stage.z) > 0.5 and abs(s.stage.heading) > 0.5
+    s.set_stage(0)
+    parts.append(s.push(music(300, seed=1)))
+    assert (s.stage.x, s.stage.z, s.stage.heading) == (0.0, 0.0, 0.0)
+    np.testing.assert_array_equal(parts[-1][-30:, [0, 2]], 0.0)  # in place again
+    s.set_stage("3x2")
+    parts.append(s.push(music(60, seed=2)))
+    p = np.concatenate(parts)
+    step = np.linalg.norm(np.diff(p[:, [0, 2]], axis=0), axis=1)
+    assert step.max() <= (MAX_SPEED + stage_mod.HOME_SPEED) / FPS + 1e-6
+    h = np.unwrap(heading(Rotation.from_quat(p[:, 3:7].astype(np.float64))))
+    assert np.degrees(np.abs(np.diff(h))).max() < 20.0  # no turn in one frame

@@ -240,16 +240,18 @@ class Stage:
     def step(self, pose: np.ndarray, read: float, idle: float) -> None:
         """Advance one frame and place ``pose`` (P,) on the stage, in place: ``read`` the
         fractional row the player read this frame's pose at, ``idle`` the idle fade (0
-        dancing .. 1 idle: the travel scaled by ``1 - idle``). Stage 0: ``pose`` untouched."""
-        if not self.active:
-            return
+        dancing .. 1 idle: the travel scaled by ``1 - idle``). Stage 0: ``pose`` untouched
+        (set live while away from the centre: first a walk back to it, turning to face +Z)."""
         v = self._at(read)
         p = self._prev if self._prev is not None else v
         self._prev, self._read = v, read
+        leaving = not self.active
+        if leaving and self.x == 0.0 and self.z == 0.0 and self.heading == 0.0:
+            return
         # this frame's step in the movement's own frame at the last read: forward z, sideways x, turn
         c, s = math.cos(p[2]), math.sin(p[2])
         dx, dz = v[0] - p[0], v[1] - p[1]
-        keep = 1.0 - idle
+        keep = 0.0 if leaving else 1.0 - idle
         lx, lz, turn = (c * dx - s * dz) * keep, (s * dx + c * dz) * keep, (v[2] - p[2]) * keep
         if self._homing:  # walk back to the centre instead of travelling
             lx = lz = 0.0
@@ -260,13 +262,17 @@ class Stage:
         if fast > 1.0:  # no faster than MAX_SPEED
             wx, wz = wx / fast, wz / fast
         wx, wz = self._home_step(wx, wz)
-        wx, wz, steer = self._bound(wx, wz)
-        turn += steer
-        if self.facing == "audience":
+        if not leaving:
+            wx, wz, steer = self._bound(wx, wz)
+            turn += steer
+        if self.facing == "audience" or leaving:
             turn = self._face_audience(turn)
         self.x += wx
         self.z += wz
         self.heading = h + turn
+        if leaving and math.hypot(self.x, self.z) < 1e-3 and abs(_wrap(self.heading)) < 1e-3:
+            self.x = self.z = self.heading = 0.0  # back at the centre (under a millimetre): in place from here
+            self._homing = False
         pose[0], pose[2] = self.x, self.z
         half = 0.5 * self.heading
         c, s = math.cos(half), math.sin(half)
@@ -284,7 +290,7 @@ class Stage:
         if not self._homing and dist == 0.0:
             self._home_w = 0.0
             return wx, wz
-        if self._homing and dist < HOME_DONE:
+        if self._homing and dist < HOME_DONE and self.active:
             self._homing, self._home_w = False, 0.0
             return wx, wz
         self._home_w = min(1.0, self._home_w + 1.0 / (HOME_RAMP * FPS))
