@@ -12,9 +12,13 @@ For the validation dances (``models.data.split.VAL_DANCES``, or ``--dances``) pr
 - ``dancers travelling``: the same motion with its root position and heading
   (``--travel``; retargeted from the mocap the same way, not canonicalised).
 
-::
+``--plot PNG`` draws one foot of one dance (``--plot-dance``, 8 s from ``--plot-start``) with the
+feet step and without, in place and on the ``--stage`` (default 6x5): its path seen from
+above and its speed, contact frames marked::
 
     .venv/bin/python benchmarks/studies/foot_skating.py --data ../shared/data/dwm --travel
+    .venv/bin/python benchmarks/studies/foot_skating.py --data ../shared/data/dwm --stage 6x5
+    .venv/bin/python benchmarks/studies/foot_skating.py --data ../shared/data/dwm --plot docs/img/feet_paths.png
 
 Exit status 2 on a missing or unreadable checkpoint or dataset.
 """
@@ -91,6 +95,55 @@ def rows_for(data_root: str, checkpoint: str, dances: list[str] | None, seed: in
     return out, motion
 
 
+def plot_foot(data_root: str, checkpoint: str, dance: str, start_s: float, stage: str, seed: int,
+              cache: str | None, path: str) -> None:
+    """The left foot's heel-toe midpoint of ``dance`` over 8 s from ``start_s``: seen from above and
+    its horizontal speed, the performer with the feet step and without, in place and on ``stage``."""
+    import torch
+    from matplotlib.figure import Figure
+
+    from models.evaluation.evaluate import EvalOptions, load_clips, positions
+    from models.evaluation.foot_skating import CONTACT_HEIGHT, FLOOR_PERCENTILE, foot_points
+    from models.generate import load_model
+    from models.networks import dance_stream
+    from models.timebase import FPS
+
+    lm = load_model(checkpoint)
+    (clip,) = load_clips(data_root, [dance], lm.features, EvalOptions(cache_dir=cache, progress=False))
+    a, b = int(start_s * FPS), int((start_s + 8.0) * FPS)
+    fig = Figure(figsize=(11, 7), layout="constrained")
+    axs = fig.subplots(2, 2)
+    for col, where in enumerate((0, stage)):
+        for feet, color in ((False, "C3"), (True, "C0")):
+            with torch.no_grad():
+                poses = dance_stream.DanceStream(lm.model, seed=seed, feet=feet, stage=where).push(clip.features)
+            heel, toe = foot_points(positions(poses))
+            low = np.minimum(heel[..., 1], toe[..., 1])
+            on = low[a:b, 0] <= np.percentile(low, FLOOR_PERCENTILE) + CONTACT_HEIGHT
+            mid = 0.5 * (heel + toe)[a:b, 0]
+            speed = np.r_[0.0, np.linalg.norm(np.diff(mid[:, [0, 2]], axis=0), axis=1)] * FPS
+            t = np.arange(a, b) / FPS
+            label = f"feet step {'on' if feet else 'off'}"
+            axs[0, col].plot(mid[:, 0], mid[:, 2], color=color, lw=1, label=label)
+            axs[0, col].plot(mid[on, 0], mid[on, 2], ".", color=color, ms=3)
+            axs[1, col].plot(t, speed, color=color, lw=1, label=label)
+            axs[1, col].fill_between(t, 0, np.where(on, speed, np.nan), color=color, alpha=0.25)
+        name = "in place" if where == 0 else f"on a {where} stage"
+        axs[0, col].set_title(f"left foot seen from above, {name} (dots: in contact)", fontsize=9)
+        axs[0, col].set_aspect("equal")
+        axs[0, col].set_xlabel("x (m)")
+        axs[0, col].set_ylabel("z (m)")
+        axs[1, col].set_title(f"its horizontal speed, m/s, {name} (shaded: in contact, <= 5 cm up)", fontsize=9)
+        axs[1, col].set_xlabel(f"time in {dance} (s)")
+        for ax in axs[:, col]:
+            ax.legend(fontsize=8)
+            ax.grid(alpha=0.3)
+    fig.suptitle(f"{dance}, {Path(checkpoint).name} (seed {seed}): the left foot's heel-toe midpoint, "
+                 f"{start_s:g}-{start_s + 8:g} s, with the feet step and without", fontsize=10)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\nExit status")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -104,6 +157,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--stage", default=None, metavar="WxD", help="the performer travels on this stage (default: in place)")
     p.add_argument("--facing", default=None, help="with --stage: free or audience (default: the stream's)")
     p.add_argument("--cache", default=".cache/corpus", metavar="DIR", help="corpus cache (default .cache/corpus)")
+    p.add_argument("--plot", default=None, metavar="PNG", help="draw one foot instead of the tables (see above)")
+    p.add_argument("--plot-dance", default="DANCE_W_5", metavar="NAME", help="--plot: the dance (default DANCE_W_5)")
+    p.add_argument("--plot-start", type=float, default=40.0, metavar="S", help="--plot: first second (default 40)")
     a = p.parse_args(argv)
     import torch
 
@@ -111,6 +167,14 @@ def main(argv: list[str] | None = None) -> int:
     from models.evaluation.foot_skating import pooled
 
     torch.set_num_threads(1)
+    if a.plot:
+        try:
+            plot_foot(a.data, a.checkpoint, a.plot_dance, a.plot_start, a.stage or "6x5", a.seed, a.cache, a.plot)
+        except (PerformerError, OSError) as e:
+            print(f"foot_skating.py: {e}", file=sys.stderr)
+            return 2
+        print(f"wrote {a.plot}")
+        return 0
     try:
         rows, motion = rows_for(a.data, a.checkpoint, a.dances, a.seed, a.travel, not a.no_feet, a.cache, a.stage,
                                 a.facing)
