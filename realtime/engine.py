@@ -741,6 +741,8 @@ class Engine:
             g.extractor = g.factory(self.source.sample_rate)
         # sinks that hold their thread hand-offs while the hop's performers run (Sink's begin_hop / end_hop)
         self._hop_sinks = [s for lane in self._lanes for s in lane.sinks if hasattr(s, "begin_hop")]
+        for lane in self._lanes:
+            self._publish_state(lane)  # the viewer draws the stage
         self.error = None
         self._stop.clear()
         self._done.clear()
@@ -884,6 +886,8 @@ class Engine:
             setting = parse_stage(value) if action == "stage" else check_facing(value)
             for fn in fns:
                 fn(setting)
+            for lane in lanes:
+                self._publish_state(lane)
         elif action == "home":
             for fn in [self._model_control(lane, "home", "home") for lane in lanes]:
                 fn()
@@ -926,6 +930,19 @@ class Engine:
     def _who(self, lane: _Lane) -> str:
         """``"performer NAME: "`` in an ensemble, ``""`` for a single performer (log prefixes)."""
         return f"performer {lane.name}: " if len(self._lanes) > 1 else ""
+
+    @staticmethod
+    def _publish_state(lane: _Lane) -> None:
+        """Tell the lane's sinks that show a stage (``set_state``: the WebSocket viewer's) the
+        model's stage and facing (models/networks/stage.py), if it has one."""
+        stage = getattr(lane.model, "stage", None)
+        if stage is None or not hasattr(stage, "width"):
+            return
+        state = {"stage": [float(stage.width), float(stage.depth)], "facing": str(stage.facing)}
+        for sink in lane.sinks:
+            set_state = getattr(sink, "set_state", None)
+            if callable(set_state):
+                set_state(state)
 
     def _model_control(self, lane: _Lane, method: str, what: str) -> Callable:
         """The pose model's ``method`` or :class:`ConfigError` "this model offers no ``what`` control"."""

@@ -47,7 +47,9 @@ class Sink(Protocol):
     thread of its own may hold the hand-off until ``end_hop``, so that thread does not
     take the interpreter lock from the performers still to run. ``notice()`` returns a
     short text for the status line while something about the output needs saying (an OSC
-    target with no receiver listening), else None.
+    target with no receiver listening), else None. ``set_state(state)`` takes the performer's
+    stage and facing (``{"stage": [W, D], "facing": "free"}``) at the engine's start and
+    whenever a control changes them (the WebSocket viewer draws the stage).
     """
 
     name: str

@@ -190,6 +190,10 @@ class WebSocketRoute:
         """Encode one frame and hand it to the server thread for this route's clients; returns at once."""
         self.server._send(frame, self.path, self)
 
+    def set_state(self, state: dict) -> None:
+        """This performer's state (``{"stage": [W, D], "facing": ...}``) to its clients: :meth:`WebSocketSink.set_state`."""
+        self.server._set_state(state, self.path)
+
     def begin_hop(self) -> None:
         """The server's :meth:`WebSocketSink.begin_hop` (the engine calls it for each route)."""
         self.server.begin_hop()
@@ -292,6 +296,7 @@ class WebSocketSink:
         self._connections = 0
         self._rate_limited = self._controls = 0
         self._routes: dict[str, WebSocketRoute] = {}
+        self._states: dict[str | None, str] = {}  # the latest state message per route path (None: own stream)
         self._default_route: str | None = None  # the route "/" and "/ws" clients get (None: the server's own)
         self._open_routes = 0
         self._route_drops: dict[str | None, int] = {}
@@ -354,6 +359,31 @@ class WebSocketSink:
         if self._wake_pending or self._holding:  # the loop will take this frame with the pending or held wake-up
             return
         self._wake()
+
+    def set_state(self, state: dict) -> None:
+        """The performer's state, a small JSON object (``{"stage": [W, D], "facing": "free"}``,
+        docs/protocol.md), sent as ``{"type": "state", ...}`` to every client now and to each
+        new one right after its hello; the engine calls it at start and when a control changes
+        the stage. Returns at once (the server thread sends it)."""
+        self._set_state(state, None)
+
+    def _set_state(self, state: dict, key: str | None) -> None:
+        text = json.dumps({"type": "state", **state})
+        self._states[key] = text
+        if self._closed:
+            return
+        try:
+            self._loop.call_soon_threadsafe(self._broadcast_text, text, key)
+        except RuntimeError:  # loop already closed
+            pass
+
+    def _broadcast_text(self, text: str, key: str | None) -> None:
+        """On the loop: one JSON text message to the clients of ``key`` (a route's path, or None:
+        the server's own stream and its default route's clients), queued like frames."""
+        with self._lock:
+            clients = [c for c in self._clients.values() if c.route == key]
+        for c in clients:
+            self._enqueue(c, text)
 
     def begin_hop(self) -> None:
         """Hold the hand-off to the server thread until :meth:`end_hop` (the engine's worker, around
@@ -610,6 +640,11 @@ class WebSocketSink:
         await ws.send(hello)
         self._messages += 1
         self._bytes += len(hello)
+        state = self._states.get(route)
+        if state is not None:  # the performer's stage, right after the hello
+            await ws.send(state)
+            self._messages += 1
+            self._bytes += len(state)
         client.progress = self._loop.time()
         client.rate = TokenBucket(self.max_messages_per_s, client.progress)
         with self._lock:

@@ -226,6 +226,30 @@ def test_reconnects_after_the_server_restarts(synthetic_stream, open_page):
     assert not [e for e in page.errors if "WebSocket" not in e], page.errors  # the refused reconnects are logged
 
 
+def test_the_stage_is_drawn_and_the_camera_follows_a_travelling_performer(synthetic_stream, open_page, tmp_path):
+    """The viewer draws the stage the server names (its rectangle on the floor) and its camera
+    drifts after the performer's hips: a performer standing 1.2 m to the right of a 3x2 stage's
+    centre ends up near the middle of the picture; with 'follow' unticked the camera stays."""
+    stream = synthetic_stream(lambda i: pose_with({}, root=(1.2, 0.95, 0.6)))
+    stream.sink.set_state({"stage": [3.0, 2.0], "facing": "free"})
+    page = open_page(f"http://127.0.0.1:{stream.sink.port}/")
+    stats = page.wait_for(lambda s: s["stage"] == [3.0, 2.0] and abs(s["target"][0] - 1.2) < 0.05
+                          and abs(s["target"][2] - 0.6) < 0.05)
+    assert stats["facing"] == "free"
+    assert page.page.evaluate("window.performer.stageOutline()") == [[-1.5, -1.0], [1.5, -1.0], [1.5, 1.0], [-1.5, 1.0]]
+    page.page.screenshot(path=str(os.environ.get("STAGE_SCREENSHOT") or tmp_path / "stage.png"))
+    stream.sink.set_state({"stage": [0.0, 0.0], "facing": "free"})  # in place: no rectangle
+    page.wait_for(lambda s: s["stage"] == [0.0, 0.0])
+    assert page.page.evaluate("window.performer.stageOutline()") is None
+    page.page.click("#follow")  # untick: the camera stays where it is
+    assert page.page.evaluate("document.getElementById('follow').checked") is False
+    time.sleep(0.5)
+    before = page.stats()["target"]
+    time.sleep(1.0)
+    assert page.stats()["target"] == before
+    assert not page.errors, page.errors
+
+
 # -- VRM avatars -----------------------------------------------------------------------------
 
 VRM_NAMES = {b: b[0].lower() + b[1:] for b in BONES}

@@ -347,3 +347,49 @@ def test_frames_held_for_a_hop_go_out_in_order_when_it_ends(sink_factory):
         assert [w.index for w in got] == [0, 1, 2, 3]
         np.testing.assert_array_equal(got[2].pose, frames[2].pose)
         assert _send_until(sink, ws, [_frame(9)])  # outside a hop: sent at once, as before
+
+
+def test_the_stage_state_follows_the_hello_and_every_change(sink_factory):
+    """The viewer draws the stage: a client gets the performer's latest state right after its
+    hello, and every later one; a performer's route keeps its own."""
+    sink = sink_factory()
+    alice, bob = sink.route("/ws/alice", "alice", default=True), sink.route("/ws/bob", "bob")
+    alice.set_state({"stage": [3.0, 2.0], "facing": "free"})
+    with connect(sink.ws_url) as ws, connect(bob.ws_url) as other:
+        assert _hello(ws)["performer"] == "alice"
+        assert json.loads(ws.recv(timeout=5)) == {"type": "state", "stage": [3.0, 2.0], "facing": "free"}
+        assert _hello(other)["performer"] == "bob"
+        alice.set_state({"stage": [6.0, 5.0], "facing": "audience"})
+        bob.set_state({"stage": [0.0, 0.0], "facing": "free"})
+        assert json.loads(ws.recv(timeout=5)) == {"type": "state", "stage": [6.0, 5.0], "facing": "audience"}
+        assert json.loads(other.recv(timeout=5))["stage"] == [0.0, 0.0]
+        with pytest.raises(TimeoutError):
+            ws.recv(timeout=0.3)  # bob's state is not alice's clients'
+
+
+def test_the_engine_tells_the_viewer_its_performers_stage_at_start_and_on_control(sink_factory):
+    from test_engine import extractor, noise
+    from test_stage import walking_model
+
+    from models.networks.dance_stream import DanceStream
+    from models.timebase import SAMPLE_RATE
+    from realtime.audio_input import FileSource
+    from realtime.engine import Engine, EngineConfig
+
+    sink = sink_factory()
+    stream = DanceStream(walking_model(), seed=0)
+    stream.set_stage("3x2")
+    # 10 ms of audio: less than one feature frame, so the tiny model (10 feature columns) never
+    # gets the extractor's 65; the engine starts, tells the sinks, and its input ends
+    eng = Engine(FileSource(noise(0.01), SAMPLE_RATE, realtime=False), extractor, stream, [sink],
+                 EngineConfig(warmup_s=0))
+    eng.start()
+    try:
+        with connect(sink.ws_url) as ws:
+            _hello(ws)
+            assert json.loads(ws.recv(timeout=5)) == {"type": "state", "stage": [3.0, 2.0], "facing": "free"}
+            eng.control("facing", "audience")
+            assert json.loads(ws.recv(timeout=5)) == {"type": "state", "stage": [3.0, 2.0], "facing": "audience"}
+    finally:
+        eng.wait(10)
+        eng.stop()

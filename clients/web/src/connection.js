@@ -4,11 +4,13 @@
 // `minDelayMs`, doubling up to `maxDelayMs`; a hello resets the delay.
 
 import { decodeFrame, frameFromJson, parseHello } from './protocol.js';
+import { parseState } from './stage.js';
 
 export class PoseConnection {
   /**
    * @param {string} url ws:// address of the stream (protocol.streamUrl).
-   * @param {object} handlers onHello(hello), onFrame(frame, nowMs), onState(state, detail), onBadMessage(error).
+   * @param {object} handlers onHello(hello), onFrame(frame, nowMs), onState(state, detail), onBadMessage(error),
+   *     and optionally onPerformerState({width, depth, facing}) (the stage: stage.js).
    */
   constructor(url, handlers, { minDelayMs = 500, maxDelayMs = 5000 } = {}) {
     this.url = url;
@@ -79,6 +81,8 @@ export class PoseConnection {
         this.handlers.onState('open', this.url);
       } else if (msg.type === 'frame' && this.hello) {
         this.handlers.onFrame(frameFromJson(msg), now);
+      } else if (msg.type === 'state') {
+        this.handlers.onPerformerState?.(parseState(msg));
       } else if (msg.type === 'error') {
         this.handlers.onBadMessage(new Error(`server: ${msg.error}`));
       }

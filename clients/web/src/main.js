@@ -3,7 +3,8 @@
 // with the button, or named by ?vrm=URL).
 //
 // URL parameters: ws=ws://HOST:PORT/ws (default: the serving host), token=SECRET,
-// format=binary|json, vrm=URL.
+// format=binary|json, vrm=URL. The stage (docs/stage.md) is drawn on the floor when the
+// server says it, and the camera follows the performer across it (the 'follow' box).
 //
 // For tests and tinkering the page exposes window.performerStats (updated with
 // every frame) and window.performer (boneQuaternion, jointPositions, loadVrm).
@@ -14,6 +15,7 @@ import { PoseConnection } from './connection.js';
 import { Hud } from './hud.js';
 import { streamUrl } from './protocol.js';
 import { ProceduralAvatar } from './skeleton.js';
+import { fitDistance, followStep, StageOutline } from './stage.js';
 import { StreamStats } from './stats.js';
 import { loadVrm, VrmAvatar } from './vrm.js';
 
@@ -32,6 +34,8 @@ let vrmAvatar = null;
 let vrmName = '';
 let latest = null; // the newest frame not yet drawn
 const trails = createTrails(world.scene);
+const outline = new StageOutline(THREE, world.scene);
+let stageState = null; // {width, depth, facing} from the server's state messages
 
 function publishStats() {
   window.performerStats = {
@@ -43,6 +47,9 @@ function publishStats() {
     pictures, // pictures drawn by WebGL since the page loaded
     framesShown, // stream frames applied to the avatars (at most one per picture)
     url: connection.url,
+    stage: stageState ? [stageState.width, stageState.depth] : null,
+    facing: stageState?.facing ?? null,
+    target: world.controls.target.toArray(),
   };
 }
 
@@ -86,9 +93,26 @@ async function openVrm(source, name) {
   }
 }
 
+/** The stage changed: draw it, and the first time frame the camera on it. */
+function onPerformerState(state) {
+  const first = stageState === null;
+  stageState = state;
+  outline.set(state);
+  if (first && state.width > 0 && state.depth > 0) {
+    const { camera, controls } = world;
+    const dist = fitDistance(state.width, state.depth, camera.fov, camera.aspect);
+    const dir = camera.position.clone().sub(controls.target).normalize();
+    camera.position.copy(controls.target).addScaledVector(dir, dist);
+    controls.update();
+  }
+  dirty = true;
+  publishStats();
+}
+
 const connection = new PoseConnection(streamUrl(location), {
   onHello,
   onFrame,
+  onPerformerState,
   onState(state, detail) {
     stats.state = state;
     if (state === 'open') stats.connects += 1;
@@ -200,6 +224,19 @@ function pushTrails(avatar) {
   }
 }
 
+// The follow camera: the orbit target (and the camera with it) drifts after the performer's
+// hips across the floor, so a travelling performer stays in the picture (stage.js).
+const _hips = new THREE.Vector3();
+function follow(avatar) {
+  if (!document.getElementById('follow').checked || !avatar.worldPosition('Hips', _hips)) return;
+  const { camera, controls } = world;
+  const [dx, dz] = followStep([controls.target.x, controls.target.z], _hips.x, _hips.z, 0.08, stageState);
+  controls.target.x += dx;
+  controls.target.z += dz;
+  camera.position.x += dx;
+  camera.position.z += dz;
+}
+
 // ---- render loop ---------------------------------------------------------------------
 
 // Draw only when something changed (a new frame, the camera, the window): a software
@@ -221,6 +258,7 @@ function animate(now) {
     lastFrameMs = now;
     world.scene.updateMatrixWorld();
     pushTrails(vrmAvatar ?? procedural);
+    follow(vrmAvatar ?? procedural);
     dirty = true;
   }
   world.controls.update();
@@ -259,6 +297,12 @@ window.performer = {
     return out;
   },
   loadVrm: (url) => openVrm(url, nameOf(url)),
+  /** The stage rectangle's corners [[x, z], ...] as drawn on the floor, or null when none is shown. */
+  stageOutline() {
+    if (!outline.line.visible) return null;
+    const a = outline.line.geometry.attributes.position.array;
+    return [0, 1, 2, 3].map((k) => [a[3 * k], a[3 * k + 2]]);
+  },
 };
 
 publishStats();

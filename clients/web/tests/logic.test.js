@@ -91,3 +91,25 @@ test('stats: fps over a 1 s window, delay, drops and joint speed', () => {
   stats.tick(1000 * 1000 + 5000);
   assert.equal(stats.fps, 0);
 });
+
+test('state messages carry the stage; bad ones are refused with the reason', async () => {
+  const { parseState } = await import('../src/stage.js');
+  assert.deepEqual(parseState({ type: 'state', stage: [3, 2], facing: 'audience' }), { width: 3, depth: 2, facing: 'audience' });
+  assert.deepEqual(parseState({ type: 'state', stage: [0, 0] }), { width: 0, depth: 0, facing: 'free' });
+  assert.throws(() => parseState({ type: 'hello' }), /expected a state message/);
+  assert.throws(() => parseState({ type: 'state', stage: [3] }), /stage must be/);
+  assert.throws(() => parseState({ type: 'state', stage: [-1, 2] }), /stage must be/);
+});
+
+test('the follow camera drifts after the performer and stays near its stage', async () => {
+  const { fitDistance, followStep } = await import('../src/stage.js');
+  const [dx, dz] = followStep([0, 0], 1, -2, 0.1);
+  close(dx, 0.1);
+  close(dz, -0.2);
+  // a performer 10 m out on a 3x2 stage pulls the target no further than the stage plus 0.5 m
+  const [ex, ez] = followStep([0, 0], 10, 10, 1.0, { width: 3, depth: 2 });
+  close(ex, 2.0);
+  close(ez, 1.5);
+  assert.ok(fitDistance(6, 5) > fitDistance(1, 1));
+  assert.ok(fitDistance(1, 1) >= 3.0);
+});
