@@ -59,6 +59,28 @@ def test_bad_input_is_one_line_and_exit_2(args, message, capsys, tmp_path):
     assert not out.exists()
 
 
+def test_music_mode_scores_each_recording_up_to_the_end_of_its_music(tmp_path):
+    """``--music DIR`` (issue 43: the lead on any song): each recording of DIR, cut at --max-s,
+    danced at every lead and scored against its own beats; the lead keeps the beat behind the delay."""
+    import shutil
+
+    shutil.copy(REPO / "models" / "assets" / "clip.ogg", tmp_path / "clip.ogg")
+    out = tmp_path / "l.json"
+    assert lb.main(["--music", str(tmp_path), "--leads", "0", "133", "--seeds", "0", "--max-s", "15",
+                    "--json", str(out)]) == 0
+    row = json.loads(out.read_text())["clip"]
+    assert set(row) == {"0", "133", "chance"}
+    hits, beats = row["133"]["seen"]
+    assert 10 < beats < 15 * 5 and hits > row["133"]["no_lead"][0]
+
+
+@pytest.mark.parametrize("args", [["--data", "x", "--music", "y"], []])
+def test_one_source_exactly(args, capsys):
+    with pytest.raises(SystemExit) as exc:
+        lb.main(args)
+    assert exc.value.code == 2 and ("--music" in capsys.readouterr().err)
+
+
 @pytest.mark.slow
 @pytest.mark.data
 def test_default_checkpoint_on_one_validation_dance(dwm_root, tmp_path):

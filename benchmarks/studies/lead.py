@@ -14,6 +14,11 @@ and each lead's ratio to lead 0's hit rate with no delay (issue 25, target 5: at
 
     .venv/bin/python benchmarks/studies/lead.py --data ../shared/data/dwm
 
+``--music DIR`` scores every recording of DIR instead (issue 43: the lead on any song), each
+up to the end of its music (``models.evaluation.listening.music_end``: trailing silence,
+brahms' applause), against ``librosa.beat.beat_track`` on the recording; ``--max-s`` cuts
+each to its first seconds.
+
 Each song is danced with seeds 0 to 5 (``--seeds``, as benchmarks/listening.py) at every lead. Hit rates are pooled
 over songs and seeds (every kinematic beat counts once), with the smallest and largest song
 in brackets. Exit status 2 on a missing or unreadable
@@ -134,6 +139,41 @@ def run(checkpoint: str, data_root: str | Path, cache_dir: str | Path | None, le
     return out
 
 
+def run_music(checkpoint: str, music_dir: str | Path, leads: Sequence[float], seeds: Sequence[int] = (0,),
+              songs: Sequence[str] | None = None, max_s: float | None = None, log=print) -> dict[str, dict]:
+    """:func:`run` on every recording of ``music_dir`` (or those whose stem is in ``songs``): the
+    features of the recording up to the end of its music (at most ``max_s`` seconds), its beats
+    by ``librosa.beat.beat_track`` on the same span; ``{stem: measure_song(...)}``."""
+    import torch
+
+    from models.errors import ConfigError
+    from models.evaluation.beats import music_beats
+    from models.evaluation.listening import HOP, SAMPLE_RATE, AudioCache, music_end, music_files
+    from models.features.spectral import extract_features
+    from models.generate import load_model
+    from models.networks.dance_vq import DanceVQ
+    from models.timebase import FPS
+
+    lm = load_model(checkpoint)
+    if not isinstance(lm.model, DanceVQ):
+        raise ConfigError(f"{checkpoint}: model {type(lm.model).__name__} has no lead control (dance_vq models do)")
+    files = [f for f in music_files(music_dir) if not songs or f.stem in songs]
+    cache = AudioCache(None)
+    out: dict[str, dict] = {}
+    with torch.no_grad():
+        for i, f in enumerate(files, 1):
+            audio = cache.audio(f)
+            feats = extract_features(audio, lm.features)
+            end = music_end(lm, feats, f.stem)[1]
+            if max_s is not None:
+                end = min(end, int(round(max_s * FPS)))
+            feats = feats[:end]
+            mus = music_beats(audio[: end * HOP], SAMPLE_RATE, FPS)  # frame t ends at sample (t + 1) HOP
+            log(f"  [{i}/{len(files)}] {f.stem} ({end / FPS:.0f} s): lead {', '.join(f'{x:g}' for x in leads)} ms")
+            out[f.stem] = measure_song(lm.model, feats, mus[mus < end], leads, seeds)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     from models.evaluation.listening import SEEDS
 
@@ -143,11 +183,16 @@ def main(argv: list[str] | None = None) -> int:
                                        "or a checkpoint whose model has no lead control.")
     p.add_argument("--checkpoint", default="models/assets/default.pt", metavar="CKPT",
                    help="a dance_vq checkpoint (default: models/assets/default.pt)")
-    p.add_argument("--data", required=True, metavar="DIR", help="the DWM dataset directory (holds DANCE_* dirs)")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--data", metavar="DIR",
+                     help="the DWM dataset directory (holds DANCE_* dirs): its validation dances")
+    src.add_argument("--music", metavar="DIR", help="a directory of recordings (.ogg, .wav, .flac, .mp3): each of them")
+    p.add_argument("--max-s", type=float, metavar="S", help="with --music: each recording's first S seconds at most")
     p.add_argument("--cache", default=".cache/corpus", metavar="DIR", help="corpus cache (default .cache/corpus)")
     p.add_argument("--leads", type=float, nargs="+", default=list(LEADS_MS), metavar="MS",
                    help=f"leads, ms, each in [0, 200], the first 0 (default {' '.join(f'{x:g}' for x in LEADS_MS)})")
-    p.add_argument("--songs", nargs="+", metavar="NAME", help="only these validation dances (default: all)")
+    p.add_argument("--songs", nargs="+", metavar="NAME",
+                   help="only these validation dances or recordings (stems; default: all)")
     p.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS), metavar="N",
                    help="generation seeds, each run at every lead, counts summed "
                         f"(default {' '.join(map(str, SEEDS))}, as benchmarks/listening.py)")
@@ -161,11 +206,14 @@ def main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(1)
     try:
-        results = run(a.checkpoint, a.data, a.cache, a.leads, a.seeds, a.songs, log=lambda m: print(m, file=sys.stderr))
+        log = lambda m: print(m, file=sys.stderr)  # noqa: E731
+        results = (run_music(a.checkpoint, a.music, a.leads, a.seeds, a.songs, a.max_s, log=log) if a.music else
+                   run(a.checkpoint, a.data, a.cache, a.leads, a.seeds, a.songs, log=log))
     except (PerformerError, OSError) as e:
         print(f"lead.py: {e}", file=sys.stderr)
         return 2
-    print(f"The lead on {len(results)} validation dances ({a.checkpoint}, seeds {' '.join(map(str, a.seeds))}): "
+    what = f"recordings of {a.music}" if a.music else "validation dances"
+    print(f"The lead on {len(results)} {what} ({a.checkpoint}, seeds {' '.join(map(str, a.seeds))}): "
           "beat hit rate (+-2 frames), pooled over songs and seeds [smallest, largest song]\n")
     print(table(results, a.leads))
     chance = np.mean([row["chance"] for row in results.values()])
