@@ -110,11 +110,13 @@ def shipped():
 
 
 def test_the_shipped_performer_keeps_its_feet_on_the_floor_and_skates_without_the_feet_step(shipped, monkeypatch):
-    """The bundled clip, in place: foot-skating ratio 0.88 without the feet step (0.07 with it); with it
-    under the issue's 0.25, contact feet under 0.25 m/s, no knee past straight, no foot under the floor."""
+    """The bundled clip, in place with the feet held (``FEET_IN_PLACE = "hold"``): foot-skating
+    ratio 0.88 without the feet step (0.07 with it); with it under the issue's 0.25, contact
+    feet under 0.25 m/s, no knee past straight, no foot under the floor."""
     import models.networks.dance_stream as ds
 
     model, feats = shipped
+    monkeypatch.setattr(ds, "FEET_IN_PLACE", "hold")
     s = ds.DanceStream(model, seed=0)
     poses = s.push(feats)
     r = foot_skating(poses)
@@ -125,6 +127,25 @@ def test_the_shipped_performer_keeps_its_feet_on_the_floor_and_skates_without_th
     monkeypatch.setattr(ds, "FEET_LOCK", False)
     off = foot_skating(ds.generate(model, feats, seed=0))
     assert off["fsr"] > 0.5 and off["knee_min_deg"] < 0.0, off
+
+
+def test_in_place_the_dance_is_as_before_or_only_its_knees_and_floor_mended(shipped, monkeypatch):
+    """In place (the canonical frame every evaluation scores) the feet part leaves the dance bit
+    for bit as it was by default; with ``FEET_IN_PLACE = "floor"`` it mends only knees and floor."""
+    import models.networks.dance_stream as ds
+
+    model, feats = shipped
+    x = feats[:400]
+    off = ds.DanceStream(model, seed=2, feet=False).push(x)
+    np.testing.assert_array_equal(ds.DanceStream(model, seed=2).push(x), off)
+    assert knee_flexion_deg(off).min() < 0.0
+    monkeypatch.setattr(ds, "FEET_IN_PLACE", "floor")
+    s = ds.DanceStream(model, seed=2)
+    mended = s.push(x)
+    assert knee_flexion_deg(mended).min() >= 0.0 and not s._feet.planted.any()
+    low = np.minimum(*[a[..., 1] for a in foot_points(positions(mended))])
+    assert low.min() >= s._feet.floor - 1e-3
+    np.testing.assert_array_equal(mended[:, :3], off[:, :3])  # the body where it was: only legs bend
 
 
 def test_planted_feet_hold_while_the_performer_travels_on_a_stage(shipped, monkeypatch):

@@ -6,7 +6,8 @@ For the validation dances (``models.data.split.VAL_DANCES``, or ``--dances``) pr
 - ``performer``: the checkpoint's live stream run on the song's features
   (:func:`models.networks.dance_stream.generate`, seed ``--seed``), as it comes out (in
   place, or with ``--stage WxD`` travelling on that stage, ``--facing`` free or audience);
-  ``--no-feet`` runs it with the feet step switched off;
+  ``--no-feet`` runs it with the feet step switched off, ``--in-place MODE`` sets what the
+  feet step does in place (``dance_stream.FEET_IN_PLACE``: off, floor, hold);
 - ``dancers in place``: the dancers' own motion as the corpus keeps it (canonical: root
   x/z zeroed, heading removed; the tempo-1 clip on the 30 fps grid);
 - ``dancers travelling``: the same motion with its root position and heading
@@ -18,7 +19,7 @@ above and its speed, contact frames marked::
 
     .venv/bin/python benchmarks/studies/foot_skating.py --data ../shared/data/dwm --travel
     .venv/bin/python benchmarks/studies/foot_skating.py --data ../shared/data/dwm --stage 6x5
-    .venv/bin/python benchmarks/studies/foot_skating.py --data ../shared/data/dwm --plot docs/img/feet_paths.png
+    .venv/bin/python benchmarks/studies/foot_skating.py --data ../shared/data/dwm --plot docs/img/feet_paths.png --in-place hold
 
 Exit status 2 on a missing or unreadable checkpoint or dataset.
 """
@@ -128,7 +129,7 @@ def plot_foot(data_root: str, checkpoint: str, dance: str, start_s: float, stage
             axs[0, col].plot(mid[on, 0], mid[on, 2], ".", color=color, ms=3)
             axs[1, col].plot(t, speed, color=color, lw=1, label=label)
             axs[1, col].fill_between(t, 0, np.where(on, speed, np.nan), color=color, alpha=0.25)
-        name = "in place" if where == 0 else f"on a {where} stage"
+        name = f"in place ({dance_stream.FEET_IN_PLACE})" if where == 0 else f"on a {where} stage"
         axs[0, col].set_title(f"left foot seen from above, {name} (dots: in contact)", fontsize=9)
         axs[0, col].set_aspect("equal")
         axs[0, col].set_xlabel("x (m)")
@@ -155,6 +156,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--travel", action="store_true", help="also the dancers with their travel and heading")
     p.add_argument("--no-feet", action="store_true", help="the performer with its feet step switched off")
     p.add_argument("--stage", default=None, metavar="WxD", help="the performer travels on this stage (default: in place)")
+    p.add_argument("--in-place", default=None, choices=("off", "floor", "hold"),
+                   help="what the feet step does in place (dance_stream.FEET_IN_PLACE; default: the shipped one)")
     p.add_argument("--facing", default=None, help="with --stage: free or audience (default: the stream's)")
     p.add_argument("--cache", default=".cache/corpus", metavar="DIR", help="corpus cache (default .cache/corpus)")
     p.add_argument("--plot", default=None, metavar="PNG", help="draw one foot instead of the tables (see above)")
@@ -167,6 +170,10 @@ def main(argv: list[str] | None = None) -> int:
     from models.evaluation.foot_skating import pooled
 
     torch.set_num_threads(1)
+    if a.in_place is not None:  # a script: the module's setting for this one run
+        from models.networks import dance_stream
+
+        dance_stream.FEET_IN_PLACE = a.in_place
     if a.plot:
         try:
             plot_foot(a.data, a.checkpoint, a.plot_dance, a.plot_start, a.stage or "6x5", a.seed, a.cache, a.plot)

@@ -214,11 +214,22 @@ REPEAT_PENALTY: float = 1.0
 REPEAT_CALM: float = 1.0
 #: Feet on the floor (:mod:`models.networks.feet`, the stream's last step on every frame): the
 #: feet the played exemplar has on the floor stay put in the world by two-bone leg IK, no knee
-#: bends past straight, no foot goes under the floor (validation songs, foot-skating ratio: in
-#: place 0.71 -> 0.06, on a 6x5 stage 0.81 -> 0.20; benchmarks/studies/foot_skating.py, docs/feet.md).
-#: The stream's ``feet`` argument overrides it.
+#: bends past straight, no foot goes under the floor, while the performer travels on a stage
+#: (in place: :data:`FEET_IN_PLACE`). Validation songs on a 6x5 stage, foot-skating ratio 0.81
+#: -> 0.20 (benchmarks/studies/foot_skating.py, docs/feet.md). The stream's ``feet`` argument overrides it.
 #: False: the legs as the memory plays them.
 FEET_LOCK: bool = True
+#: What the feet part does while the performer dances in place (no stage, the canonical
+#: frame every evaluation scores): "off" (the dance's legs bit for bit, as before it), "floor"
+#: (knees never past straight, no foot under the floor, nothing held) or "hold" (as on a
+#: stage). performer evaluate's headline on the validation songs (band amplitude, jitter, jerk,
+#: beat hit rate, FD; tests/test_eval_reference.py's default_headline at 136023d): "off" 0.856,
+#: 1.001, 135.7, 0.543, 6.50; "floor" 0.856, 1.006, 136.7, 0.542, 6.67; "hold" 0.681, 1.003,
+#: 120.8, 0.502, 9.48: in place the held feet stop the dancers' own sliding steps, which the
+#: canonical dancers it is scored against have (docs/feet.md). A memory without travel dances in place
+#: on a stage too. Once the part has stepped (a stage was set), it keeps stepping in place with
+#: nothing held, so nothing it held jumps back.
+FEET_IN_PLACE: str = "off"
 #: The energy control's range.
 ENERGY_RANGE: tuple[float, float] = (0.0, 2.0)
 #: The lead control's range, ms (:meth:`DanceStream.set_lead`): a display chain's delay
@@ -613,6 +624,7 @@ class DanceStream:
         # travel and turns on the stage (models/networks/stage.py): each exemplar's, played along
         self._travel = cached_travel(model, MEMBER_SMOOTH)  # (K, M, 2 seg, 3), shared: never written
         self._stage = Stage(self.seg, stage, facing)
+        self._travels = bool(self._travel.any())  # a memory without travel dances in place on any stage
         cc = c.clarity_col
         self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None
         self._onset_col = c.onset_col if 0 <= c.onset_col < c.feature_dim else None
@@ -660,6 +672,7 @@ class DanceStream:
         self._at = float(self.seg)  # where in _played the last frame was read
         if self._feet is not None:
             self._feet.reset()
+        self._feet_used = False  # the feet part has stepped since the reset (FEET_IN_PLACE)
         self._fade_prev: np.ndarray | None = None  # the fade's last rotation vectors, dance -> idle (J, 3)
         self._prev_quat: np.ndarray | None = None
         self.codes_drawn: list[int] = []
@@ -1091,9 +1104,15 @@ class DanceStream:
                 pose = self._fade(pose, self._sway(np.array([t]))[0], e)
             self._stage.step(pose, self._at, e)  # travel and turns, inside the stage (models/networks/stage.py)
             if self._feet is not None:  # the last step: planted feet stay put (models/networks/feet.py)
-                left, right, lift = self._contact_at(self._at)  # the idle stands on both feet
-                pose = self._feet.step(pose, left + e * (1.0 - left), right + e * (1.0 - right),
-                                       lift + e * (self._idle_lift - lift))
+                mode = "hold" if self._stage.active and self._travels else FEET_IN_PLACE
+                if mode == "hold":
+                    left, right, lift = self._contact_at(self._at)  # the idle stands on both feet
+                    pose = self._feet.step(pose, left + e * (1.0 - left), right + e * (1.0 - right),
+                                           lift + e * (self._idle_lift - lift))
+                    self._feet_used = True
+                elif mode == "floor" or self._feet_used:  # knees and floor; what was held is handed back
+                    pose = self._feet.step(pose, 0.0, 0.0, 0.0)
+                    self._feet_used = True
             out[i] = pose
             self.frame += 1
         if k == 0:
