@@ -178,6 +178,8 @@ class RunConfig:
     style: str = "auto"
     energy: float = 1.0
     lead: float = 0.0
+    stage: str | None = None
+    facing: str = "free"
     seed: int = 0
     record: Path | None = None
     threads: int = 1
@@ -208,6 +210,14 @@ class RunConfig:
             raise ConfigError(f"style must be one of {STYLE_CHOICES}, got {self.style!r}")
         if self.osc_mode not in OSC_MODES:
             raise ConfigError(f"osc_mode must be one of {OSC_MODES}, got {self.osc_mode!r}")
+        from models.networks.stage import check_facing, parse_stage
+
+        if self.stage is not None:
+            parse_stage(self.stage)
+        check_facing(self.facing)
+        if self.performer and (self.stage not in (None, 0, "0") or self.facing != "free"):
+            raise ConfigError("stage and facing apply to one performer: an ensemble's performers dance in place "
+                              "for now (each its own spot on one stage is not built yet, docs/stage.md)")
         checks = [
             ("sample_rate", self.sample_rate is None or 4000 <= self.sample_rate <= 192000, "4000..192000 Hz"),
             ("block_size", 16 <= self.block_size <= 65536, "16..65536 samples"),
@@ -338,7 +348,7 @@ _TYPES: dict[str, tuple[type, ...]] = {
     "audio": (str,), "input_device": (str, int), "sample_rate": (int,), "block_size": (int,),
     "monitor": (bool,), "loop": (bool,), "fast": (bool,), "duration": (int, float), "osc": (list, str),
     "osc_mode": (str,), "no_osc": (bool,), "ws": (str,), "no_ws": (bool,), "checkpoint": (str,), "style": (str,),
-    "energy": (int, float), "lead": (int, float), "seed": (int,), "record": (str,), "threads": (int,), "offset_ms": (int, float),
+    "energy": (int, float), "lead": (int, float), "stage": (str, int, float), "facing": (str,), "seed": (int,), "record": (str,), "threads": (int,), "offset_ms": (int, float),
     "smoothing": (int, float),
     "warmup": (int, float), "fallback_audio": (str,), "fallback_after": (int, float), "ws_token": (str,),
     "ws_viewers_open": (bool,), "ws_max_clients": (int,), "ws_origin": (list, str),
@@ -426,8 +436,9 @@ def resolve_run_config(args: argparse.Namespace) -> RunConfig:
 def live_changes(old: RunConfig, new: RunConfig) -> tuple[dict[str, float], list[str]]:
     """What a reload changes: ``({live setting: new value}, [other changed fields])``.
 
-    Live settings (``offset_ms``, ``smoothing``) can be applied to a running engine;
-    the other fields only take effect at the next start.
+    Live settings (``offset_ms``, ``smoothing``) can be applied to a running engine, and so
+    can ``stage`` and ``facing`` (:func:`realtime.commands.run.reload_settings` sends them as
+    controls); the other fields only take effect at the next start.
     """
     from realtime.engine import LIVE_SETTINGS
 

@@ -42,6 +42,7 @@ class Pipeline:
 
 def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, hop: int = 64, seed: int = 0,
                    style: str | None = None, energy: float = 1.0, lead: float = 0.0,
+                   stage: str | float | None = None, facing: str = "free",
                    loaded: dict | None = None) -> Pipeline:
     """Load ``checkpoint`` (default: the packaged one) into an extractor factory and a pose model.
 
@@ -57,8 +58,10 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
     A ``dance_vq`` model streams as a :class:`~models.networks.dance_stream.DanceStream`
     with ``seed``, ``style`` (None: the music decides) and ``energy`` (0..2, 1: as the music
     asks; :meth:`~models.networks.dance_stream.DanceStream.set_energy`) and ``lead`` (ms, 0..200:
-    :meth:`~models.networks.dance_stream.DanceStream.set_lead`); a style, an energy other
-    than 1 or a lead other than 0 for another model is refused.
+    :meth:`~models.networks.dance_stream.DanceStream.set_lead`), on ``stage`` (``"WxD"`` metres or
+    0: in place; None: :data:`models.networks.stage.DEFAULT_STAGE`) facing ``facing`` (free,
+    audience; docs/stage.md); a style, an energy other than 1, a lead other than 0, a stage or
+    facing audience for another model is refused.
     """
     from models.features.streaming import StreamingFeatureExtractor
     from models.networks.streaming import StreamingGenerator
@@ -80,7 +83,10 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
         if getattr(loaded.model, "takes_style", False):
             from models.networks.dance_stream import DanceStream
 
-            generator = DanceStream(loaded.model, seed=seed, style=style, energy=energy, lead_ms=lead)
+            from models.networks.stage import DEFAULT_STAGE
+
+            generator = DanceStream(loaded.model, seed=seed, style=style, energy=energy, lead_ms=lead,
+                                    stage=DEFAULT_STAGE if stage is None else stage, facing=facing)
         else:
             if style not in (None, "auto"):
                 raise CheckpointError(f"model {loaded.name!r} takes no style (--style needs a dance_vq model)",
@@ -91,6 +97,9 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
             if lead != 0.0:
                 raise CheckpointError(f"model {loaded.name!r} has no lead control (--lead needs a dance_vq model)",
                                       source=path)
+            if stage not in (None, 0, "0") or facing != "free":
+                raise CheckpointError(f"model {loaded.name!r} has no stage (--stage and --facing need a dance_vq "
+                                      "model)", source=path)
             generator = StreamingGenerator(loaded.model, window=window, hop=hop)
     except CheckpointError:
         raise

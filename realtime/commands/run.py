@@ -23,8 +23,8 @@ defaults: OSC to 127.0.0.1:39539 (VMC), WebSocket server on 127.0.0.1:8765,
 one torch thread, no smoothing, no offset. Ctrl-C stops cleanly (the recording is
 written) and exits with status 130; the end of a file or --duration exits with 0.
 Errors about inputs (missing file, bad checkpoint, port in use) print one line and
-exit with status 2. SIGHUP re-reads --config and applies offset_ms and smoothing
-live (a bad file is reported and the current settings are kept). See
+exit with status 2. SIGHUP re-reads --config and applies offset_ms, smoothing, stage
+and facing live (a bad file is reported and the current settings are kept). See
 docs/engine.md, docs/reliability.md and docs/security.md.
 
 show control (--control-osc, off by default; docs/show.md): OSC messages to
@@ -35,6 +35,8 @@ show control (--control-osc, off by default; docs/show.md): OSC messages to
   /performer/style      STRING     style name (only models that offer styles)
   /performer/energy     NUMBER     0..2, 1: as the music asks (only models that offer it)
   /performer/lead       NUMBER     ms, 0..200: send the poses ahead for the display's delay (same)
+  /performer/stage      STRING     "WxD" metres or "0" (in place); /performer/facing free|audience;
+  /performer/home                  walk back to the centre of the stage (same)
 A bad message is logged once per address, counted in the status line
 ("control N ok M bad") and changes nothing; the stream never stops for it.
 In an ensemble these act on every performer, and /performer/NAME/reset (offset,
@@ -46,10 +48,12 @@ energy, lead, seed, smoothing, offset, OSC targets and WebSocket path; the audio
 checkpoints' feature configs agree, the feature extractor are shared. Unset keys take
 the top-level options; performer i (from 0) sends OSC to the --osc ports + i and streams
 on ws://HOST:PORT/ws/NAME (/ws is the first performer). Keys: name, checkpoint, style,
-energy, lead, seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase.
+energy, lead, seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase. An
+ensemble's performers dance in place (a spot of its own for each on one stage is not built yet).
 
 examples:
   performer run --audio song.wav --record take1.npz
+  performer run --audio song.wav --stage 6x5 --facing audience
   performer run --input-device "USB Audio" --osc 192.168.1.20:39539 --smoothing 0.3
   performer run --audio song.wav --fast --no-ws --osc-mode plain --osc 127.0.0.1:9000
   performer run --input-device "USB Audio" --control-osc 0.0.0.0:9100 --control-allow 192.168.10.0/24
@@ -116,6 +120,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     m.add_argument("--energy", type=float, metavar="E",
                    help="how lively the dance is, 0 (calmest) .. 2 (liveliest); default 1: as the music asks. "
                         "dance_vq models only; live: /performer/energy (docs/show.md, \"Energy\")")
+    m.add_argument("--stage", metavar="WxD",
+                   help="travel and turn inside a stage of W x D metres centred on the origin (default 3x2: a "
+                        "screen or a small stage), or 0: dance in place facing +Z; dance_vq models only; live: "
+                        "/performer/stage, /performer/home walks back to the centre (docs/stage.md)")
+    m.add_argument("--facing", choices=("free", "audience"),
+                   help="free (default): turn as the dancers did; audience: dance the turns but come back to "
+                        "face the audience (+Z) within a few seconds; live: /performer/facing")
     m.add_argument("--lead", type=float, metavar="MS",
                    help="send the pose the performer takes MS ms later, 0..200 (default 0), so it is on the beat "
                         "behind a display chain of that delay; dance_vq models only; live: /performer/lead "
@@ -208,7 +219,7 @@ def _open_ensemble(cfg, specs, source, fallback):
     for spec in specs:
         try:
             pipelines.append(build_pipeline(spec.checkpoint, seed=spec.seed, loaded=loaded, energy=spec.energy,
-                                            lead=spec.lead,
+                                            lead=spec.lead, stage=0,  # in place: no spots of their own yet
                                             style=None if spec.style == "auto" else spec.style))
         except PerformerError as exc:
             raise type(exc)(f"performer {spec.name!r}: {exc}") from None
@@ -263,6 +274,10 @@ def _describe(sinks, source, pipeline, control=None) -> str:
     for s in sinks:
         outs.append(f"{s.name} (viewer {s.url})" if hasattr(s, "url") else s.name)
     text = f"{source.name} at {source.sample_rate} Hz -> {', '.join(outs) or 'no outputs'} [{pipeline.checkpoint.name}]"
+    stage = getattr(pipeline.model, "stage", None)
+    if stage is not None and hasattr(stage, "width"):
+        text += (f"; stage {stage.width:g}x{stage.depth:g} m, facing {stage.facing}" if stage.active
+                 else "; dancing in place")
     if control is not None:
         text += f"; OSC control on {control.host}:{control.port}"
     return text
@@ -290,7 +305,7 @@ def run(args: argparse.Namespace) -> int:
         engine, sinks, server, lines = _open_ensemble(cfg, specs, source, fallback)
     else:
         pipeline = build_pipeline(cfg.checkpoint, seed=cfg.seed, style=None if cfg.style == "auto" else cfg.style,
-                                  energy=cfg.energy, lead=cfg.lead)
+                                  energy=cfg.energy, lead=cfg.lead, stage=cfg.stage, facing=cfg.facing)
         sinks = _open_sinks(cfg, source.sample_rate)
         engine = Engine(
             source, pipeline.extractor_factory, pipeline.model, sinks,
@@ -386,6 +401,11 @@ def reload_settings(args: argparse.Namespace, engine, current):
         else:
             live, other = live_changes(current, new)
             engine.update(**live)
+            for key in ("stage", "facing"):  # live controls of the model, like /performer/stage
+                if key in other and getattr(new, key) is not None:
+                    engine.control(key, getattr(new, key))
+                    other.remove(key)
+                    live[key] = getattr(new, key)
     except PerformerError as exc:
         log.error("config reload of %s failed, keeping the current settings: %s", args.config, exc)
         return current
@@ -403,7 +423,8 @@ def reload_settings(args: argparse.Namespace, engine, current):
         return dataclasses.replace(current, **kept, performer=[
             dataclasses.replace(p, offset_ms=by_name[p.name].offset_ms, smoothing=by_name[p.name].smoothing)
             for p in current.performer])
-    changes = ", ".join(f"{k} {getattr(current, k):g} -> {v:g}" for k, v in live.items()) or "no live changes"
+    show = lambda v: f"{v:g}" if isinstance(v, float) else str(v)  # noqa: E731 - numbers, or a stage/facing
+    changes = ", ".join(f"{k} {show(getattr(current, k))} -> {show(v)}" for k, v in live.items()) or "no live changes"
     log.warning("config reloaded from %s: %s", args.config, changes)
     return dataclasses.replace(current, **live)
 
