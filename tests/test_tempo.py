@@ -190,6 +190,32 @@ def test_a_tempo_the_tracker_holds_at_the_faster_octave_is_danced_there_with_one
     assert track_periods(mixed, c, onset)[-1] == pytest.approx(2 * period, rel=0.02)
 
 
+@pytest.mark.parametrize("hold_on", [True, False])
+def test_a_settled_octave_is_held_through_a_busier_passage(hold_on, monkeypatch):
+    """DANCE_R_5 at 0.8x (issue 43): 65 bpm danced for 12 s, then a passage where the tracker
+    reads 130 nine frames in ten and the beat at 130 carries 1.45 onsets (the octave score
+    +0.27, share 0.9: both over the switching margins). Held (OCTAVE_HOLD, FAST_HOLD) the
+    settled octave stays; without the hold the follower doubles the tempo for the passage
+    (and the stretch set's 0.8x is danced faster than its 1.25x, where 130 x 1.56 is out of range)."""
+    if not hold_on:
+        monkeypatch.setattr(tempo, "OCTAVE_HOLD", tempo.OCTAVE_MARGIN)
+        monkeypatch.setattr(tempo, "FAST_HOLD", tempo.FAST_SHARE)
+    slow = 60.0 * FPS / 65.0  # frames a beat
+    f = TempoFollower()
+    periods = []
+    for t in range(22 * FPS):
+        busy = t >= 12 * FPS
+        logp = math.log2(slow / 15.0) - (1.0 if busy and t % 10 else 0.0)  # 130 nine frames in ten
+        onsets_a_beat_at_fast = 1.45 if busy else 0.9
+        f.update(logp, 0.5, onsets_a_beat_at_fast * FPS / (slow / 2.0))  # onsets a second
+        periods.append(f.period)
+    assert periods[11 * FPS] == pytest.approx(slow, rel=0.02)
+    if hold_on:
+        assert min(periods[12 * FPS:]) > 0.9 * slow
+    else:
+        assert periods[-1] == pytest.approx(slow / 2.0, rel=0.02)
+
+
 def test_the_warp_aims_at_the_danced_beats():
     """The tracker at half the danced tempo (vibeace_kevinmacleod: 65 bpm against 129): its
     phase doubled, so the beats between its beats are warped to as well; a 3:2 or a slower

@@ -15,7 +15,8 @@ about a second and a level jump of the tracker is not. The danced period is the 
 in :data:`TEMPO_RANGE` (faster music is danced at half time, slower at double time); where
 two octaves are in the range, the faster when its beat is subdivided (:data:`SUBDIVIDED`
 onsets a beat, :func:`onset_density`, a count stretching does not change) or when the
-tracker itself reads the faster one most of the time (:data:`FAST_SHARE`), else the slower.
+tracker itself reads the faster one most of the time (:data:`FAST_SHARE`), else the slower;
+once settled, double time needs more of either (:data:`OCTAVE_HOLD`, :data:`FAST_HOLD`).
 :func:`danced_beat` gives the beat warp the phase of the danced beats.
 
 ``DanceStream`` plays each movement of its choreographic memory at the ratio of this tempo
@@ -76,6 +77,18 @@ SUBDIVIDED: float = 1.2
 #: one is chosen (a steady choice on a borderline song instead of a flip every few seconds).
 OCTAVE_MEAN: float = 64.0
 OCTAVE_MARGIN: float = 0.15
+#: Double time is not taken up mid-song on a busier passage: after OCTAVE_SETTLE clear frames
+#: (8 s at full clarity) a move from the slower octave to the faster needs the octave score over
+#: OCTAVE_HOLD (1.7 onsets a beat at the faster octave, not 1.33) or the tracker's share at the
+#: faster octave over FAST_HOLD (not FAST_SHARE); back to the slower octave the margins are as
+#: before. DANCE_R_5 at 0.8x, settled at 65 bpm, took 130 for 14 s of a busier passage (score
+#: +0.30, share 0.91) and at 1.0x 160 for a while, never at 1.25x (200: out of range), so its
+#: 0.8x was danced quicker than its 1.25x (stretch set, frequency centroid ratio 0.92 -> 1.71;
+#: nutcracker at 1.25x, 140 bpm, now takes its faster octave later: 1.59 -> 1.49;
+#: docs/listening.md "Tempo"). OCTAVE_HOLD = OCTAVE_MARGIN and FAST_HOLD = FAST_SHARE: no hold.
+OCTAVE_SETTLE: int = 240
+OCTAVE_HOLD: float = 0.5
+FAST_HOLD: float = 0.95
 #: The tracker's own octave, where two are in range: a frame whose estimate lies within this
 #: many octaves of the faster one reads it; when such frames hold FAST_SHARE of the
 #: clarity-weighted running mean over FAST_MEAN frames (8 s), the faster octave is danced
@@ -190,9 +203,11 @@ class TempoFollower:
             x = math.log2(max(density * fast / FPS, 1e-3) / SUBDIVIDED)
             first = self.score != self.score
             self.score = x if first else self.score + (x - self.score) / OCTAVE_MEAN
-            if first or abs(self.score) > OCTAVE_MARGIN:
+            margin = OCTAVE_HOLD if self.heard >= OCTAVE_SETTLE and self.score > 0.0 else OCTAVE_MARGIN
+            if first or abs(self.score) > margin:
                 self.slow = self.score < 0.0
-        if self.fast_num > FAST_SHARE * self.fast_den:  # the tracker holds the faster octave: dance it
+        share = FAST_SHARE if self.heard < OCTAVE_SETTLE else FAST_HOLD
+        if self.fast_num > share * self.fast_den:  # the tracker holds the faster octave: dance it
             self.slow = False
 
     def _vote(self) -> None:
