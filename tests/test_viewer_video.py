@@ -87,9 +87,25 @@ def test_tempo_sides_start_at_the_same_moment_of_the_song_and_keep_its_beats(tmp
 
 def test_bad_options_are_refused(capsys):
     for argv in (["--fps", "60"], ["--seconds", "0"], ["--size", "big"], ["--out", "x.mp4"], ["--tempo", "0.8"],
-                 ["--tempo", "0.8,x"], ["--audio", "a.ogg"]):
+                 ["--tempo", "0.8,x"], ["--audio", "a.ogg"], ["--stage", "6y5"], ["--stage", "3x2", "--tempo", "1,2"]):
         with pytest.raises(SystemExit) as exc:
             vv.parse_args(argv)
         assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "--out must be a .gif" in err and "--tempo takes two rates" in err and "--audio works with --tempo" in err
+    assert "--stage: stage must be WxD" in err and "--stage works without --tempo" in err
+
+
+def test_on_a_stage_both_dancers_travel_and_the_real_one_as_recorded(dwm_root, tmp_path):
+    """--stage: the performer's poses travel on the stage, the real dancer's keep the recorded travel
+    (centred on the span), and the stage goes to both pages."""
+    a = vv.parse_args(["--checkpoint", str(default_checkpoint_path()), "--data", str(dwm_root), "--dance", "DANCE_C_2",
+                       "--start-s", "30", "--seconds", "4", "--stage", "6x5", "--cache", str(REPO / ".cache" / "corpus")])
+    t = vv.load_tracks(a)
+    assert t.stage == (6.0, 5.0)
+    span = slice(t.start, t.start + t.frames)
+    for poses in (t.real, t.generated):
+        xz = poses[span][:, [0, 2]]
+        assert np.ptp(xz, axis=0).max() > 0.2  # both travel
+    np.testing.assert_allclose(t.real[span][:, [0, 2]].mean(0), 0.0, atol=1e-5)
+    assert np.abs(t.generated[:, [0, 2]]).max(0).tolist() <= [3.0, 2.5]  # inside the stage

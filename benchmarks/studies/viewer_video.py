@@ -29,6 +29,13 @@ marker (the beats of the stretched audio it heard) and song position::
     .venv/bin/python benchmarks/studies/viewer_video.py --tempo 0.8,1.25 --dance DANCE_W_5 --start-s 40 \\
         --seconds 8 --fps 15 --out docs/img/tempo_side_by_side.gif
 
+With ``--stage WxD`` the performer travels on that stage and the real dancer as recorded (its
+travel and heading, centred on the recorded span), the stage drawn on both floors and each
+camera following its dancer (README's picture)::
+
+    .venv/bin/python benchmarks/studies/viewer_video.py --dance DANCE_W_5 --start-s 40 --seconds 10 \\
+        --fps 10 --stage 6x5 --out docs/img/stage_side_by_side.gif
+
 Needs Debian's chromium (``apt-get install chromium``; ``$PERFORMER_CHROMIUM`` names
 another binary) and the playwright Python package (``pip install -e '.[dev]'``)::
 
@@ -87,6 +94,7 @@ class Tracks:
     rates: tuple[float, float] | None = None  # --tempo: the two sides' stretch rates (real, generated: both generated)
     side_beats: tuple[np.ndarray, np.ndarray] | None = None  # --tempo: each side's beat frames on its own grid
     tempo_start_s: float = 0.0  # --tempo: the unstretched song's time at frame ``start`` of both sides
+    stage: tuple[float, float] | None = None  # --stage: drawn on both floors; the dancer travels as recorded
 
     def song_time(self, t: int) -> float:
         """Audio time (s) clip frame ``t`` describes: the end of its feature frame."""
@@ -113,6 +121,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--tempo", metavar="A,B",
                    help="two stretch rates (e.g. 0.8,1.25): the performer on the song at each rate, side by side")
     p.add_argument("--audio", metavar="FILE", help="--tempo: a recording to stretch instead of --dance's song")
+    p.add_argument("--stage", metavar="WxD",
+                   help="the performer travels on a W x D m stage (docs/stage.md) and the real dancer as recorded "
+                        "(not canonicalised, centred on the recorded span), the stage drawn on both floors and "
+                        "the cameras following; default: both in place, facing +Z")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     a = p.parse_args(argv)
     if a.tempo is not None:
@@ -124,6 +136,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
             p.error("--tempo takes two rates in [0.25, 4] separated by a comma, e.g. 0.8,1.25")
     elif a.audio is not None:
         p.error("--audio works with --tempo only")
+    if a.stage is not None:
+        from models.errors import ConfigError
+        from models.networks.stage import parse_stage
+
+        if a.tempo is not None:
+            p.error("--stage works without --tempo")
+        try:
+            a.stage = parse_stage(a.stage)
+        except ConfigError as exc:
+            p.error(f"--stage: {exc}")
     if not 0 < a.fps <= FPS:
         p.error(f"--fps must be in (0, {FPS}], got {a.fps}")
     if not a.seconds > 0:
@@ -163,7 +185,16 @@ def load_tracks(a: argparse.Namespace) -> Tracks:
                              f"--start-s must be in {lo:.1f}..{hi:.1f} for --seconds {a.seconds:g}")
     song = load_audio(load_dance(Path(a.data) / a.dance).audio_path, SAMPLE_RATE)[0]
     # Models that hear the waveform (gcn) get the clip's audio: clip frame t ends at song sample (f0 + t + 1) * HOP.
-    generated = run_model(loaded.model, clip.features, audio=song[clip.first_frame * HOP :], energy=a.energy)
+    stage = a.stage if a.stage is not None else 0
+    generated = run_model(loaded.model, clip.features, audio=song[clip.first_frame * HOP :], energy=a.energy,
+                          stage=stage)
+    real = clip.poses
+    if a.stage is not None:  # the dancer as recorded: travel and heading kept, centred on the recorded span
+        from models.data.corpus import clip_motion
+
+        motion, _, f0, _ = clip_motion(load_dance(Path(a.data) / a.dance), len(clip.features) + clip.first_frame)
+        real = motion.to_vector()[clip.first_frame - f0:][: len(clip.poses)].astype(np.float32)
+        real[:, [0, 2]] -= real[start: start + frames, [0, 2]].mean(0)
     # Beats of a stretch a few seconds wider than the recording (the tracker needs context).
     f_lo = max(0, clip.first_frame + start - 5 * FPS)
     f_hi = clip.first_frame + start + frames + 5 * FPS
@@ -171,8 +202,9 @@ def load_tracks(a: argparse.Namespace) -> Tracks:
     names = sorted(d.name for d in Path(a.data).iterdir() if d.is_dir() and d.name.startswith("DANCE_"))
     split = "validation" if a.dance in split_names(names)[1] else "training"
     label = loaded.path.name + (f", energy {a.energy:g}" if a.energy != 1.0 else "")
-    return Tracks(clip.poses, generated, start, frames, clip.first_frame, a.dance, STYLES[a.dance.split("_")[1]],
-                  label, loaded.name, beats, split)
+    label += f", stage {a.stage[0]:g}x{a.stage[1]:g} m" if a.stage is not None else ""
+    return Tracks(real, generated, start, frames, clip.first_frame, a.dance, STYLES[a.dance.split("_")[1]],
+                  label, loaded.name, beats, split, stage=a.stage)
 
 
 def load_tempo_tracks(a: argparse.Namespace) -> Tracks:
@@ -294,6 +326,8 @@ def record(tracks: Tracks, size: tuple[int, int], fps: float, progress: bool = T
             viewers += [Viewer(browser, size), Viewer(browser, size)]
             for v in viewers:
                 v.wait_open()
+                if tracks.stage is not None:  # the rectangle on the floor; the cameras follow the dancers
+                    v.sink.set_state({"stage": list(tracks.stage), "facing": "free"})
             t0 = time.monotonic()
             for t in range(first, tracks.start + tracks.frames):
                 for v, poses in zip(viewers, (tracks.real, tracks.generated)):
