@@ -527,7 +527,9 @@ def soak(minutes: float, checkpoint: str | None = None, progress: bool = True,
     ws = WebSocketSink("127.0.0.1", 0)
     osc = OscSink("127.0.0.1", udp.port, "vmc")
     check = FrameCheck()
-    monitor = None if stability_ref_m is None else StabilityMonitor(stability_ref_m)
+    stage = getattr(pipeline.model, "stage", None)  # the dancing default travels on performer run's 3x2 stage
+    stage = (stage.width, stage.depth) if stage is not None and getattr(stage, "active", False) else None
+    monitor = None if stability_ref_m is None else StabilityMonitor(stability_ref_m, stage=stage)
     tap = None if monitor is None else PoseTap()
     src = FileSource(audio, sr, realtime=False, loop=True, name=name)
     eng = Engine(src, pipeline.extractor_factory, pipeline.model, [osc, ws, check] + ([tap] if tap else []),
@@ -633,9 +635,11 @@ def _print_stability(st: dict) -> None:
     line = f"  stability: {len(st['stretches'])} stretches of {st['stretch_s']:g} s, {failing} failing"
     if rows:
         amps = [s["amp_ratio"] for s in rows]
+        horizontal = max(s["root_horizontal_m"] for s in rows)
+        where = (f"root {horizontal:.2f} m outside the {st['stage'][0]:g}x{st['stage'][1]:g} m stage and "
+                 if st.get("stage") else f"root within {horizontal:.2f} m horizontally and ")
         line += (f"; amplitude {min(amps):.2f}-{max(amps):.2f}x the real {st['ref_m'] * 100:.2f} cm (0.5-1.5x), "
-                 f"root within {max(s['root_horizontal_m'] for s in rows):.2f} m horizontally and "
-                 f"{max(s['root_vertical_m'] for s in rows):.2f} m vertically (0.5), longest still "
+                 f"{where}{max(s['root_vertical_m'] for s in rows):.2f} m vertically (0.5), longest still "
                  f"{max(s['still_s'] for s in rows):.1f} s, fastest point {max(s['max_speed'] for s in rows):.1f} m/s")
     print(line)
     for s in st["stretches"]:

@@ -31,7 +31,11 @@ PACKAGES: tuple[str, ...] = ("models", "realtime")
 
 
 def _live_dispatchers() -> list:
-    """Every cached numba kernel (``@njit(cache=True)``) of an imported module of :data:`PACKAGES`."""
+    """Every cached numba kernel (``@njit(cache=True)``) of an imported module of :data:`PACKAGES`,
+    but those numba inlines into their callers (``inline="always"``, models/networks/feet.py's
+    quaternion helpers): their code lives in the callers' cache entries, never in their own, so
+    they would read as uncached forever (every run announcing a compile, ``make setup``'s
+    ``python -m realtime.kernels`` failing)."""
     if "numba" not in sys.modules:
         return []
     from numba.core.dispatcher import Dispatcher
@@ -41,7 +45,8 @@ def _live_dispatchers() -> list:
         if module is None or name.split(".")[0] not in PACKAGES:
             continue
         for obj in list(vars(module).values()):
-            if isinstance(obj, Dispatcher) and id(obj) not in seen and type(obj._cache).__name__ != "NullCache":
+            if isinstance(obj, Dispatcher) and id(obj) not in seen and type(obj._cache).__name__ != "NullCache" \
+                    and obj.targetoptions.get("inline") != "always":
                 seen.add(id(obj))
                 found.append(obj)
     return found

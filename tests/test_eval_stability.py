@@ -126,3 +126,17 @@ def test_too_short_and_bad_input():
         S.stability_check(np.zeros((100, 10)), 0.05)
     with pytest.raises(DataError, match="poses"):
         S.StabilityMonitor(0.05).add(np.zeros(7))
+
+
+def test_on_a_stage_the_root_may_travel_inside_it_but_not_leave_it(stream, ref_m):
+    """A performer on a stage travels: 1.2 m from its start inside a 3x2 stage passes (in place it
+    would fail), 0.3 m past the stage's edge fails naming the stage."""
+    s = stream.copy()
+    t = np.arange(len(s)) / FPS
+    s[:, 0] = 1.2 * np.sin(2 * np.pi * t / 20.0)  # across the stage and back, |x| <= 1.2 < 1.5
+    assert S.stability_check(s, ref_m, stage=(3.0, 2.0)).ok
+    assert not S.stability_check(s, ref_m).ok  # in place, 1.2 m is a drift
+    s[:, 2] = 1.3  # 0.3 m in front of the 3x2 stage's front edge
+    report = S.stability_check(s, ref_m, stage=(3.0, 2.0))
+    assert not report.ok and "0.30 m outside the 3x2 m stage" in report.failures[0]
+    assert report.to_dict()["stage"] == [3.0, 2.0]

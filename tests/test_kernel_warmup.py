@@ -48,3 +48,15 @@ def test_first_run_compiles_the_live_kernels_in_the_warm_up_not_in_a_frame(tmp_p
 
     again = performer_run(cache, "--fast", "--duration", "1")  # the cache holds them now
     assert again.returncode == 0 and "compiling" not in again.stderr, again.stderr
+
+
+def test_kernels_numba_inlines_are_not_counted_as_uncached():
+    """feet.py's quaternion helpers are ``inline="always"``: numba compiles them into their
+    callers and never caches them alone, so counting them left `python -m realtime.kernels`
+    (make setup) failing and every run announcing a compile."""
+    import models.networks.feet  # noqa: F401 - its kernels join the live dispatchers
+    from realtime.kernels import _live_dispatchers
+
+    names = {f"{d.py_func.__module__}.{d.py_func.__qualname__}" for d in _live_dispatchers()}
+    assert "models.networks.feet._leg_ik" in names
+    assert not {"models.networks.feet._mul", "models.networks.feet._q"} & names

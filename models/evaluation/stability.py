@@ -10,7 +10,10 @@ must:
   stretch's own mean removed) is between :data:`AMP_RANGE` (0.5x and 1.5x) the real
   dances' (``ref_m``, see :func:`real_reference_m`);
 - **root**: the root (Hips) stays within :data:`ROOT_RADIUS_M` (0.5 m) of its position
-  in the stream's first frame, horizontally (distance in x-z) and vertically (|dy|);
+  in the stream's first frame, horizontally (distance in x-z) and vertically (|dy|); a
+  performer on a stage (``stage`` (W, D) m, models/networks/stage.py) travels: horizontally
+  it must then stay inside the stage (``root_horizontal_m`` is how far outside it went, 0
+  inside; :data:`STAGE_TOL_M` allowed);
 - **no freeze**: amplitude above :data:`FROZEN_RATIO` (0.05x) the real dances', and no
   run of :data:`FREEZE_S` (1 s) or more in which no point moves faster than
   :data:`STILL_SPEED` (0.02 m/s, in place);
@@ -41,6 +44,9 @@ STRETCH_S: float = 30.0
 AMP_RANGE: tuple[float, float] = (0.5, 1.5)
 #: Largest allowed distance of the root from its first-frame position, metres (horizontal and vertical each).
 ROOT_RADIUS_M: float = 0.5
+#: How far (m) a performer on a stage may be found outside it before a stretch fails (the stage
+#: part never lets it cross an edge: this is float slack, not a margin of the dance).
+STAGE_TOL_M: float = 0.01
 #: Below this multiple of the real amplitude a stretch is frozen.
 FROZEN_RATIO: float = 0.05
 #: A point slower than this is still, m/s (in place).
@@ -59,7 +65,8 @@ class StabilityReport:
 
     ``stretches``: one dict per judged stretch with ``index``, ``start_s``, ``end_s``,
     ``amp_m`` (band RMS, m), ``amp_ratio`` (over ``ref_m``), ``root_horizontal_m`` and
-    ``root_vertical_m`` (largest distance from the first frame's root, m), ``still_s``
+    ``root_vertical_m`` (largest distance from the first frame's root, m; on a stage the
+    horizontal one is how far outside the stage the root went), ``still_s``
     (longest run with every point still, s), ``max_speed`` (fastest point, m/s),
     ``finite`` and ``reasons`` (empty when the stretch passes). Values that cannot be
     computed (non-finite stretch) are None. ``tail_frames``: frames after the last
@@ -71,6 +78,7 @@ class StabilityReport:
     fps: float
     stretches: list[dict] = field(default_factory=list)
     tail_frames: int = 0
+    stage: list[float] | None = None  # (width, depth) m of the stage the performer travels on; None: in place
 
     @property
     def failures(self) -> list[str]:
@@ -117,11 +125,13 @@ def _longest_run(flags: np.ndarray) -> int:
     return int(np.max(np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)))
 
 
-def judge_stretch(poses: np.ndarray, root0: np.ndarray, ref_m: float, index: int = 0, fps: float = FPS) -> dict:
+def judge_stretch(poses: np.ndarray, root0: np.ndarray, ref_m: float, index: int = 0, fps: float = FPS,
+                  stage: tuple[float, float] | None = None) -> dict:
     """Values and failure reasons of one stretch ``poses (n, POSE_DIM)`` (see the module docstring).
 
     ``root0``: the stream's first root position (3,) m; ``index``: the stretch's number
-    (its start is ``index * n / fps`` s).
+    (its start is ``index * n / fps`` s); ``stage``: (width, depth) m of the stage the
+    performer travels on, centred on the origin (None or zeros: it dances in place).
     """
     from models.evaluation.evaluate import positions
     from models.evaluation.metrics import DANCE_BAND, band_rms, in_place
@@ -142,7 +152,13 @@ def judge_stretch(poses: np.ndarray, root0: np.ndarray, ref_m: float, index: int
         out["reasons"] = reasons
         return out
     d = poses[:, :3] - root0
-    out["root_horizontal_m"] = float(np.max(np.hypot(d[:, 0], d[:, 2])))
+    on_stage = stage is not None and min(stage) > 0.0
+    if on_stage:  # how far outside the stage the root went (0: inside throughout)
+        ox = np.maximum(np.abs(poses[:, 0]) - 0.5 * stage[0], 0.0)
+        oz = np.maximum(np.abs(poses[:, 2]) - 0.5 * stage[1], 0.0)
+        out["root_horizontal_m"] = float(np.max(np.hypot(ox, oz)))
+    else:
+        out["root_horizontal_m"] = float(np.max(np.hypot(d[:, 0], d[:, 2])))
     out["root_vertical_m"] = float(np.max(np.abs(d[:, 1])))
     pos = in_place(positions(poses))
     amp = band_rms(pos, DANCE_BAND, fps, root=None)
@@ -157,7 +173,10 @@ def judge_stretch(poses: np.ndarray, root0: np.ndarray, ref_m: float, index: int
                        f"still for {out['still_s']:.1f} s")
     elif not lo <= out["amp_ratio"] <= hi:
         reasons.append(f"amplitude {out['amp_ratio']:.2f}x real, outside {lo:g}-{hi:g}x")
-    for key, what in (("root_horizontal_m", "horizontally"), ("root_vertical_m", "vertically")):
+    if on_stage and out["root_horizontal_m"] > STAGE_TOL_M:
+        reasons.append(f"root {out['root_horizontal_m']:.2f} m outside the {stage[0]:g}x{stage[1]:g} m stage")
+    for key, what in ((("root_vertical_m", "vertically"),) if on_stage else
+                      (("root_horizontal_m", "horizontally"), ("root_vertical_m", "vertically"))):
         if out[key] > ROOT_RADIUS_M:
             reasons.append(f"root {out[key]:.2f} m from its start {what} (> {ROOT_RADIUS_M:g} m)")
     out["reasons"] = reasons
@@ -167,11 +186,15 @@ def judge_stretch(poses: np.ndarray, root0: np.ndarray, ref_m: float, index: int
 class StabilityMonitor:
     """:func:`stability_check`, fed a few poses at a time; memory: one stretch of poses.
 
-    ``ref_m``: the real dances' band RMS, metres (:func:`real_reference_m`).
+    ``ref_m``: the real dances' band RMS, metres (:func:`real_reference_m`); ``stage``: the
+    stage (width, depth) m the performer travels on (None: in place; :func:`judge_stretch`).
     """
 
-    def __init__(self, ref_m: float, fps: float = FPS, stretch_s: float = STRETCH_S) -> None:
-        self.report = StabilityReport(_check_ref(ref_m), float(stretch_s), float(fps))
+    def __init__(self, ref_m: float, fps: float = FPS, stretch_s: float = STRETCH_S,
+                 stage: tuple[float, float] | None = None) -> None:
+        self.stage = stage
+        self.report = StabilityReport(_check_ref(ref_m), float(stretch_s), float(fps),
+                                     stage=None if stage is None else [float(v) for v in stage])
         self._n = int(round(stretch_s * fps))
         if self._n < 4:
             raise DataError(f"a stretch needs at least 4 frames, got {stretch_s} s at {fps} fps", source="stretch_s")
@@ -200,7 +223,7 @@ class StabilityMonitor:
             if self._fill == self._n:
                 idx = len(self.report.stretches)
                 self.report.stretches.append(judge_stretch(self._buf, self._root0, self.report.ref_m, idx,
-                                                           self.report.fps))
+                                                           self.report.fps, self.stage))
                 self._fill = 0
         self.report.tail_frames = self._fill
 
@@ -208,16 +231,18 @@ class StabilityMonitor:
         return self.report
 
 
-def stability_check(poses: np.ndarray, ref_m: float, fps: float = FPS, stretch_s: float = STRETCH_S) -> StabilityReport:
+def stability_check(poses: np.ndarray, ref_m: float, fps: float = FPS, stretch_s: float = STRETCH_S,
+                    stage: tuple[float, float] | None = None) -> StabilityReport:
     """Judge every whole ``stretch_s`` stretch of a generated stream ``poses (T, POSE_DIM)`` at ``fps``.
 
-    ``ref_m``: the real dances' dance-band RMS in metres (:func:`real_reference_m`).
+    ``ref_m``: the real dances' dance-band RMS in metres (:func:`real_reference_m`); ``stage``:
+    the stage (width, depth) m the performer travels on (None: in place).
     Returns a :class:`StabilityReport` (``ok``, ``failures``, per-stretch values).
     """
     a = np.asarray(poses, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] != POSE_DIM:
         raise DataError(f"expected poses of shape (T, {POSE_DIM}), got {a.shape}", source="poses")
-    mon = StabilityMonitor(ref_m, fps, stretch_s)
+    mon = StabilityMonitor(ref_m, fps, stretch_s, stage)
     mon.add(a)
     return mon.result()
 
