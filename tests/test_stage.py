@@ -272,3 +272,19 @@ def test_stage_0_set_live_walks_back_to_the_centre_and_a_stage_again_starts_ther
     assert step.max() <= (MAX_SPEED + stage_mod.HOME_SPEED) / FPS + 1e-6
     h = np.unwrap(heading(Rotation.from_quat(p[:, 3:7].astype(np.float64))))
     assert np.degrees(np.abs(np.diff(h))).max() < 20.0  # no turn in one frame
+
+
+def test_a_spin_plays_no_faster_than_max_turn():
+    """An exemplar turning 1.2 rad a frame (sped up further by the tempo rate): the heading turns
+    at most MAX_TURN a second on the stage; without the cap it turns as fast as it is read."""
+    m = walking_model(speed=0.0, turn=1.2)
+    x = music(300)
+    steps = np.abs(np.diff(track(DanceStream(m, seed=0, stage="6x5").push(x))[60:, 2]))
+    assert steps.max() <= stage_mod.MAX_TURN / FPS + 1e-4
+    cap = stage_mod.MAX_TURN
+    try:
+        stage_mod.MAX_TURN = 1e9
+        free = np.abs(np.diff(track(DanceStream(m, seed=0, stage="6x5").push(x))[60:, 2]))
+    finally:
+        stage_mod.MAX_TURN = cap
+    assert free.max() > 1.5 * cap / FPS

@@ -59,6 +59,11 @@ STEER_RATE: float = math.radians(120.0)
 #: took the root to 5 m/s on DANCE_W_5 (the dancer's 99.9th percentile there: 1.96 m/s;
 #: benchmarks/studies/stage_travel.py).
 MAX_SPEED: float = 1.7
+#: Fastest the exemplar's own turn plays (radians a second: two turns a second): a turn faster
+#: than this a frame is shortened to it. The tempo rate and the beat warp play the memory's spins
+#: up to 2.5x faster: on DANCE_W_5 the Hips then turned 38 degrees a frame at their 99.9th
+#: percentile (42.6 at most) where the dancer's own Hips turn 18.3 (DANCE_C_2's cha-cha 31.6).
+MAX_TURN: float = math.radians(720.0)
 #: Rows (exemplar frames) over which a new movement's travel takes over the last one's velocity,
 #: root (CARRY_ROWS, as the pose's inertialization carries the bones': dance_stream DECAY_FRAMES)
 #: and heading (CARRY_TURN_ROWS). Without a carry the root's mean acceleration in the two frames
@@ -253,6 +258,7 @@ class Stage:
         dx, dz = v[0] - p[0], v[1] - p[1]
         keep = 0.0 if leaving else 1.0 - idle
         lx, lz, turn = (c * dx - s * dz) * keep, (s * dx + c * dz) * keep, (v[2] - p[2]) * keep
+        turn = min(max(turn, -MAX_TURN / FPS), MAX_TURN / FPS)  # no faster than MAX_TURN
         if self._homing:  # walk back to the centre instead of travelling
             lx = lz = 0.0
         h = self.heading
