@@ -382,11 +382,13 @@ def stream_vs_offline(checkpoint: Path, features: np.ndarray, seed: int = 0, pha
     pipeline = build_pipeline(checkpoint)
     x = features.astype(np.float32)
     lead = stagger_lead(pipeline.model, pipeline.extractor_factory, phase)
+    st = getattr(pipeline.model, "stage", None)  # the offline pass on the live model's stage (run's default 3x2)
+    kw = {"stage": (st.width, st.depth), "facing": st.facing} if st is not None and hasattr(st, "width") else {}
     if lead is not None:
         pipeline.model.push(lead)
-        offline = run_model(pipeline.model.model, np.concatenate([lead, x]))[len(lead):]
+        offline = run_model(pipeline.model.model, np.concatenate([lead, x]), **kw)[len(lead):]
     else:
-        offline = run_model(pipeline.model.model, x)
+        offline = run_model(pipeline.model.model, x, **kw)
     rng = np.random.default_rng(seed)
     parts, i = [], 0
     while i < len(x):

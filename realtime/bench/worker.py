@@ -204,7 +204,8 @@ def run(spec: dict) -> dict:
         performers = []
         lanes = []
         for k, p in enumerate(ensemble):
-            pipe = build_pipeline(spec["checkpoint"], seed=int(p.get("seed", 0)), loaded=loaded)
+            # in place, as performer run's ensembles (their own spots on one stage are not built)
+            pipe = build_pipeline(spec["checkpoint"], seed=int(p.get("seed", 0)), loaded=loaded, stage=0)
             mine = [OscSink("127.0.0.1", int(p["osc_port"]), mode="vmc"),
                     server.route(f"/ws/{p['name']}", p["name"], default=k == 0), TimingSink(frames_max)]
             lanes.append((p["name"], mine))
