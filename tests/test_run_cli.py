@@ -388,3 +388,21 @@ def test_status_line_plain_when_not_a_tty():
     line.stop()
     out = buf.getvalue()
     assert "\r" not in out and out.count("\n") >= 2
+
+
+def test_a_reader_that_goes_away_is_no_error_and_prints_no_traceback(tmp_path):
+    """`performer library info big.npz | head -1`: the pipe closes under a long output; the command
+    ends quietly (exit 0), with no BrokenPipeError traceback."""
+    code = (
+        "import sys\n"
+        "from realtime import cli\n"
+        "def spam(args):\n"
+        "    for i in range(200000):\n"
+        "        print('line', i)\n"
+        "cli.build_parser = (lambda orig: (lambda: (lambda p: (p.set_defaults(func=spam, command='x'), p)[1])(orig())))"
+        "(cli.build_parser)\n"
+        "sys.exit(cli.main([]))\n"
+    )
+    proc = subprocess.run(f"{sys.executable} -c \"{code}\" | head -1", shell=True, capture_output=True, text=True,
+                          cwd=Path(__file__).resolve().parents[1], timeout=60)
+    assert proc.stdout == "line 0\n" and "Traceback" not in proc.stderr and "BrokenPipe" not in proc.stderr, proc.stderr
