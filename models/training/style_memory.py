@@ -72,13 +72,20 @@ def save_as_loaded(lm, out: str) -> None:
                     feature_config=meta["feature_config"], rig=meta["rig"], extra=meta.get("extra"))
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\nExit status")[0],
+def refit_parser(doc: str, what: str) -> argparse.ArgumentParser:
+    """The options of a command that adds ``what`` (e.g. "style memory") to a trained checkpoint by
+    refitting its memory: --checkpoint, --config, --data, --out; ``doc``: the module docstring."""
+    p = argparse.ArgumentParser(description=doc.split("\nExit status")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--checkpoint", required=True, metavar="CKPT", help="a dance_vq checkpoint")
     p.add_argument("--config", required=True, metavar="TOML", help="the training config it was trained with")
     p.add_argument("--data", required=True, metavar="DIR", help="the DWM dataset directory (holds DANCE_* dirs)")
-    p.add_argument("--out", required=True, metavar="CKPT", help="where to write the checkpoint with its style memory")
+    p.add_argument("--out", required=True, metavar="CKPT", help=f"where to write the checkpoint with its {what}")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = refit_parser(__doc__, "style memory")
     p.add_argument("--cache", default=".cache/corpus", metavar="DIR", help="corpus cache (default .cache/corpus)")
     a = p.parse_args(argv)
 

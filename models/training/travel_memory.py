@@ -24,7 +24,6 @@ memory that does not refit to the same exemplars (another config or dataset).
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -111,13 +110,9 @@ def travel_summary(model: DanceVQ) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\nExit status")[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--checkpoint", required=True, metavar="CKPT", help="a dance_vq checkpoint")
-    p.add_argument("--config", required=True, metavar="TOML", help="the training config it was trained with")
-    p.add_argument("--data", required=True, metavar="DIR", help="the DWM dataset directory (holds DANCE_* dirs)")
-    p.add_argument("--out", required=True, metavar="CKPT", help="where to write the checkpoint with its travel memory")
-    a = p.parse_args(argv)
+    from models.training.style_memory import refit_parser
+
+    a = refit_parser(__doc__, "travel memory").parse_args(argv)
 
     from models.errors import PerformerError
     from models.training.config import TrainConfig
