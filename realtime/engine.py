@@ -46,6 +46,8 @@ from models.rig.humanoid import NUM_BONES
 from models.rig.motion import POSE_DIM
 from models.timebase import FPS, HOP, SAMPLE_RATE
 from realtime.audio_input import AudioSource, RingBuffer
+from realtime.controls import (CONTROL_ACTIONS, MAX_STYLE_CHARS, applied, apply_control, check_finite, check_style_name,
+                               check_switch, publish_state)
 from realtime.frame import PoseFrame, Sink
 from realtime.pose_jit import guard_smooth
 
@@ -283,24 +285,6 @@ MAX_SAMPLE: float = 4.0
 #: Settings :meth:`Engine.update` can change while running.
 LIVE_SETTINGS: tuple[str, ...] = ("offset_ms", "smoothing")
 
-#: Actions of :meth:`Engine.control` (the WebSocket and OSC control inputs use these).
-CONTROL_ACTIONS: tuple[str, ...] = ("reset", "set_offset", "set_smoothing", "idle", "style", "energy", "lead", "stage",
-                                    "facing", "home")
-
-#: Longest style name :meth:`Engine.control` passes to a model, characters.
-MAX_STYLE_CHARS: int = 64
-
-
-def check_finite(name: str, value: object) -> float:
-    """A finite real number (not a bool) as a float; :class:`ConfigError` naming ``name`` otherwise."""
-    try:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise OverflowError
-    except OverflowError:  # also an int too large for a float
-        raise ConfigError(f"{name} must be a finite number, got {short_repr(value)}") from None
-    return float(value)
-
-
 def check_live_setting(name: str, value: object) -> float:
     """Validate one live setting; return it as a float or raise :class:`ConfigError` naming it."""
     if name not in LIVE_SETTINGS:
@@ -311,24 +295,6 @@ def check_live_setting(name: str, value: object) -> float:
         raise ConfigError(f"offset_ms must be -10000..10000 ms, got {value!r}")
     if name == "smoothing" and not 0.0 <= value < 1.0:
         raise ConfigError(f"smoothing must be in [0, 1), got {value!r}")
-    return value
-
-
-def check_switch(name: str, value: object) -> bool:
-    """An on/off control value: ``True``/``False``, or a number equal to 0 or 1 (an OSC
-    ``i`` 0/1, or a TouchOSC toggle's ``f`` 0.0/1.0). :class:`ConfigError` naming ``name`` otherwise."""
-    if isinstance(value, bool):
-        return value
-    if isinstance(value, (int, float)) and value in (0, 1):  # NaN is neither
-        return bool(value)
-    raise ConfigError(f"{name} must be 0 or 1, got {short_repr(value)}")
-
-
-def check_style_name(value: object) -> str:
-    """A style name: a non-empty string of at most :data:`MAX_STYLE_CHARS` printable characters."""
-    if not isinstance(value, str) or not value or len(value) > MAX_STYLE_CHARS or not value.isprintable():
-        raise ConfigError(f"style must be a style name (1..{MAX_STYLE_CHARS} printable characters), "
-                          f"got {short_repr(value)}")
     return value
 
 
@@ -742,7 +708,7 @@ class Engine:
         # sinks that hold their thread hand-offs while the hop's performers run (Sink's begin_hop / end_hop)
         self._hop_sinks = [s for lane in self._lanes for s in lane.sinks if hasattr(s, "begin_hop")]
         for lane in self._lanes:
-            self._publish_state(lane)  # the viewer draws the stage
+            publish_state(lane)  # the viewer draws the stage
         self.error = None
         self._stop.clear()
         self._done.clear()
@@ -855,44 +821,7 @@ class Engine:
         an unknown action or performer, or a control a model does not offer raises
         :class:`ConfigError` (one line) and changes nothing. Thread-safe; never waits on the worker.
         """
-        lanes = [self._lane(performer)] if self._named(performer) else self._lanes
-        if action == "reset":
-            if self._named(performer):
-                self.reset_performer(lanes[0].name)
-            else:
-                self.reset()
-        elif action == "set_offset":
-            self.update(performer, offset_ms=value)
-        elif action == "set_smoothing":
-            self.update(performer, smoothing=value)
-        elif action == "idle":
-            idle = check_switch("idle", value)
-            for lane in lanes:
-                self._set_lane_idle(lane, idle)
-        elif action == "style":
-            fns = [self._model_control(lane, "set_style", "style") for lane in lanes]
-            style = check_style_name(value)
-            for fn in fns:
-                fn(style)
-        elif action in ("energy", "lead"):
-            fns = [self._model_control(lane, f"set_{action}", action) for lane in lanes]
-            number = check_finite(action, value)
-            for fn in fns:
-                fn(number)
-        elif action in ("stage", "facing"):
-            from models.networks.stage import check_facing, parse_stage
-
-            fns = [self._model_control(lane, f"set_{action}", action) for lane in lanes]
-            setting = parse_stage(value) if action == "stage" else check_facing(value)
-            for fn in fns:
-                fn(setting)
-            for lane in lanes:
-                self._publish_state(lane)
-        elif action == "home":
-            for fn in [self._model_control(lane, "home", "home") for lane in lanes]:
-                fn()
-        else:
-            raise ConfigError(f"unknown control action {short_repr(action)}; use {', '.join(CONTROL_ACTIONS)}")
+        apply_control(self, action, value, performer)  # realtime/controls.py: one dispatch for every input
 
     def set_idle(self, idle: bool, performer: str | None = None) -> None:
         """Settle into the idle pose and hold it (True), or dance again (False), without a jump;
@@ -931,25 +860,14 @@ class Engine:
         """``"performer NAME: "`` in an ensemble, ``""`` for a single performer (log prefixes)."""
         return f"performer {lane.name}: " if len(self._lanes) > 1 else ""
 
-    @staticmethod
-    def _publish_state(lane: _Lane) -> None:
-        """Tell the lane's sinks that show a stage (``set_state``: the WebSocket viewer's) the
-        model's stage and facing (models/networks/stage.py), if it has one."""
-        stage = getattr(lane.model, "stage", None)
-        if stage is None or not hasattr(stage, "width"):
-            return
-        state = {"stage": [float(stage.width), float(stage.depth)], "facing": str(stage.facing)}
-        for sink in lane.sinks:
-            set_state = getattr(sink, "set_state", None)
-            if callable(set_state):
-                set_state(state)
+    def applied(self) -> dict[str, dict]:
+        """What each performer runs with now, by name (:func:`realtime.controls.applied`). Thread-safe reads."""
+        return {lane.name: applied(lane) for lane in self._lanes}
 
-    def _model_control(self, lane: _Lane, method: str, what: str) -> Callable:
-        """The pose model's ``method`` or :class:`ConfigError` "this model offers no ``what`` control"."""
-        fn = getattr(lane.model, method, None)
-        if not callable(fn):
-            raise ConfigError(f"{self._who(lane)}this model offers no {what} control")
-        return fn
+    @property
+    def models(self) -> dict[str, PoseModel]:
+        """Each performer's pose model, by name (read its state; steer it through :meth:`control`)."""
+        return {lane.name: lane.model for lane in self._lanes}
 
     @property
     def active_source(self) -> AudioSource:

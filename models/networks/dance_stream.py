@@ -772,6 +772,21 @@ class DanceStream:
         return self._idle.music
 
     @property
+    def heard(self) -> str:
+        """What the idle gate heard in the last frame: music, silence, quiet or not music (IdleGate.heard)."""
+        return self._idle.heard()
+
+    @property
+    def beat_phase(self) -> float:
+        """Where the last frame lies between the danced beats, 0..1 (0: on a beat); NaN without a pulse."""
+        raw = getattr(self, "_raw", None)
+        if self._beat_cols is None or raw is None or float(raw[self._beat_cols[2]]) <= 0.0:
+            return math.nan
+        theta, _ = self._danced_phase(*(float(raw[j]) for j in (self._beat_cols[0], self._beat_cols[1],
+                                                                 self._beat_cols[3])))
+        return (theta / (2.0 * math.pi)) % 1.0
+
+    @property
     def tempo_bpm(self) -> float:
         """The tempo the performer follows (beats per minute, in the danced range), 0 before a clear pulse."""
         period = self._tempo.period

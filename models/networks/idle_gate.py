@@ -108,9 +108,18 @@ class IdleGate:
         self.level = math.nan  # the music's running level, dB (NaN: nothing heard yet)
         self.break_frames = 0
         self.break_silent = True
+        self.present = False  # the detector's verdict on the last frame
         self._ema = np.zeros(len(self._gcols))  # the logistic detector's running mean
         if self.presence is not None:
             self.presence.reset()
+
+    def heard(self) -> str:
+        """What the last frame sounded like, in words for the show desk: ``"silence"`` or ``"quiet"``
+        (a break: silent, or BREAK_DB under the music's level), ``"music"``, or ``"not music"``
+        (sound the detector does not take for music: a voice, noise)."""
+        if self.break_frames:
+            return "silence" if self.break_silent else "quiet"
+        return "music" if self.present else "not music"
 
     def _is_break(self, energy: float) -> bool:
         """Frame energy ``energy`` (dB) is a break frame: silence, or :data:`BREAK_DB` under the
@@ -149,6 +158,7 @@ class IdleGate:
             elif was and self.music:
                 self.run = 0.0  # a break danced through: what it counted towards the stop is void
         present = self._detector(row)
+        self.present = present
         count = 1.0  # a sure detector counts a frame as more than one (music_gate.SURE_COUNT)
         if self.music and not present and self.presence is not None:
             count = self.presence.stop_count()
