@@ -10,8 +10,9 @@ JIT_STAMP := $(VENV)/.jit-compiled
 # OSC wire format, mono-mcs to compile and run the Unity receiver's C# OSC parser
 # against our encoder (tests/test_listen.py; about 20 s to install), espeak-ng for the
 # synthetic speech the idle gate's presence detector learns and is tested on
-# (models/training/music_gate.py, tests/test_music_gate.py).
-APT_PKGS := libportaudio2 liblo-tools mono-mcs espeak-ng
+# (models/training/music_gate.py, tests/test_music_gate.py), nats-server: the broker of
+# `performer run --publish` (tests/test_publish.py, benchmarks/audience.py; docs/audience.md).
+APT_PKGS := libportaudio2 liblo-tools mono-mcs espeak-ng nats-server
 
 .PHONY: setup system-deps web browser-deps demo test test-fast bench soak constraints clean help
 
@@ -31,8 +32,8 @@ system-deps:
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
 	    echo "installing system packages:$$missing"; \
 	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing) >/dev/null \
-	      || echo "warning: could not install$$missing; live audio input, oscdump or C# tests will be skipped"; \
-	  else echo "note: missing system packages:$$missing (live audio input / oscdump / C# tests will be skipped)"; fi; \
+	      || echo "warning: could not install$$missing; live audio input, oscdump, C# or broker tests will be skipped"; \
+	  else echo "note: missing system packages:$$missing (live audio input / oscdump / C# / broker tests will be skipped)"; fi; \
 	fi
 
 # Every Python package at the exact version of constraints.txt (docs/install.md); torch

@@ -192,6 +192,10 @@ class RunConfig:
     ws_viewers_open: bool = False
     ws_max_clients: int = 16
     ws_origin: list[str] = field(default_factory=list)
+    publish: str | None = None
+    publish_subject: str = "performer"
+    publish_credentials: Path | None = None
+    publish_tls_ca: Path | None = None
     control_osc: str | None = None
     control_allow: list[str] = field(default_factory=list)
     performer: list[PerformerConfig] = field(default_factory=list)
@@ -241,6 +245,11 @@ class RunConfig:
                               "without one every client is a viewer already")
         self.osc_targets()  # raise ConfigError now if an address is malformed
         self.ws_endpoint()
+        if self.publish is not None:  # the broker output (realtime/publish.py)
+            from realtime.publish import check_broker_url, check_subject
+
+            check_broker_url(self.publish)
+            check_subject(self.publish_subject)
         if self.control_allow and self.control_osc is None:
             raise ConfigError("--control-allow limits the OSC control input: it needs --control-osc [HOST:]PORT")
         self.control_endpoint()
@@ -343,7 +352,7 @@ class RunConfig:
 
 
 _FIELDS = {f.name: f for f in dataclasses.fields(RunConfig)}
-_PATHS = {"audio", "checkpoint", "record", "fallback_audio"}
+_PATHS = {"audio", "checkpoint", "record", "fallback_audio", "publish_credentials", "publish_tls_ca"}
 _TYPES: dict[str, tuple[type, ...]] = {
     "audio": (str,), "input_device": (str, int), "sample_rate": (int,), "block_size": (int,),
     "monitor": (bool,), "loop": (bool,), "fast": (bool,), "duration": (int, float), "osc": (list, str),
@@ -353,6 +362,7 @@ _TYPES: dict[str, tuple[type, ...]] = {
     "warmup": (int, float), "fallback_audio": (str,), "fallback_after": (int, float), "ws_token": (str,),
     "ws_viewers_open": (bool,), "ws_max_clients": (int,), "ws_origin": (list, str),
     "control_osc": (str, int), "control_allow": (list, str), "performer": (list,),
+    "publish": (str,), "publish_subject": (str,), "publish_credentials": (str,), "publish_tls_ca": (str,),
 }
 assert set(_TYPES) == set(_FIELDS)
 

@@ -60,6 +60,7 @@ examples:
   oscsend 127.0.0.1 9100 /performer/offset f 40       # liblo-tools; QLab, TouchOSC: docs/show.md
   performer run --audio song.wav --performer alice,style=waltz --performer bob,style=rumba,seed=7
   performer run --audio song.wav --performer calm,energy=0.5 --performer lively,energy=1.6
+  PERFORMER_PUBLISH_TOKEN=s3cret performer run --audio song.wav --publish nats://127.0.0.1:4222
 """
 
 
@@ -104,6 +105,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     o.add_argument("--ws-max-clients", type=int, metavar="N", help="most WebSocket clients at once (default 16)")
     o.add_argument("--ws-origin", action="append", metavar="URL",
                    help="allowed browser Origin (e.g. http://stage-pc:8765); repeat; default: any")
+    o.add_argument("--publish", metavar="URL",
+                   help="also publish every frame to a NATS broker for a web audience: nats://HOST:4222 or "
+                        "tls://HOST:4222; credentials from $PERFORMER_PUBLISH_TOKEN or $PERFORMER_PUBLISH_USER "
+                        "and $PERFORMER_PUBLISH_PASSWORD, or --publish-credentials (docs/audience.md)")
+    o.add_argument("--publish-subject", metavar="PREFIX",
+                   help="publish on PREFIX.NAME.frames and PREFIX.NAME.meta (default performer; "
+                        "one performer alone is NAME main)")
+    o.add_argument("--publish-credentials", metavar="FILE",
+                   help="TOML file with the broker login: token = \"...\", or user and password")
+    o.add_argument("--publish-tls-ca", metavar="FILE", help="CA file that signed the broker's TLS certificate")
     o.add_argument("--record", metavar="FILE", help="write what was streamed to FILE.npz and FILE.bvh when the run stops")
     c = p.add_argument_group("show control")
     c.add_argument("--control-osc", metavar="[HOST:]PORT",
@@ -164,6 +175,7 @@ def _open_source(cfg):
 def _open_sinks(cfg, input_sample_rate: int) -> list:
     """OSC targets, WebSocket server and recorder; closes what it opened if one fails."""
     from realtime.osc_out import OscSink
+    from realtime.publish import open_routes
     from realtime.recorder import Recorder
     from realtime.ws_server import WebSocketSink
 
@@ -177,6 +189,7 @@ def _open_sinks(cfg, input_sample_rate: int) -> list:
         if ws is not None:
             sinks.append(WebSocketSink(*ws, token=cfg.ws_token, viewers_open=cfg.ws_viewers_open,
                                        max_clients=cfg.ws_max_clients, allowed_origins=cfg.ws_origin or None))
+        sinks += open_routes(cfg, ["main"])  # --publish: the broker for a web audience
     except BaseException:
         _discard(sinks)
         raise
@@ -211,6 +224,7 @@ def _open_ensemble(cfg, specs, source, fallback):
     from realtime.engine import Engine, EngineConfig, Performer
     from realtime.osc_out import OscSink
     from realtime.pipeline import build_pipeline
+    from realtime.publish import open_routes
     from realtime.recorder import Recorder
     from realtime.ws_server import WebSocketSink
 
@@ -230,6 +244,8 @@ def _open_ensemble(cfg, specs, source, fallback):
         if ws is not None:
             server = WebSocketSink(*ws, token=cfg.ws_token, viewers_open=cfg.ws_viewers_open,
                                    max_clients=cfg.ws_max_clients, allowed_origins=cfg.ws_origin or None)
+        routes = open_routes(cfg, [spec.name for spec in specs])  # --publish: one subject each
+        opened += routes
         performers = []
         for k, (spec, pipe) in enumerate(zip(specs, pipelines)):
             sinks: list = []
@@ -241,6 +257,8 @@ def _open_ensemble(cfg, specs, source, fallback):
                 opened.append(sinks[-1])
             if server is not None:
                 sinks.append(server.route(spec.ws_path, spec.name, default=k == 0))
+            if routes:
+                sinks.append(routes[k])
             performers.append(Performer(spec.name, pipe.model, pipe.extractor_factory, sinks,
                                         feature_key=pipe.feature_key, smoothing=spec.smoothing,
                                         offset_ms=spec.offset_ms, phase=spec.phase))
