@@ -56,6 +56,9 @@ log = logging.getLogger(__name__)
 WS_PORT: int = 8765
 FORMATS: tuple[str, ...] = ("binary", "json")
 WS_PATHS: tuple[str, ...] = ("/", "/ws")
+#: The show desk's path (realtime/desk.py): status messages, no frames; the viewers' token rules.
+DESK_PATH: str = "/desk"
+_DESK = "#desk"  # the route key of desk clients (no performer's path can be it)
 #: Close codes (RFC 6455) sent to refused clients.
 CLOSE_POLICY = 1008  # bad or missing token, unknown format, message rate exceeded
 CLOSE_FULL = 1013  # client cap reached ("try again later")
@@ -303,6 +306,7 @@ class WebSocketSink:
         self._outbox: deque[tuple[bytes, str | None]] = deque()  # engine thread -> loop (deque ops are atomic)
         self._wake_pending = False
         self._holding = False  # between begin_hop and end_hop: frames queue without waking the loop
+        self.on_desk_control: Callable[[], None] | None = None  # called after a desk's control applied
 
         self._loop = asyncio.new_event_loop()
         self._ready = threading.Event()
@@ -370,6 +374,18 @@ class WebSocketSink:
     def _set_state(self, state: dict, key: str | None) -> None:
         text = json.dumps({"type": "state", **state})
         self._states[key] = text
+        self._post_text(text, key)
+
+    def desk_clients(self) -> int:
+        """Show desks connected now (clients of :data:`DESK_PATH`)."""
+        return sum(1 for c in tuple(self._clients.values()) if c.route == _DESK)
+
+    def send_status(self, text: str) -> None:
+        """One JSON status message (realtime/desk.py) to every desk, each through its bounded
+        drop-oldest queue; returns at once."""
+        self._post_text(text, _DESK)
+
+    def _post_text(self, text: str, key: str | None) -> None:
         if self._closed:
             return
         try:
@@ -584,7 +600,7 @@ class WebSocketSink:
         self._connections += 1
         url = urlsplit(ws.request.path)  # type: ignore[union-attr]
         query = parse_qs(url.query)
-        route = url.path if url.path in self._routes else self._default_route
+        route = _DESK if url.path == DESK_PATH else url.path if url.path in self._routes else self._default_route
         fmt = query.get("format", ["binary"])[-1]
         if fmt not in FORMATS:
             await ws.close(CLOSE_POLICY, f"unknown format {fmt!r}; use binary or json")
@@ -634,7 +650,9 @@ class WebSocketSink:
         if sock is not None:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self._socket_buffer)
         hello = {**self._hello, "format": fmt, "control": controller and self.control is not None}
-        if route is not None and self._routes[route].performer is not None:
+        if route == _DESK:
+            hello["desk"] = True
+        elif route is not None and self._routes[route].performer is not None:
             hello["performer"] = self._routes[route].performer
         hello = json.dumps(hello)
         await ws.send(hello)
@@ -725,7 +743,7 @@ class WebSocketSink:
             return _error("control needs the server token (send an auth message first)")
         action = msg["action"]
         target = msg.get("performer")
-        if target is None and c.route is not None:
+        if target is None and c.route in self._routes:
             target = self._routes[c.route].performer
         try:
             if target is None:
@@ -739,6 +757,8 @@ class WebSocketSink:
             return _error(f"control {action} failed")
         self._controls += 1
         log.info("control %s %s from %s", action, _short(msg.get("value", "")), c.peer)
+        if c.route == _DESK and self.on_desk_control is not None:
+            self.on_desk_control()
         reply = {"type": "control_ok", "action": action, "value": msg.get("value")}
         if target is not None:
             reply["performer"] = target
@@ -747,7 +767,7 @@ class WebSocketSink:
     async def _process_request(self, connection: ServerConnection, request: Request) -> Response | None:
         url = urlsplit(request.path)
         if "websocket" in request.headers.get("Upgrade", "").lower():
-            if url.path in WS_PATHS or url.path in self._routes:
+            if url.path in WS_PATHS or url.path in self._routes or url.path == DESK_PATH:
                 return None
             known = ", ".join(["/ws", *self._routes])
             return connection.respond(404, f"no pose stream at {url.path}; connect to {known}\n")

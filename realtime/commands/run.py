@@ -367,6 +367,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"performer run: warm-up done in {engine.warmup_seconds:.1f} s", file=sys.stderr)
     if control is not None:
         control.start()
+    from realtime.desk import start_desk
+
+    desk = start_desk(engine, server if server is not None else sinks,
+                      extra=None if control is None else lambda: {"control": control.stats()})
+    if desk is not None and not args.quiet:
+        print(f"performer run: show desk {desk.url} (steering with the WebSocket token)", file=sys.stderr)
     status = None if args.quiet else StatusLine(lambda: _stats(engine, control))
     interrupted = False
     restore = _install_reload(args, engine, cfg)
@@ -379,6 +385,8 @@ def run(args: argparse.Namespace) -> int:
         interrupted = True
     finally:
         restore()
+        if desk is not None:
+            desk.close()
         if control is not None:
             control.close()
         if status is not None:
