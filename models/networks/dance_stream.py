@@ -965,9 +965,12 @@ class DanceStream:
         else:
             at = self._advance(self.seg)  # the current movement's end, seg frames back
             self._played[: self.seg] = [warp_pose(self._played, at + i) for i in range(self.seg)]
+            lift = (self._contact_at(at + self.seg)[2], self._contact_at(at + self.seg + 1)[2])
             self._played_contact[: self.seg] = [self._contact_at(at + i) for i in range(self.seg)]
         self._played[self.seg:] = window
         self._played_contact[self.seg:] = contact if contact is not None else 0.0
+        if self.codes_drawn and self._has_cont and contact is not None:  # bent as the root's height (feet.bend_lift)
+            feet_part.bend_lift(self._played_contact[self.seg:], *lift, self._decay)
         rate = min(rate, limit)
         self._rate_from = min(self._rate, limit) if self.codes_drawn else rate
         self._rate = rate

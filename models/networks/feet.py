@@ -79,10 +79,14 @@ LEASH_PULL: float = 0.2
 KNEE_MIN_DEG: float = 0.5
 #: Grounding: the body's height is moved by the played exemplar's lift (what puts its window's
 #: lowest foot point on the floor, :func:`member_contacts`) through two one-pole low-passes of
-#: this rate a frame (so its speed has no kink either): the memory's dancers stand at
-#: different heights on the default skeleton, and their exemplars take turns.
-#: 0: the height as the dance has it.
-GROUND_RATE: float = 0.2
+#: this rate a frame: the memory's dancers stand at different heights on the default skeleton,
+#: and their exemplars take turns. 1: the lift as played, which the handover bends exactly as
+#: it bends the root's height (:func:`bend_lift`), so the grounded height changes smoothly from
+#: one dancer's to the next. 0: the height as the dance has it. (0.2 lagged the lift ~10
+#: frames behind the root's bend: a handover from a dancer standing low (lift 0) to one
+#: standing 0.45 m high (lift -0.45) took the hips to 0.49 m, and 13 of the hour soak's 120
+#: stretches failed its vertical check; benchmarks/soak.py, docs/feet.md.)
+GROUND_RATE: float = 1.0
 
 _SIDES = ("Left", "Right")
 
@@ -117,6 +121,18 @@ def member_contacts(positions: np.ndarray, counts: np.ndarray) -> tuple[np.ndarr
     contact = (low <= own + CONTACT_HEIGHT) & (speed <= CONTACT_SPEED) & real[:, :, None, None]
     lift = np.where(real[:, :, None, None], floor - own, 0.0)
     return np.concatenate([contact, np.broadcast_to(lift, (k, m, f, 1))], axis=-1).astype(np.float32), floor
+
+
+def bend_lift(rows: np.ndarray, lift0: float, lift1: float, decay: np.ndarray) -> None:
+    """The lift channel ``rows[:, 2]`` (F, 3; a new movement's contacts, :func:`member_contacts`)
+    bent, in place, to continue from the last movement's lift ``lift0`` at the handover (and its
+    change a frame ``lift1 - lift0``) with the Hermite weights ``decay`` (2, D) that bend the
+    root's position there (``dance_jit.match_exemplar``): the root's height and its lift then
+    change together, so the grounded height never dips between two dancers' heights."""
+    n = min(decay.shape[1], len(rows))
+    d0 = lift0 - float(rows[0, 2])
+    d1 = (lift1 - lift0) - float(rows[1, 2] - rows[0, 2]) if len(rows) > 1 else 0.0
+    rows[:n, 2] += decay[0, :n] * d0 + decay[1, :n] * d1
 
 
 # -- the compiled step ---------------------------------------------------------------------------
@@ -285,7 +301,7 @@ def _lowest(pose, f, bones, offs):  # pragma: no cover - compiled
 def feet_kernel(pose, bones, offs, ang_rest, planted, plant, weight, ground, target, contact, floor, leash, pull,
                 release, knee_min, ground_rate, plant_rate):  # pragma: no cover - compiled
     """Both legs of ``pose`` (P,) float32, in place; the state arrays updated (see :class:`FeetLock`)."""
-    if ground_rate > 0.0:  # the body lowered or raised by the exemplar's lift, low-passed twice (no kink)
+    if ground_rate > 0.0:  # the body lowered or raised by the exemplar's lift (GROUND_RATE < 1: low-passed twice)
         ground[1] += ground_rate * (contact[2] - ground[1])
         ground[0] += ground_rate * (ground[1] - ground[0])
         pose[1] = pose[1] + ground[0]
