@@ -171,6 +171,7 @@ class RunConfig:
     duration: float | None = None
     osc: list[str] = field(default_factory=lambda: [DEFAULT_OSC])
     osc_mode: str = "vmc"
+    vmc_root: str = "world"
     no_osc: bool = False
     ws: str = DEFAULT_WS
     no_ws: bool = False
@@ -219,9 +220,9 @@ class RunConfig:
         if self.stage is not None:
             parse_stage(self.stage)
         check_facing(self.facing)
-        if self.performer and (self.stage not in (None, 0, "0") or self.facing != "free"):
-            raise ConfigError("stage and facing apply to one performer: an ensemble's performers dance in place "
-                              "for now (each its own spot on one stage is not built yet, docs/stage.md)")
+        from realtime.vmc import check_root_mode
+
+        check_root_mode(self.vmc_root)
         checks = [
             ("sample_rate", self.sample_rate is None or 4000 <= self.sample_rate <= 192000, "4000..192000 Hz"),
             ("block_size", 16 <= self.block_size <= 65536, "16..65536 samples"),
@@ -356,7 +357,7 @@ _PATHS = {"audio", "checkpoint", "record", "fallback_audio", "publish_credential
 _TYPES: dict[str, tuple[type, ...]] = {
     "audio": (str,), "input_device": (str, int), "sample_rate": (int,), "block_size": (int,),
     "monitor": (bool,), "loop": (bool,), "fast": (bool,), "duration": (int, float), "osc": (list, str),
-    "osc_mode": (str,), "no_osc": (bool,), "ws": (str,), "no_ws": (bool,), "checkpoint": (str,), "style": (str,),
+    "osc_mode": (str,), "vmc_root": (str,), "no_osc": (bool,), "ws": (str,), "no_ws": (bool,), "checkpoint": (str,), "style": (str,),
     "energy": (int, float), "lead": (int, float), "stage": (str, int, float), "facing": (str,), "seed": (int,), "record": (str,), "threads": (int,), "offset_ms": (int, float),
     "smoothing": (int, float),
     "warmup": (int, float), "fallback_audio": (str,), "fallback_after": (int, float), "ws_token": (str,),

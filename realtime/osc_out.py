@@ -98,6 +98,8 @@ class OscSink:
             loads :func:`models.rig.skeleton.load_default_skeleton`. Unused in plain mode.
         names: plain mode only: humanoid bone -> output name mapping.
         max_datagram: upper bound on each UDP datagram, bytes.
+        vmc_root: VMC mode only: ``"world"`` (/VMC/Ext/Root/Pos carries the position and heading),
+            ``"in-place"`` or ``"hips"`` (:data:`realtime.vmc.VMC_ROOT_MODES`).
     """
 
     def __init__(
@@ -109,11 +111,12 @@ class OscSink:
         offsets: np.ndarray | None = None,
         names: Mapping[str, str] | None = None,
         max_datagram: int = MAX_DATAGRAM,
+        vmc_root: str = "world",
     ) -> None:
         if mode == "vmc":
             if names is not None:
                 raise ConfigError("OSC mode 'vmc' sends Unity HumanBodyBones names; joint name mappings need mode 'plain'")
-            vmc = VmcEncoder(rest_offsets(offsets), max_datagram=max_datagram)
+            vmc = VmcEncoder(rest_offsets(offsets), max_datagram=max_datagram, root=vmc_root)
             self._encode = lambda f: vmc.encode(f.pose, f.audio_time)
         elif mode == "plain":
             plain = PlainOscEncoder(names, max_datagram=max_datagram)

@@ -120,13 +120,28 @@ def _floats(params: Sequence, n: int, start: int = 0) -> np.ndarray | None:
     return np.array(vals, dtype=np.float64)
 
 
+def compose_root(base: np.ndarray, position: np.ndarray, rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A bone's local ``position`` (3,) and ``rotation`` (4,) xyzw under a parent ``base`` (7,):
+    position then rotation xyzw -> the bone's (position (3,), rotation (4,)) in the parent's frame."""
+    (bx, by, bz, bw), (qx, qy, qz, qw) = base[3:], rotation
+    v = np.asarray(position, np.float64)
+    t = 2.0 * np.cross([bx, by, bz], v)
+    moved = v + bw * t + np.cross([bx, by, bz], t)  # base rotation applied to the position
+    rot = np.array([bw * qx + bx * qw + by * qz - bz * qy, bw * qy - bx * qz + by * qw + bz * qx,
+                    bw * qz + bx * qy - by * qx + bz * qw, bw * qw - bx * qx - by * qy - bz * qz])
+    return base[:3] + moved, rot
+
+
 class VmcAssembler:
     """VMC protocol messages -> frames (docs/protocol.md, "VMC protocol").
 
     A frame starts at ``/VMC/Ext/Root/Pos`` (or at the first bone after the previous
     frame, when the datagram holding Root/Pos was lost) and ends at ``/VMC/Ext/T``; bone positions
-    and rotations are converted from Unity's left-handed frame. The root position is
-    the Hips' local position. Other addresses are ignored, as the protocol requires.
+    and rotations are converted from Unity's left-handed frame. The frame's root position and
+    Hips rotation are the Hips' local ones under the model root of ``/VMC/Ext/Root/Pos``
+    (root * Hips: the world pose whichever ``--vmc-root`` the sender used; a frame whose
+    Root/Pos was lost takes the Hips as they are). Other addresses are ignored, as the
+    protocol requires.
     """
 
     def __init__(self, names: Sequence[str] = BONES, problems: _Problems | None = None, fps: float = FPS) -> None:
@@ -135,6 +150,7 @@ class VmcAssembler:
         self.fps = fps
         self.count = 0
         self.last_time = math.nan
+        self._base: np.ndarray | None = None  # this frame's model root (7,): position, rotation xyzw
 
     def feed(self, address: str, params: Sequence, arrival: tuple[float, float]) -> ReceivedFrame | None:
         f = self.frame
@@ -143,6 +159,9 @@ class VmcAssembler:
                 self.problems.add(f"a VMC frame after audio time {self.last_time:.3f} s ended without /VMC/Ext/T (datagram lost?)")
             f.reset()
             f.active = True
+            vals = _floats(params, 7, 1)  # v2.1 adds scale and offset after these: ignored
+            self._base = None if vals is None else np.concatenate(
+                [from_unity_position(vals[:3]), from_unity_quaternion(vals[3:])])
         elif address == "/VMC/Ext/Bone/Pos":
             f.active = True  # also when the frame's first datagram (with Root/Pos) was lost
             vals = _floats(params, 7, 1)
@@ -167,6 +186,10 @@ class VmcAssembler:
             f.index = round(f.time * self.fps) - 1
             self.count += 1
             self.last_time = f.time
+            base, self._base = self._base, None
+            hips = f.row.get("Hips")
+            if base is not None and hips is not None and "Hips" in f.seen:
+                f.root, f.rot[hips] = compose_root(base, f.root, f.rot[hips])
             return f.finish(arrival)
         return None
 

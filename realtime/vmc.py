@@ -10,10 +10,20 @@ UDP, default port 39539. Per frame a Performer sends, in order::
 
 Positions are metres and rotations ``localPosition``/``localRotation`` of each bone
 in Unity's LEFT-handed frame (Y up, character faces +Z, character's right = +X).
-As VirtualMotionCapture does, the model root stays at the origin (identity root)
-and the body's translation is carried by the Hips' local position (the frame's
-root position); every other bone's local position is its rest offset from its
-parent. The messages travel as OSC bundles (time tag "immediately") of at most
+Where the performer stands and faces (``root``, :data:`VMC_ROOT_MODES`):
+
+* ``world`` (default): ``/VMC/Ext/Root/Pos`` is the model root's absolute pose, as the
+  protocol defines it (and as EVMC4U applies it to the model's transform, "room-scale
+  movement"): the floor point under the Hips (x, 0, z) and the heading (the yaw of the
+  Hips' forward axis, models.data.canonical.heading). The Hips' local position and rotation
+  are then relative to that root: (0, hip height, 0), the heading taken out.
+* ``in-place``: the same bones, the root at the origin with identity rotation: no travel,
+  no turns (a receiver that ignores Root/Pos sees the same from ``world``).
+* ``hips``: the root at the origin, identity; the Hips carry the world position and heading
+  (what this encoder sent before issue 39; for receivers that ignore Root/Pos but apply the
+  Hips' position).
+
+Every other bone's local position is its rest offset from its parent. The messages travel as OSC bundles (time tag "immediately") of at most
 ``max_datagram`` bytes each, split between bones when one frame does not fit.
 
 The encoder is hand-written rather than built with python-osc's builders because
@@ -25,6 +35,7 @@ pre-encoded once, so a frame costs one numpy fill and a few ``bytes.join`` calls
 from __future__ import annotations
 
 import struct
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -41,6 +52,9 @@ MAX_DATAGRAM: int = 1400
 #: OSC time tag 1 = "immediately" (same bytes as python-osc's IMMEDIATELY).
 IMMEDIATE: bytes = struct.pack(">Q", 1)
 BUNDLE_HEADER: bytes = b"#bundle\x00" + IMMEDIATE
+
+#: Where the root goes (module docstring): the first is the default.
+VMC_ROOT_MODES: tuple[str, ...] = ("world", "in-place", "hips")
 
 #: Arguments of /VMC/Ext/OK: loaded=1, calibration state 3 (calibrated; EVMC4U hides
 #: an uncalibrated model when asked to), calibration mode 0 (normal, not MR),
@@ -96,6 +110,28 @@ def to_unity_quaternion(q: np.ndarray) -> np.ndarray:
 
 from_unity_position = to_unity_position
 from_unity_quaternion = to_unity_quaternion
+
+
+def check_root_mode(mode) -> str:
+    """``mode`` if it is one of :data:`VMC_ROOT_MODES`, else ConfigError (one line)."""
+    if mode not in VMC_ROOT_MODES:
+        raise ConfigError(f"VMC root must be one of {', '.join(VMC_ROOT_MODES)}, got {mode!r}")
+    return mode
+
+
+def split_root(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The model root under a pose's Hips, project frame: (root (7,) position x, 0, z in metres
+    and rotation Ry(heading) x y z w; the Hips' position (3,) relative to it, (0, y, 0); the
+    Hips' rotation (4,) relative to it, Ry(-heading) * q). ``pose``: (POSE_DIM,) flat pose of
+    :mod:`models.rig.motion`. The heading is the yaw of the Hips' forward (+Z) axis, as
+    models.data.canonical.heading defines it, so root * hips gives the pose's Hips back."""
+    x, y, z = (float(v) for v in pose[:3])
+    qx, qy, qz, qw = (float(v) for v in pose[3:7])
+    h = math.atan2(2.0 * (qx * qz + qw * qy), 1.0 - 2.0 * (qx * qx + qy * qy))
+    s, c = math.sin(0.5 * h), math.cos(0.5 * h)
+    # Ry(-h) * q, Ry(-h) = (0, -s, 0, c)
+    hips = np.array([c * qx - s * qz, c * qy - s * qw, c * qz + s * qx, c * qw + s * qy])
+    return np.array([x, 0.0, z, 0.0, s, 0.0, c]), np.array([0.0, y, 0.0]), hips
 
 
 class BundleLayout:
@@ -162,7 +198,7 @@ class VmcEncoder:
     """Encodes one pose per call as VMC Performer bundles (see the module docstring).
 
     Every byte of a frame's datagrams but its 88 numbers (the Hips' position, the bones'
-    rotations, the time) is the same from frame to frame, so the datagrams are built once
+    rotations, the time; with the world root also the root's 7) is the same from frame to frame, so the datagrams are built once
     as a template and a frame writes its numbers into their big-endian float slots with one
     NumPy fancy assignment (about 15 NumPy calls and the joins per frame before, 0.13 ms a
     frame on the live path; an ensemble pays it per performer). The bytes are those the
@@ -171,11 +207,13 @@ class VmcEncoder:
     Args:
         offsets: (NUM_BONES, 3) rest offset of each bone from its parent, metres, project
             frame, bones in :data:`models.rig.humanoid.BONES` order (the root's row is unused:
-            the Hips' local position is the frame's root position).
+            the Hips' local position comes from the frame's root position).
         max_datagram: upper bound on each datagram, bytes.
+        root: ``"world"``, ``"in-place"`` or ``"hips"`` (:data:`VMC_ROOT_MODES`, module docstring).
     """
 
-    def __init__(self, offsets: np.ndarray, *, max_datagram: int = MAX_DATAGRAM) -> None:
+    def __init__(self, offsets: np.ndarray, *, max_datagram: int = MAX_DATAGRAM, root: str = "world") -> None:
+        self.root = check_root_mode(root)
         offsets = np.asarray(offsets, dtype=np.float64)
         if offsets.shape != (NUM_BONES, 3):
             raise ConfigError(f"VMC rest offsets must have shape ({NUM_BONES}, 3), got {offsets.shape}")
@@ -196,7 +234,8 @@ class VmcEncoder:
         ends = np.cumsum([len(g) for g in grams])
         self._spans = [(int(e) - len(g), int(e)) for g, e in zip(grams, ends)]
         starts = self.layout.tail_offsets()  # where each message's numbers start in the template
-        # The frame's numbers: Hips position (-x, y, z), then per bone its rotation (x, -y, -z, w).
+        # The frame's numbers: Hips position (-x, y, z), then per bone its rotation (x, -y, -z, w),
+        # then (world) the root's position and rotation, read from ``_vals`` (the pose, the root).
         hips = 1 + self._root
         slots = [starts[hips] + 4 * c for c in range(3)]
         src, sign = [0, 1, 2], [-1.0, 1.0, 1.0]
@@ -204,6 +243,12 @@ class VmcEncoder:
             slots += [starts[1 + b] + 12 + 4 * k for k in range(4)]
             src += [3 + 4 * b + k for k in range(4)]
             sign += [1.0, -1.0, -1.0, 1.0]
+        pose_dim = 3 + 4 * NUM_BONES
+        if self.root == "world":
+            slots += [starts[0] + 4 * k for k in range(7)]
+            src += [pose_dim + k for k in range(7)]
+            sign += [-1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0]
+        self._vals = np.zeros(pose_dim + 7, np.float64)
         self._slots = np.array(slots) // 4  # float32 slots of the template viewed as ">f4"
         self._src = np.array(src)
         self._sign = np.array(sign, np.float32)
@@ -218,7 +263,14 @@ class VmcEncoder:
                 local xyzw quaternions, project frame).
             time_s: sender time in seconds for /VMC/Ext/T.
         """
-        self._view[self._slots] = np.asarray(pose)[self._src] * self._sign
+        if self.root == "hips":
+            self._view[self._slots] = np.asarray(pose)[self._src] * self._sign
+        else:
+            v = self._vals
+            v[: len(v) - 7] = pose
+            root, v[:3], v[3:7] = split_root(v)
+            v[len(v) - 7 :] = root
+            self._view[self._slots] = v[self._src] * self._sign
         self._view[self._time_slot] = time_s
         buf = self._buf
         return [bytes(buf[a:b]) for a, b in self._spans]

@@ -43,7 +43,7 @@ def receiver():
 def test_vmc_frame_reaches_a_python_osc_server(receiver):
     server, got = receiver
     offsets, frame = tpose_offsets(), _frame()
-    with OscSink("127.0.0.1", server.server_address[1], "vmc", offsets=offsets) as sink:
+    with OscSink("127.0.0.1", server.server_address[1], "vmc", offsets=offsets, vmc_root="hips") as sink:
         sink.send(frame)
         _receive(server, got, 2)
         stats = sink.stats()

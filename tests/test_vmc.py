@@ -19,6 +19,7 @@ from realtime.vmc import (
     from_unity_position,
     from_unity_quaternion,
     osc_message,
+    split_root,
     to_unity_position,
     to_unity_quaternion,
 )
@@ -74,12 +75,26 @@ def test_osc_message_matches_python_osc_bytes(address, args):
     assert osc_message(address, *args) == _builder_message(address, args)
 
 
-def test_vmc_bundles_match_python_osc_builder_byte_for_byte():
+def expected_root(pose: np.ndarray, mode: str) -> tuple[list[float], np.ndarray]:
+    """(Root/Pos's 7 numbers, the pose with the Hips as the encoder sends them), project frame."""
+    if mode == "hips":
+        return [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0], np.asarray(pose, np.float64)
+    root, hips_pos, hips_rot = split_root(np.asarray(pose, np.float64))
+    local = np.concatenate([hips_pos, hips_rot, np.asarray(pose[7:], np.float64)])
+    if mode == "in-place":
+        return [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0], local
+    unity = np.concatenate([to_unity_position(root[:3]), to_unity_quaternion(root[3:])])
+    return [float(v) for v in unity.astype(np.float32)], local
+
+
+@pytest.mark.parametrize("mode", ["world", "in-place", "hips"])
+def test_vmc_bundles_match_python_osc_builder_byte_for_byte(mode):
     offsets, pose = tpose_offsets(), random_pose(1)
-    enc = VmcEncoder(offsets)
+    enc = VmcEncoder(offsets, root=mode)
     got = enc.encode(pose, 12.5)
     # The same messages built with python-osc, split at the same places.
-    msgs = [_builder_message("/VMC/Ext/Root/Pos", ["root", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])]
+    root, pose = expected_root(pose, mode)
+    msgs = [_builder_message("/VMC/Ext/Root/Pos", ["root", *root])]
     pos = to_unity_position(offsets).astype(np.float32)
     pos[bone_index("Hips")] = to_unity_position(pose[:3])
     rot = to_unity_quaternion(pose[3:].reshape(NUM_BONES, 4)).astype(np.float32)
@@ -97,7 +112,7 @@ def test_vmc_bundles_match_python_osc_builder_byte_for_byte():
 
 def test_vmc_frame_every_address_type_and_value():
     offsets, pose = tpose_offsets(), random_pose(2)
-    msgs = parse_datagrams(VmcEncoder(offsets).encode(pose, 3.25))
+    msgs = parse_datagrams(VmcEncoder(offsets, root="hips").encode(pose, 3.25))
     assert [m.address for m in msgs] == (
         ["/VMC/Ext/Root/Pos"] + ["/VMC/Ext/Bone/Pos"] * NUM_BONES + ["/VMC/Ext/OK", "/VMC/Ext/T"]
     )

@@ -53,6 +53,17 @@ class Counter:
 # -- OSC: VMC protocol or plain /performer/... ----------------------------------------------------
 
 
+def compose(base: tuple, position: tuple, rotation: tuple) -> tuple:
+    """A bone's local (position, rotation xyzw) under a parent ``base`` = (position, rotation)
+    -> the bone's (position, rotation) in the parent's frame."""
+    (bp, (bx, by, bz, bw)), (px, py, pz), (qx, qy, qz, qw) = base, position, rotation
+    tx, ty, tz = 2 * (by * pz - bz * py), 2 * (bz * px - bx * pz), 2 * (bx * py - by * px)
+    moved = (px + bw * tx + by * tz - bz * ty, py + bw * ty + bz * tx - bx * tz, pz + bw * tz + bx * ty - by * tx)
+    rot = (bw * qx + bx * qw + by * qz - bz * qy, bw * qy - bx * qz + by * qw + bz * qx,
+           bw * qz + bx * qy - by * qx + bz * qw, bw * qw - bx * qx - by * qy - bz * qz)
+    return tuple(b + m for b, m in zip(bp, moved)), rot
+
+
 def receive_osc(port: int, mode: str, host: str, counter: Counter) -> None:
     from pythonosc.dispatcher import Dispatcher
     from pythonosc.osc_server import BlockingOSCUDPServer
@@ -68,6 +79,11 @@ def receive_osc(port: int, mode: str, host: str, counter: Counter) -> None:
             server.done = True
 
     if mode == "vmc":
+        def model_root(_addr, _name, px, py, pz, qx, qy, qz, qw, *_):
+            # the model root: where the performer stands on the stage and its heading
+            # (performer run --vmc-root world; identity with in-place or hips)
+            state["base"] = ((-px, py, pz), (qx, -qy, -qz, qw))  # Unity (left-handed) -> project frame
+
         def bone(_addr, name, px, py, pz, qx, qy, qz, qw, *_):
             if name == "Hips":
                 state["root"] = (-px, py, pz)  # Unity (left-handed) -> project frame
@@ -75,8 +91,12 @@ def receive_osc(port: int, mode: str, host: str, counter: Counter) -> None:
 
         def vmc_time(_addr, t, *_):  # /VMC/Ext/T ends a frame; its value is the audio time
             state["time"], state["index"] = t, round(t * 30) - 1
+            base = state.pop("base", None)
+            if base is not None and "Hips" in state["rot"]:  # the Hips in the world: root * Hips
+                state["root"], state["rot"]["Hips"] = compose(base, state["root"], state["rot"]["Hips"])
             emit()
 
+        dispatcher.map("/VMC/Ext/Root/Pos", model_root)
         dispatcher.map("/VMC/Ext/Bone/Pos", bone)
         dispatcher.map("/VMC/Ext/T", vmc_time)
     else:

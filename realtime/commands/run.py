@@ -95,6 +95,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="OSC destination; repeat for several (default 127.0.0.1:39539)")
     o.add_argument("--osc-mode", choices=("vmc", "plain"), help="VMC protocol (default) or /performer/... addresses")
     o.add_argument("--no-osc", action="store_true", default=None, help="send no OSC")
+    o.add_argument("--vmc-root", choices=("world", "in-place", "hips"),
+                   help="VMC: world (default): /VMC/Ext/Root/Pos carries the performer's place on the stage and "
+                        "heading, the Hips their height; in-place: the root stays at the origin (no travel, no "
+                        "turns); hips: the root at the origin, the Hips carry place and heading (docs/receivers.md)")
     o.add_argument("--ws", metavar="HOST:PORT", help="WebSocket + viewer server address (default 127.0.0.1:8765)")
     o.add_argument("--no-ws", action="store_true", default=None, help="run no WebSocket server")
     o.add_argument("--ws-token", metavar="TOKEN",
@@ -184,7 +188,7 @@ def _open_sinks(cfg, input_sample_rate: int) -> list:
         if cfg.record is not None:
             sinks.append(Recorder(cfg.record, input_sample_rate=input_sample_rate))
         for host, port in cfg.osc_targets():
-            sinks.append(OscSink(host, port, mode=cfg.osc_mode))
+            sinks.append(OscSink(host, port, mode=cfg.osc_mode, vmc_root=cfg.vmc_root))
         ws = cfg.ws_endpoint()
         if ws is not None:
             sinks.append(WebSocketSink(*ws, token=cfg.ws_token, viewers_open=cfg.ws_viewers_open,
@@ -253,7 +257,7 @@ def _open_ensemble(cfg, specs, source, fallback):
                 sinks.append(Recorder(spec.record, input_sample_rate=source.sample_rate))
                 opened.append(sinks[-1])
             for host, port in spec.osc:
-                sinks.append(OscSink(host, port, mode=cfg.osc_mode))
+                sinks.append(OscSink(host, port, mode=cfg.osc_mode, vmc_root=cfg.vmc_root))
                 opened.append(sinks[-1])
             if server is not None:
                 sinks.append(server.route(spec.ws_path, spec.name, default=k == 0))
