@@ -72,7 +72,8 @@ def publish_state(lane) -> None:
     stage = getattr(lane.model, "stage", None)
     if stage is None or not hasattr(stage, "width"):
         return
-    state = {"stage": [float(stage.width), float(stage.depth)], "facing": str(stage.facing)}
+    state = stage.state() if callable(getattr(stage, "state", None)) else {  # an ensemble's: with its spot
+        "stage": [float(stage.width), float(stage.depth)], "facing": str(stage.facing)}
     for sink in lane.sinks:
         set_state = getattr(sink, "set_state", None)
         if callable(set_state):

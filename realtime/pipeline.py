@@ -42,7 +42,7 @@ class Pipeline:
 
 def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, hop: int = 64, seed: int = 0,
                    style: str | None = None, energy: float = 1.0, lead: float = 0.0,
-                   stage: str | float | None = None, facing: str = "free",
+                   stage: str | float | None = None, facing: str = "free", spot: tuple[int, int] | None = None,
                    loaded: dict | None = None) -> Pipeline:
     """Load ``checkpoint`` (default: the packaged one) into an extractor factory and a pose model.
 
@@ -60,8 +60,9 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
     asks; :meth:`~models.networks.dance_stream.DanceStream.set_energy`) and ``lead`` (ms, 0..200:
     :meth:`~models.networks.dance_stream.DanceStream.set_lead`), on ``stage`` (``"WxD"`` metres or
     0: in place; None: :data:`models.networks.stage.DEFAULT_STAGE`) facing ``facing`` (free,
-    audience; docs/stage.md); a style, an energy other than 1, a lead other than 0, a stage or
-    facing audience for another model is refused.
+    audience; docs/stage.md), ``spot`` (i, n): performer i of an ensemble of n on its own part
+    of that stage (:class:`models.networks.stage.SpotStage`); a style, an energy other than 1,
+    a lead other than 0, a stage or facing audience for another model is refused.
     """
     from models.features.streaming import StreamingFeatureExtractor
     from models.networks.streaming import StreamingGenerator
@@ -86,7 +87,7 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
             from models.networks.stage import DEFAULT_STAGE
 
             generator = DanceStream(loaded.model, seed=seed, style=style, energy=energy, lead_ms=lead,
-                                    stage=DEFAULT_STAGE if stage is None else stage, facing=facing)
+                                    stage=DEFAULT_STAGE if stage is None else stage, facing=facing, spot=spot)
         else:
             if style not in (None, "auto"):
                 raise CheckpointError(f"model {loaded.name!r} takes no style (--style needs a dance_vq model)",

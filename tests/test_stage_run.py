@@ -37,7 +37,7 @@ def test_bad_stage_values_are_one_line_config_errors(kw, needle):
     assert "\n" not in str(e.value)
 
 
-def test_a_stage_for_a_model_without_one_or_for_an_ensemble_is_refused(capsys, clip, tiny_checkpoint):  # noqa: F811
+def test_a_stage_for_a_model_without_one_is_refused(capsys, clip, tiny_checkpoint):  # noqa: F811
     code = cli.main(["run", "--audio", str(clip), "--fast", "--no-ws", "--no-osc", "--checkpoint", str(tiny_checkpoint),
                      "--stage", "3x2"])
     assert code == 2 and "has no stage" in one_line_error(capsys.readouterr().err)
@@ -45,8 +45,8 @@ def test_a_stage_for_a_model_without_one_or_for_an_ensemble_is_refused(capsys, c
     assert code == 0  # the default stage is the dancing model's: another model runs as before
     capsys.readouterr()
     code = cli.main(["run", "--audio", str(clip), "--fast", "--no-ws", "--no-osc", "--performer", "a",
-                     "--performer", "b", "--facing", "audience"])
-    assert code == 2 and "an ensemble's performers dance in place" in one_line_error(capsys.readouterr().err)
+                     "--performer", "b", "--performer", "c", "--stage", "0.5x0.5"])
+    assert code == 2 and "no room for 3 performers" in one_line_error(capsys.readouterr().err)  # tests/test_stage_spots.py
 
 
 def test_a_reload_applies_stage_and_facing_live(monkeypatch):

@@ -46,7 +46,7 @@ from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_bl
 from models.networks.dance_vq import DanceVQ, style_token
 from models.networks import feet as feet_part
 from models.networks.feet import FeetLock
-from models.networks.stage import Stage, cached_travel
+from models.networks.stage import SpotStage, Stage, cached_travel
 from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate
 from models.networks.streaming import FEATURE_LIMIT
 from models.networks.tempo import DENSITY_WINDOW, TEMPO_RANGE, TempoFollower, danced_beat, onset_density
@@ -572,7 +572,8 @@ class DanceStream:
     """
 
     def __init__(self, model: DanceVQ, seed: int = 0, style: str | None = None, energy: float = 1.0,
-                 lead_ms: float = 0.0, feet: bool | None = None, stage=0, facing: str = "free") -> None:
+                 lead_ms: float = 0.0, feet: bool | None = None, stage=0, facing: str = "free",
+                 spot: tuple[int, int] | None = None) -> None:
         if not isinstance(model, DanceVQ):
             raise ConfigError(f"DanceStream needs a dance_vq model, got {type(model).__name__}")
         self.model = model.eval()
@@ -623,7 +624,8 @@ class DanceStream:
         self.set_lead(lead_ms)
         # travel and turns on the stage (models/networks/stage.py): each exemplar's, played along
         self._travel = cached_travel(model, MEMBER_SMOOTH)  # (K, M, 2 seg, 3), shared: never written
-        self._stage = Stage(self.seg, stage, facing)
+        # spot (i, n): performer i of an ensemble of n, on its own part of the stage (SpotStage)
+        self._stage = Stage(self.seg, stage, facing) if spot is None else SpotStage(self.seg, stage, facing, spot)
         self._travels = bool(self._travel.any())  # a memory without travel dances in place on any stage
         cc = c.clarity_col
         self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None

@@ -340,3 +340,85 @@ class Stage:
         if turn * off > 0.0:  # turning further away
             turn *= min(max(2.0 - abs(off) / FACING_CONE, 0.0), 1.0)
         return turn - off / (FACING_TAU * FPS)
+
+
+# -- an ensemble's spots (issue 39): each performer its own part of one stage --------------------
+
+#: Least distance (m) between two performers' roots in an ensemble: about a body's width.
+MIN_SEPARATION: float = 0.6
+
+
+def ensemble_spots(stage, count: int, gap: float = MIN_SEPARATION) -> list[tuple[float, float, float, float]]:
+    """Each of ``count`` performers' spot on one ``stage`` ("WxD" m or 0): (centre x, centre z,
+    width, depth) m. The stage is cut into a grid of cells (the columns and rows whose narrowest
+    spot is widest), and each cell gives up ``gap / 2`` on every side it shares with another, so
+    two performers who each stay inside their own spot are always at least ``gap`` apart.
+    Performer i takes column ``i % cols``, row ``i // cols`` (row 0 at the back, -z). Stage 0:
+    every spot is (0, 0, 0, 0), in place. ConfigError (one line) when a spot would be empty."""
+    w, d = parse_stage(stage)
+    count = int(count)
+    if count < 1:
+        raise ConfigError(f"an ensemble needs at least one performer, got {count}")
+    if w == 0.0:
+        return [(0.0, 0.0, 0.0, 0.0)] * count
+    best = None
+    for cols in range(1, count + 1):
+        rows = -(-count // cols)
+        narrow = min(w / cols - (gap if cols > 2 else gap / 2 if cols == 2 else 0.0),
+                     d / rows - (gap if rows > 2 else gap / 2 if rows == 2 else 0.0))
+        key = (round(narrow, 9), -(cols * rows - count))
+        if best is None or key > best[0]:
+            best = (key, cols, rows)
+    (narrow, _), cols, rows = best
+    if narrow <= 0.0:
+        raise ConfigError(f"a {w:g}x{d:g} m stage has no room for {count} performers {gap:g} m apart; "
+                          "give a larger stage or 0 (in place)")
+
+    def span(k: int, n: int, side: float) -> tuple[float, float]:
+        lo, hi = -side / 2 + k * side / n, -side / 2 + (k + 1) * side / n
+        return lo + (gap / 2 if k > 0 else 0.0), hi - (gap / 2 if k < n - 1 else 0.0)
+
+    spots = []
+    for i in range(count):
+        (x0, x1), (z0, z1) = span(i % cols, cols, w), span(i // cols, rows, d)
+        spots.append((0.5 * (x0 + x1), 0.5 * (z0 + z1), x1 - x0, z1 - z0))
+    return spots
+
+
+class SpotStage(Stage):
+    """One ensemble performer's :class:`Stage`: its spot of the whole stage (:func:`ensemble_spots`,
+    performer ``index`` of ``count``). It is a Stage of the spot's size (so the bound, the facing
+    and ``home()`` act within the spot: home is the spot's centre) whose place is moved to the
+    spot's centre. State beyond Stage's: :attr:`whole` (width, depth of the whole stage, m) and
+    the spot's centre :attr:`cx`, :attr:`cz` (m). ``set_stage`` takes the whole stage: the
+    spot is cut anew, and a performer outside its new spot walks into it (as on a Stage made
+    smaller live), from where it stood."""
+
+    def __init__(self, seg: int, stage=0, facing: str = "free", spot: tuple[int, int] = (0, 1)) -> None:
+        self.index, self.count = int(spot[0]), int(spot[1])
+        if not 0 <= self.index < self.count:
+            raise ConfigError(f"performer {self.index} of {self.count} has no spot")
+        self.whole = parse_stage(stage)
+        self.cx, self.cz, w, d = ensemble_spots(self.whole, self.count)[self.index]
+        super().__init__(seg, (w, d), facing)
+
+    def set_stage(self, stage) -> None:
+        """The whole stage (``"WxD"`` m, or 0: in place); this performer's spot is cut from it."""
+        whole = parse_stage(stage)
+        cx, cz, w, d = ensemble_spots(whole, self.count)[self.index]  # raises before anything changes
+        self.x += self.cx - cx  # where it stands, relative to the new spot's centre
+        self.z += self.cz - cz
+        self.whole, self.cx, self.cz = whole, cx, cz
+        super().set_stage((w, d))
+
+    def step(self, pose: np.ndarray, read: float, idle: float) -> None:
+        """:meth:`Stage.step` in the spot, then the spot's centre added to ``pose``'s x, z."""
+        super().step(pose, read, idle)
+        pose[0] += self.cx
+        pose[2] += self.cz
+
+    def state(self) -> dict:
+        """What a viewer draws: the whole stage, the facing and this performer's spot
+        ([centre x, centre z, width, depth], m)."""
+        return {"stage": [float(self.whole[0]), float(self.whole[1])], "facing": str(self.facing),
+                "spot": [float(self.cx), float(self.cz), float(self.width), float(self.depth)]}

@@ -48,8 +48,9 @@ energy, lead, seed, smoothing, offset, OSC targets and WebSocket path; the audio
 checkpoints' feature configs agree, the feature extractor are shared. Unset keys take
 the top-level options; performer i (from 0) sends OSC to the --osc ports + i and streams
 on ws://HOST:PORT/ws/NAME (/ws is the first performer). Keys: name, checkpoint, style,
-energy, lead, seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase. An
-ensemble's performers dance in place (a spot of its own for each on one stage is not built yet).
+energy, lead, seed, osc (repeatable), ws_path, smoothing, offset_ms, record, phase. --stage
+and --facing apply to the ensemble: each performer dances on its own spot of the stage, the
+spots at least 0.6 m apart (docs/stage.md); --stage 0: all in place at the origin.
 
 examples:
   performer run --audio song.wav --record take1.npz
@@ -234,10 +235,11 @@ def _open_ensemble(cfg, specs, source, fallback):
 
     loaded: dict = {}
     pipelines = []
-    for spec in specs:
-        try:
+    for k, spec in enumerate(specs):
+        try:  # each performer dances on its own spot of the stage (models/networks/stage.py, ensemble_spots)
             pipelines.append(build_pipeline(spec.checkpoint, seed=spec.seed, loaded=loaded, energy=spec.energy,
-                                            lead=spec.lead, stage=0,  # in place: no spots of their own yet
+                                            lead=spec.lead, stage=cfg.stage, facing=cfg.facing,
+                                            spot=(k, len(specs)),
                                             style=None if spec.style == "auto" else spec.style))
         except PerformerError as exc:
             raise type(exc)(f"performer {spec.name!r}: {exc}") from None
@@ -293,6 +295,10 @@ def _open_ensemble(cfg, specs, source, fallback):
 
 def _describe(sinks, source, pipeline, control=None) -> str:
     outs = []
+        spot = getattr(getattr(pipe.model, "stage", None), "state", None)
+        if callable(spot) and pipe.model.stage.active:
+            cx, cz, w, d = spot()["spot"]
+            energy += f", spot {w:.2g}x{d:.2g} m at ({cx:+.2f}, {cz:+.2f})"
     for s in sinks:
         outs.append(f"{s.name} (viewer {s.url})" if hasattr(s, "url") else s.name)
     text = f"{source.name} at {source.sample_rate} Hz -> {', '.join(outs) or 'no outputs'} [{pipeline.checkpoint.name}]"
