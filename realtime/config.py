@@ -176,6 +176,8 @@ class RunConfig:
     ws: str = DEFAULT_WS
     no_ws: bool = False
     checkpoint: Path | None = None
+    library: Path | None = None  # a motion library danced instead of (or with: mix) the checkpoint's memory
+    mix: bool = False
     style: str = "auto"
     energy: float = 1.0
     lead: float = 0.0
@@ -211,8 +213,10 @@ class RunConfig:
             raise ConfigError("--loop replays a file in real time (--audio FILE without --fast)")
         if self.monitor and (self.audio is None or self.fast):
             raise ConfigError("--monitor plays a file replayed in real time (--audio FILE without --fast)")
-        if self.style not in STYLE_CHOICES:
-            raise ConfigError(f"style must be one of {STYLE_CHOICES}, got {self.style!r}")
+        if self.style not in STYLE_CHOICES and self.library is None:  # a library's folders: checked when it loads
+            raise ConfigError(f"style must be one of {STYLE_CHOICES} (or a folder of --library), got {self.style!r}")
+        if self.mix and self.library is None:
+            raise ConfigError("mix plays the checkpoint's memory together with a library: give library = FILE.npz")
         if self.osc_mode not in OSC_MODES:
             raise ConfigError(f"osc_mode must be one of {OSC_MODES}, got {self.osc_mode!r}")
         from models.networks.stage import check_facing, parse_stage
@@ -286,7 +290,7 @@ class RunConfig:
             name = check_performer_name(p.name)
             what = f"performer {name!r}"
             style = self.style if p.style is None else p.style
-            if style not in STYLE_CHOICES:
+            if style not in STYLE_CHOICES and self.library is None:
                 raise ConfigError(f"{what}: style must be one of {STYLE_CHOICES}, got {style!r}")
             energy = self.energy if p.energy is None else float(p.energy)
             if not ENERGY_RANGE[0] <= energy <= ENERGY_RANGE[1]:
@@ -353,13 +357,13 @@ class RunConfig:
 
 
 _FIELDS = {f.name: f for f in dataclasses.fields(RunConfig)}
-_PATHS = {"audio", "checkpoint", "record", "fallback_audio", "publish_credentials", "publish_tls_ca"}
+_PATHS = {"audio", "checkpoint", "library", "record", "fallback_audio", "publish_credentials", "publish_tls_ca"}
 _TYPES: dict[str, tuple[type, ...]] = {
     "audio": (str,), "input_device": (str, int), "sample_rate": (int,), "block_size": (int,),
     "monitor": (bool,), "loop": (bool,), "fast": (bool,), "duration": (int, float), "osc": (list, str),
     "osc_mode": (str,), "vmc_root": (str,), "no_osc": (bool,), "ws": (str,), "no_ws": (bool,), "checkpoint": (str,), "style": (str,),
     "energy": (int, float), "lead": (int, float), "stage": (str, int, float), "facing": (str,), "seed": (int,), "record": (str,), "threads": (int,), "offset_ms": (int, float),
-    "smoothing": (int, float),
+    "smoothing": (int, float), "library": (str,), "mix": (bool,),
     "warmup": (int, float), "fallback_audio": (str,), "fallback_after": (int, float), "ws_token": (str,),
     "ws_viewers_open": (bool,), "ws_max_clients": (int,), "ws_origin": (list, str),
     "control_osc": (str, int), "control_allow": (list, str), "performer": (list,),

@@ -40,10 +40,27 @@ class Pipeline:
     feature_key: str | None = None
 
 
+def _load(checkpoint, library, mix: bool):
+    """:func:`load_model` of ``checkpoint``, its memory replaced by (or mixed with) ``library``."""
+    import dataclasses
+
+    lm = load_model(checkpoint)
+    if library is None:
+        if mix:
+            raise CheckpointError("--mix needs --library FILE.npz", source=lm.path)
+        return lm
+    if not getattr(lm.model, "takes_style", False):
+        raise CheckpointError(f"model {lm.name!r} cannot dance a library (--library needs a dance_vq model)",
+                              source=lm.path)
+    from models.networks.library_player import load_library_model
+
+    return dataclasses.replace(lm, model=load_library_model(lm.model, library, mix=mix))
+
+
 def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, hop: int = 64, seed: int = 0,
                    style: str | None = None, energy: float = 1.0, lead: float = 0.0,
                    stage: str | float | None = None, facing: str = "free", spot: tuple[int, int] | None = None,
-                   loaded: dict | None = None) -> Pipeline:
+                   loaded: dict | None = None, library: str | Path | None = None, mix: bool = False) -> Pipeline:
     """Load ``checkpoint`` (default: the packaged one) into an extractor factory and a pose model.
 
     ``loaded``: a dict kept by the caller across calls (an ensemble's performers): a
@@ -68,11 +85,13 @@ def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, h
     from models.networks.streaming import StreamingGenerator
 
     if loaded is None:
-        loaded_model = load_model(checkpoint)
+        loaded_model = _load(checkpoint, library, mix)
     else:
         key = str(Path(checkpoint).resolve()) if checkpoint is not None else None
+        if library is not None:
+            key = (key, str(Path(library).resolve()), bool(mix))
         if key not in loaded:
-            loaded[key] = load_model(checkpoint)
+            loaded[key] = _load(checkpoint, library, mix)
         loaded_model = loaded[key]
     loaded = loaded_model
     path, meta, cfg = loaded.path, loaded.meta, loaded.features

@@ -18,8 +18,9 @@ The engine's worker never waits on the broker: :meth:`BrokerRoute.send` encodes 
 (about 1 us), appends it to a bounded deque that drops its OLDEST frame when full (counted as
 ``drops``) and wakes the loop at most once per hop (held between ``begin_hop`` and
 ``end_hop``). On the loop, a frame is handed to nats-py's buffer while the connection is up;
-while it is down (or its outgoing buffer of :data:`PENDING_BYTES` is full: a broker that does
-not read) frames are dropped and counted (``drops_down``), never stored. The connection
+while it is down, or while :data:`PENDING_BYTES` wait to be written (a broker that does not read;
+the kernel's send buffer is capped at :data:`SOCKET_BUFFER`), frames are dropped and counted
+(``drops_down``), never stored. The connection
 reconnects by itself every :data:`RECONNECT_WAIT_S` seconds without limit; the first loss and
 the return are each logged once.
 
@@ -35,6 +36,7 @@ import contextlib
 import json
 import logging
 import os
+import socket
 import ssl
 import threading
 import time
@@ -59,6 +61,8 @@ META_PERIOD_S: float = 1.0
 RECONNECT_WAIT_S: float = 0.25
 #: nats-py's outgoing buffer, bytes (about 80 frames); past it a frame is dropped, not queued.
 PENDING_BYTES: int = 32 * 1024
+#: The connection's kernel send buffer, bytes (SO_SNDBUF; Linux doubles it).
+SOCKET_BUFFER: int = 32 * 1024
 #: Frames held between the worker and the loop, per publisher (drop oldest when full).
 QUEUE_FRAMES: int = 64
 #: Environment variables read by :func:`load_credentials` (they do not show in the process list).
@@ -365,6 +369,7 @@ class BrokerPublisher:
                                 "%.2f s", self.display, RECONNECT_WAIT_S)
 
         async def on_reconnect() -> None:
+            _limit_socket(self._nc)
             self.connected = True
             self.reconnects += 1
             self._meta_due = True
@@ -409,6 +414,7 @@ class BrokerPublisher:
         nc = self._nc = await self._connect()
         if nc is None:
             return
+        _limit_socket(nc)
         self.connected = True
         if self._logged_down:
             self._logged_down = False
@@ -441,8 +447,7 @@ class BrokerPublisher:
                 await nc.close()
 
     async def _publish(self, nc, subject: str, data: bytes, frame: bool = True) -> None:
-        # nats-py's own buffer (a private counter): past PENDING_BYTES its publish() would wait for a flush
-        if not nc.is_connected or nc._pending_data_size + len(data) > PENDING_BYTES:
+        if not nc.is_connected or _buffered(nc) + len(data) > PENDING_BYTES:
             if frame:
                 self.drops_down += 1
             return
@@ -457,6 +462,33 @@ class BrokerPublisher:
             return
         if frame:
             self.published += 1
+
+
+def _socket_writer(nc):
+    """nats-py's asyncio StreamWriter of the connection (private attributes; None if they change)."""
+    return getattr(getattr(nc, "_transport", None), "_io_writer", None)
+
+
+def _limit_socket(nc) -> None:
+    """Cap the connection's kernel send buffer at SOCKET_BUFFER bytes. Loopback and LAN sockets
+    otherwise grow to megabytes (tcp_wmem): a broker that stops reading would hold a minute of
+    stale frames before anything counted a drop."""
+    writer = _socket_writer(nc)
+    sock = None if writer is None else writer.get_extra_info("socket")
+    if sock is not None:
+        with contextlib.suppress(OSError):
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SOCKET_BUFFER)
+
+
+def _buffered(nc) -> int:
+    """Bytes waiting to go to the broker: nats-py's pending commands and asyncio's write buffer
+    (private counters of nats-py; 0 for either when they are not found)."""
+    writer = _socket_writer(nc)
+    size = getattr(nc, "_pending_data_size", 0)
+    if writer is not None:
+        with contextlib.suppress(Exception):
+            size += writer.transport.get_write_buffer_size()
+    return size
 
 
 def open_routes(cfg, names: list[str]) -> list[BrokerRoute]:
