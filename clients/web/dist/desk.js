@@ -30,7 +30,7 @@ function setConn(text, kind) {
 }
 
 function setMode() {
-  $('mode').textContent = state.control ? 'steering' : 'watching only';
+  $('mode').textContent = state.control ? 'steering' : (state.tokenRejected ? 'watching only: wrong token' : 'watching only');
   document.body.classList.toggle('locked', !state.control);
 }
 
@@ -41,7 +41,7 @@ function connect(useToken) {
   sock.onopen = () => {
     state.connects += 1;
     setConn(state.connects > 1 ? 'reconnected' : 'connected', 'ok');
-    if (state.connects > 1) say(`engine back: connection ${state.connects}`);
+    if (state.connects > 1 && !state.tokenRejected) say(`engine back: connection ${state.connects}`);
     if (useToken && token) sock.send(JSON.stringify({ type: 'auth', token }));
   };
   sock.onmessage = (ev) => {
