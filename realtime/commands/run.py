@@ -288,6 +288,10 @@ def _open_ensemble(cfg, specs, source, fallback):
         outs = [f"{s.name} (viewer {s.url})" if hasattr(s, "url") else s.name for s in perf.sinks]
         energy = f", energy {spec.energy:g}" if spec.energy != 1.0 else ""
         energy += f", lead {spec.lead:g} ms" if spec.lead != 0.0 else ""
+        spot = getattr(getattr(pipe.model, "stage", None), "state", None)
+        if callable(spot) and pipe.model.stage.active:
+            cx, cz, w, d = spot()["spot"]
+            energy += f", spot {w:.2g}x{d:.2g} m at ({cx:+.2f}, {cz:+.2f})"
         lines.append(f"  {spec.name} [{pipe.checkpoint.name}, style {spec.style}{energy}, seed {spec.seed}, "
                      f"phase {phases[spec.name]}] -> {', '.join(outs) or 'no outputs'}")
     return engine, [s for perf in performers for s in perf.sinks], server, lines
@@ -295,10 +299,6 @@ def _open_ensemble(cfg, specs, source, fallback):
 
 def _describe(sinks, source, pipeline, control=None) -> str:
     outs = []
-        spot = getattr(getattr(pipe.model, "stage", None), "state", None)
-        if callable(spot) and pipe.model.stage.active:
-            cx, cz, w, d = spot()["spot"]
-            energy += f", spot {w:.2g}x{d:.2g} m at ({cx:+.2f}, {cz:+.2f})"
     for s in sinks:
         outs.append(f"{s.name} (viewer {s.url})" if hasattr(s, "url") else s.name)
     text = f"{source.name} at {source.sample_rate} Hz -> {', '.join(outs) or 'no outputs'} [{pipeline.checkpoint.name}]"
