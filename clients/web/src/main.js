@@ -3,7 +3,9 @@
 // with the button, or named by ?vrm=URL).
 //
 // URL parameters: ws=ws://HOST:PORT/ws (default: the serving host), token=SECRET,
-// format=binary|json, vrm=URL. The stage (docs/stage.md) is drawn on the floor when the
+// format=binary|json, vrm=URL; or, for an audience through a NATS broker (broker.js,
+// docs/audience.md), broker=ws://HOST:PORT&subject=performer.NAME&user=...&pass=... The
+// HUD's "source" says which. The stage (docs/stage.md) is drawn on the floor when the
 // server says it, and the camera follows the performer across it (the 'follow' box).
 //
 // For tests and tinkering the page exposes window.performerStats (updated with
@@ -11,6 +13,7 @@
 
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { BrokerConnection, brokerParams } from './broker.js';
 import { PoseConnection } from './connection.js';
 import { Hud } from './hud.js';
 import { streamUrl } from './protocol.js';
@@ -47,6 +50,7 @@ function publishStats() {
     pictures, // pictures drawn by WebGL since the page loaded
     framesShown, // stream frames applied to the avatars (at most one per picture)
     url: connection.url,
+    source,
     stage: stageState ? [stageState.width, stageState.depth] : null,
     facing: stageState?.facing ?? null,
     target: world.controls.target.toArray(),
@@ -109,7 +113,7 @@ function onPerformerState(state) {
   publishStats();
 }
 
-const connection = new PoseConnection(streamUrl(location), {
+const handlers = {
   onHello,
   onFrame,
   onPerformerState,
@@ -125,7 +129,11 @@ const connection = new PoseConnection(streamUrl(location), {
     stats.lastError = String(err.message ?? err);
     console.warn('bad message from the server:', err);
   },
-});
+};
+const broker = brokerParams(location.search);
+const connection = broker ? new BrokerConnection(broker, handlers) : new PoseConnection(streamUrl(location), handlers);
+const source = broker ? 'broker' : 'performer run';
+document.getElementById('source').textContent = source;
 
 // ---- VRM from the URL, the file button, or a dropped file ----------------------------
 
