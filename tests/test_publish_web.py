@@ -4,17 +4,11 @@ real nats-server -> its WebSocket port -> clients/web with ``?broker=`` (docs/au
 from __future__ import annotations
 
 import os
-import signal
-import subprocess
-import sys
-import time
-import urllib.request
 
 import numpy as np
 import pytest
-from _proc import default_sigint
-from test_run_cli import clip, free_port, tiny_checkpoint  # noqa: F401 - fixtures
-from test_web_client import REPO, browser, open_page  # noqa: F401 - fixtures
+from test_run_cli import clip, tiny_checkpoint  # noqa: F401 - fixtures
+from test_web_client import browser, open_page, performer_run  # noqa: F401 - fixtures
 
 from models.rig.humanoid import NUM_BONES
 from realtime.nats_server import PUBLISHER, VIEWER, LocalBroker, find_nats_server
@@ -26,35 +20,11 @@ pytestmark = pytest.mark.skipif(find_nats_server() is None,
 @pytest.fixture
 def published_show(tmp_path, clip, tiny_checkpoint):  # noqa: F811 - fixtures from test_run_cli
     """A broker, and ``performer run`` publishing the clip to it (its own server serves the page)."""
-    broker = LocalBroker(tmp_path).start()
-    port = free_port()
-    log = open(tmp_path / "engine.log", "w")
     env = {**os.environ, "PERFORMER_PUBLISH_USER": PUBLISHER[0], "PERFORMER_PUBLISH_PASSWORD": PUBLISHER[1]}
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "realtime.cli", "run", "--audio", str(clip), "--no-osc", "--ws", f"127.0.0.1:{port}",
-         "--checkpoint", str(tiny_checkpoint), "--warmup", "0.5", "--quiet", "--publish", broker.url],
-        cwd=REPO, stdout=log, stderr=subprocess.STDOUT, preexec_fn=default_sigint, env=env,
-    )
-    url = f"http://127.0.0.1:{port}/"
-    deadline = time.monotonic() + 60
-    while True:
-        try:
-            urllib.request.urlopen(url, timeout=1).close()
-            break
-        except OSError:
-            if proc.poll() is not None or time.monotonic() > deadline:
-                proc.kill()
-                broker.stop()
-                pytest.fail(f"performer run did not serve {url}: {(tmp_path / 'engine.log').read_text()}")
-            time.sleep(0.2)
-    yield url, broker
-    proc.send_signal(signal.SIGINT)
-    try:
-        proc.wait(timeout=20)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-    log.close()
-    broker.stop()
+    with LocalBroker(tmp_path) as broker, performer_run(
+            tmp_path, ["--audio", str(clip), "--no-osc", "--checkpoint", str(tiny_checkpoint), "--warmup", "0.5",
+                       "--quiet", "--publish", broker.url], env=env) as url:
+        yield url, broker
 
 
 @pytest.mark.slow

@@ -8,6 +8,7 @@ download). Browser tests skip with the reason when chromium or playwright is abs
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
 import os
 import shutil
@@ -153,15 +154,15 @@ def synthetic_stream():
         s.close()
 
 
-@pytest.fixture
-def engine(tmp_path, clip, tiny_checkpoint) -> Iterator[str]:  # noqa: F811 - fixtures from test_run_cli
-    """``performer run`` replaying the bundled clip in real time; yields the viewer URL."""
+@contextlib.contextmanager
+def performer_run(tmp_path: Path, args: list[str], env: dict | None = None) -> Iterator[str]:
+    """``performer run ARGS --ws 127.0.0.1:PORT`` in a child process until its page is served;
+    yields the viewer URL, then stops it with SIGINT."""
     port = free_port()
     log = open(tmp_path / "engine.log", "w")
     proc = subprocess.Popen(
-        [sys.executable, "-m", "realtime.cli", "run", "--audio", str(clip), "--no-osc", "--ws", f"127.0.0.1:{port}",
-         "--checkpoint", str(tiny_checkpoint), "--warmup", "0.5", "--quiet"],
-        cwd=REPO, stdout=log, stderr=subprocess.STDOUT, preexec_fn=default_sigint,
+        [sys.executable, "-m", "realtime.cli", "run", *args, "--ws", f"127.0.0.1:{port}"],
+        cwd=REPO, stdout=log, stderr=subprocess.STDOUT, preexec_fn=default_sigint, env=env,
     )
     url = f"http://127.0.0.1:{port}/"
     deadline = time.monotonic() + 60
@@ -174,13 +175,23 @@ def engine(tmp_path, clip, tiny_checkpoint) -> Iterator[str]:  # noqa: F811 - fi
                 proc.kill()
                 pytest.fail(f"performer run did not serve {url}: {(tmp_path / 'engine.log').read_text()}")
             time.sleep(0.2)
-    yield url
-    proc.send_signal(signal.SIGINT)
     try:
-        proc.wait(timeout=20)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-    log.close()
+        yield url
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+        log.close()
+
+
+@pytest.fixture
+def engine(tmp_path, clip, tiny_checkpoint) -> Iterator[str]:  # noqa: F811 - fixtures from test_run_cli
+    """``performer run`` replaying the bundled clip in real time; yields the viewer URL."""
+    with performer_run(tmp_path, ["--audio", str(clip), "--no-osc", "--checkpoint", str(tiny_checkpoint),
+                                  "--warmup", "0.5", "--quiet"]) as url:
+        yield url
 
 
 # -- the page against the live engine --------------------------------------------------------
