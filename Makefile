@@ -11,8 +11,10 @@ JIT_STAMP := $(VENV)/.jit-compiled
 # against our encoder (tests/test_listen.py; about 20 s to install), espeak-ng for the
 # synthetic speech the idle gate's presence detector learns and is tested on
 # (models/training/music_gate.py, tests/test_music_gate.py), nats-server: the broker of
-# `performer run --publish` (tests/test_publish.py, benchmarks/audience.py; docs/audience.md).
-APT_PKGS := libportaudio2 liblo-tools mono-mcs espeak-ng nats-server
+# `performer run --publish` (tests/test_publish.py, benchmarks/audience.py; docs/audience.md),
+# pulseaudio, pulseaudio-utils and libasound2-plugins: a real live input for the tests (a private
+# server's null sink captured through PortAudio's ALSA pulse device; realtime/pulse.py, tests/test_live_input.py).
+APT_PKGS := libportaudio2 liblo-tools mono-mcs espeak-ng nats-server pulseaudio pulseaudio-utils libasound2-plugins
 
 .PHONY: setup system-deps web browser-deps demo test test-fast bench soak constraints clean help
 
@@ -69,7 +71,7 @@ constraints:
 # without npm. With npm, `make web` rebuilds dist/ when a source differs from the build
 # (a hash of the sources is kept in dist/.source-hash): nothing to do in well under a second.
 WEB      := clients/web
-WEB_SRC   = $(WEB)/package.json $(WEB)/package-lock.json $(WEB)/index.html $(WEB)/vite.config.js $(sort $(wildcard $(WEB)/src/*.js))
+WEB_SRC   = $(WEB)/package.json $(WEB)/package-lock.json $(WEB)/index.html $(WEB)/vite.config.js $(sort $(wildcard $(WEB)/src/*.js $(WEB)/public/*))
 WEB_HASH  = $(shell cat $(WEB_SRC) | sha256sum | cut -c1-16)
 web:
 	@if [ "$$(cat $(WEB)/dist/.source-hash 2>/dev/null)" != "$(WEB_HASH)" ]; then \

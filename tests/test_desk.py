@@ -8,12 +8,10 @@ screenshots go to tmp, or to docs/img with ``PERFORMER_DOC_IMAGES=1`` (docs/show
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 import urllib.request
 from pathlib import Path
@@ -23,18 +21,19 @@ import pytest
 from test_run_cli import clip, free_port, tiny_checkpoint  # noqa: F401 - fixtures
 from test_web_client import CHROMIUM, CHROMIUM_ARGS, WEB
 from _proc import default_sigint
+from _ws_reader import JsonReader
 
 REPO = Path(__file__).resolve().parents[1]
 TOKEN = "desk-test-token"
 CLIP_BPM = 120.0  # models/assets/clip.json
 
 
-def start_engine(args: list[str], port: int, log: Path) -> subprocess.Popen:
-    """``performer run ARGS --ws 127.0.0.1:PORT``, once its HTTP port answers."""
+def start_engine(args: list[str], port: int, log: Path, env: dict | None = None) -> subprocess.Popen:
+    """``performer run ARGS --ws 127.0.0.1:PORT`` with the token TOKEN, once its HTTP port answers."""
     out = open(log, "a")
     proc = subprocess.Popen([sys.executable, "-m", "realtime.cli", "run", *args, "--ws", f"127.0.0.1:{port}"],
                             cwd=REPO, stdout=out, stderr=subprocess.STDOUT, preexec_fn=default_sigint,
-                            env={**os.environ, "PERFORMER_WS_TOKEN": TOKEN})
+                            env={**(env or os.environ), "PERFORMER_WS_TOKEN": TOKEN})
     deadline = time.monotonic() + 120
     while True:
         try:
@@ -55,39 +54,18 @@ def stop_engine(proc: subprocess.Popen) -> None:
         proc.kill()
 
 
-class Poses:
+class Poses(JsonReader):
     """The pose stream (``/ws``, JSON) read on a thread: (arrival time.monotonic(), rotations (B, 4))."""
 
     def __init__(self, port: int) -> None:
-        self.url = f"ws://127.0.0.1:{port}/ws?format=json"
-        self.frames: list[tuple[float, np.ndarray]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        from websockets.sync.client import connect
-
-        with connect(self.url) as ws:
-            while not self._stop.is_set():
-                try:
-                    msg = json.loads(ws.recv(timeout=0.5))
-                except TimeoutError:
-                    continue
-                except Exception:  # noqa: BLE001 - the engine went away
-                    return
-                if msg.get("type") == "frame":
-                    self.frames.append((time.monotonic(), np.asarray(msg["rotations"], np.float64)))
+        super().__init__(f"ws://127.0.0.1:{port}/ws?format=json", "frame",
+                         lambda m: np.asarray(m["rotations"], np.float64))
 
     def speed(self, t0: float, t1: float) -> float:
         """Mean bone rotation speed (degrees a frame, over every bone) of the frames that arrived in [t0, t1)."""
-        rots = np.stack([r for t, r in self.frames if t0 <= t < t1])
+        rots = np.stack(self.between(t0, t1))
         dots = np.abs(np.sum(rots[1:] * rots[:-1], axis=-1)).clip(0, 1)
         return float(np.degrees(2 * np.arccos(dots)).mean())
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(5)
 
 
 @pytest.fixture(scope="module")
