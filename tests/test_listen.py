@@ -321,14 +321,29 @@ def test_unity_osc_parser_reads_the_vmc_encoder(tmp_path):
 
     unity = REPO / "clients" / "unity"
     exe = tmp_path / "check.exe"
-    subprocess.run(["mcs", f"-out:{exe}", str(unity / "OscParser.cs"), str(unity / "Tests" / "OscParserCheck.cs")],
-                   check=True, capture_output=True, timeout=120)
+    subprocess.run(["mcs", f"-out:{exe}", str(unity / "OscParser.cs"), str(unity / "VmcFrame.cs"),
+                    str(unity / "Tests" / "OscParserCheck.cs")], check=True, capture_output=True, timeout=120)
     files = []
-    for k, dgram in enumerate(VmcEncoder(tpose_offsets()).encode(smooth_pose(3), 0.125) + [b"#bundle\x00\x00"]):
+    pose = smooth_pose(3)
+    pose[[0, 2]] = [1.25, -0.75]  # standing away from the centre of a stage (issue 39)
+    for k, dgram in enumerate(VmcEncoder(tpose_offsets()).encode(pose, 0.125) + [b"#bundle\x00\x00"]):
         files.append(tmp_path / f"d{k}.bin")
         files[-1].write_bytes(dgram)
     res = subprocess.run(["mono", str(exe), *map(str, files)], capture_output=True, text=True, timeout=60, check=True)
     lines = res.stdout.splitlines()
+    frame_lines = [ln for ln in lines if ln.startswith("FRAME ")]
+    lines = [ln for ln in lines if not ln.startswith("FRAME ")]
+    # the frame PerformerVmcReceiver applies: the avatar's root where the performer stands, facing its
+    # heading (--vmc-root world), and the Hips back where the pose has them
+    from realtime.vmc import split_root, to_unity_position, to_unity_quaternion
+
+    assert len(frame_lines) == 1
+    t, *nums = (float(v) for v in frame_lines[0].split()[1:])
+    root, _, _ = split_root(pose.astype(np.float64))
+    assert t == 0.125
+    np.testing.assert_allclose(nums[:3], to_unity_position(root[:3]), atol=1e-5)
+    np.testing.assert_allclose(nums[3:7], to_unity_quaternion(root[3:]), atol=1e-5)
+    np.testing.assert_allclose(nums[7:], to_unity_position(pose[:3]), atol=1e-5)
     expected = [m.message for f in files[:-1] for m in OscPacket(f.read_bytes()).messages]
     assert len(lines) == len(expected) + 1 and lines[-1] == "MALFORMED d2.bin"
     for line, msg in zip(lines, expected):

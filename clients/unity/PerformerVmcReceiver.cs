@@ -11,6 +11,12 @@
 //     localRotation = inverse(restRootRel(parent transform)) * q * restRootRel(bone)
 // which leaves the model in its rest pose when q is identity (and is just q on a
 // normalized VRM). Bones the model lacks (e.g. Chest, Toes) are skipped.
+//
+// Where the performer stands and faces (issue 39): /VMC/Ext/Root/Pos is the model root,
+// with `performer run --vmc-root world` (the default) its place on the stage and its heading.
+// Root Motion World moves and turns this avatar's transform by it (scaled to the avatar, from
+// where the avatar stood at Start); In Place ignores it: the avatar dances on its spot.
+// VmcFrame.cs collects each frame (plain C#, checked outside Unity by Tests/OscParserCheck.cs).
 using System;
 using System.Collections.Generic;
 using System.Net;
@@ -31,14 +37,19 @@ namespace LivePerformer
         public bool applyRootPosition = true;
         [Tooltip("Hip height of the stream's rig in metres (models/assets/humanoid_rest.json, hello rest_offsets[0])")]
         public float streamHipsHeight = 0.9256f;
+        public enum RootMotion { World, InPlace }
+        [Tooltip("World: move and turn the avatar by /VMC/Ext/Root/Pos (the performer's place on the stage and "
+                 + "heading, performer run --vmc-root world); In Place: ignore it")]
+        public RootMotion rootMotion = RootMotion.World;
 
         class Target { public Transform bone; public Quaternion pre, post; }
 
         readonly Dictionary<string, Target> targets = new Dictionary<string, Target>();
         readonly object gate = new object();
-        Dictionary<string, Quaternion> pending = new Dictionary<string, Quaternion>();
-        Dictionary<string, Quaternion> latest;
-        Vector3 pendingHips, latestHips;
+        readonly VmcFrameAssembler assembler = new VmcFrameAssembler();
+        VmcFrame latest;
+        Vector3 startPosition;
+        Quaternion startRotation;
         Vector3 restHips;
         float hipsScale = 1f;
         UdpClient udp;
@@ -72,6 +83,8 @@ namespace LivePerformer
             }
             Transform hips = animator.GetBoneTransform(HumanBodyBones.Hips);
             restHips = hips.localPosition;
+            startPosition = animator.transform.position;
+            startRotation = animator.transform.rotation;
             hipsScale = animator.transform.InverseTransformPoint(hips.position).y / streamHipsHeight;
             try
             {
@@ -103,22 +116,14 @@ namespace LivePerformer
                 if (!OscParser.TryParse(data, data.Length, messages)) { MalformedDatagrams++; continue; }
                 foreach (OscMessage m in messages)
                 {
-                    if (m.Address == "/VMC/Ext/Bone/Pos" && m.Args.Length >= 8 && m.Args[0] is string name)
-                    {
-                        var v = new float[7];
-                        for (int k = 0; k < 7; k++) v[k] = m.Args[k + 1] is float f ? f : 0f;
-                        pending[name] = new Quaternion(v[3], v[4], v[5], v[6]);
-                        if (name == "Hips") pendingHips = new Vector3(v[0], v[1], v[2]);
-                    }
-                    else if (m.Address == "/VMC/Ext/T")
+                    VmcFrame done = assembler.Feed(m);
+                    if (done != null)
                     {
                         lock (gate)
                         {
-                            latest = pending;
-                            latestHips = pendingHips;
+                            latest = done;
                             FramesReceived++;
                         }
-                        pending = new Dictionary<string, Quaternion>();
                     }
                 }
             }
@@ -126,15 +131,25 @@ namespace LivePerformer
 
         void LateUpdate() // after the Animator, so the stream wins over any animation
         {
-            Dictionary<string, Quaternion> frame;
-            Vector3 hips;
-            lock (gate) { frame = latest; hips = latestHips; }
+            VmcFrame frame;
+            lock (gate) { frame = latest; }
             if (frame == null) return;
-            foreach (var kv in frame)
+            foreach (var kv in frame.Bones)
             {
+                float[] v = kv.Value;
                 if (targets.TryGetValue(kv.Key, out Target t))
-                    t.bone.localRotation = t.pre * kv.Value * t.post;
+                    t.bone.localRotation = t.pre * new Quaternion(v[3], v[4], v[5], v[6]) * t.post;
             }
+            if (rootMotion == RootMotion.World)
+            {
+                // the performer's place on the stage (scaled to this avatar) and heading, from where it stood at Start
+                float[] p = frame.RootPosition, r = frame.RootRotation;
+                animator.transform.SetPositionAndRotation(
+                    startPosition + startRotation * (new Vector3(p[0], p[1], p[2]) * hipsScale),
+                    startRotation * new Quaternion(r[0], r[1], r[2], r[3]));
+            }
+            Vector3 hips = frame.Bones.TryGetValue("Hips", out float[] hv) ? new Vector3(hv[0], hv[1], hv[2])
+                                                                            : new Vector3(0f, streamHipsHeight, 0f);
             if (applyRootPosition && targets.TryGetValue("Hips", out Target h))
             {
                 // The stream's hips position is relative to its floor origin; move ours by the same
