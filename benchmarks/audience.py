@@ -1,0 +1,317 @@
+"""A web audience through a NATS broker: N subscribers on the broker's WebSocket port, one performer.
+
+For each audience size, a fresh nats-server (realtime/nats_server.py: the publisher and the
+subscribe-only viewer accounts) and N asyncio subscribers in ``--procs`` processes, each a
+plain NATS-over-WebSocket client (``websockets``: CONNECT as the viewer, SUB
+``performer.main.frames``, answer PINGs), as the browser's nats.ws speaks it. The real engine
+(the packaged checkpoint, the bundled clip in real time, VMC to a local UDP socket) then plays
+``--seconds`` of audio four times, alternating without and with the broker output
+(``realtime/publish.py``), so both conditions share the machine's state. Reported:
+
+* delivery: for every frame published, the share of subscribers that received it, in order
+  (the least over frames, and the share of subscribers that got every frame in order);
+* publish-to-receive: the subscriber's ``time.time()`` minus the frame's ``send_time``
+  (stamped in ``BrokerRoute.send``), p50 and p99 over every frame of every subscriber;
+* the performer's per-hop compute (the engine's own timer, per frame: all of it, and its own
+  part less the run-queue wait), p99 without and with publishing, and their ratio;
+* the broker's CPU (share of one core over the publishing phases) and peak RSS, and the
+  subscriber processes' CPU, from /proc.
+
+    .venv/bin/python benchmarks/audience.py --subscribers 100 500 1000 --seconds 15
+    .venv/bin/python benchmarks/audience.py --subscribers 300 --cluster 3 --procs 3   # 3 routed nodes
+
+Everything runs on this machine: the subscribers' and the broker's CPU compete with the
+engine's, which an audience served from other machines would not.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:  # run as a script from anywhere
+    sys.path.insert(0, str(REPO))
+
+import numpy as np  # noqa: E402
+
+SUBJECT = "performer.main"
+
+
+# ---- subscriber process -------------------------------------------------------------------
+
+
+async def _subscriber(url: str, user: tuple[str, str], rec: dict, ready: asyncio.Event, stop: asyncio.Event) -> None:
+    from websockets.asyncio.client import connect
+
+    idx, lat = rec["index"], rec["latency"]
+    async with connect(url, compression=None, max_size=None, ping_interval=None, open_timeout=60) as ws:
+        await ws.recv()  # INFO
+        login = json.dumps({"user": user[0], "pass": user[1], "verbose": False, "pedantic": False, "protocol": 1,
+                            "name": "audience-bench"})
+        await ws.send(f"CONNECT {login}\r\nSUB {SUBJECT}.frames 1\r\nPING\r\n".encode())
+        buf = b""
+        recv = asyncio.ensure_future(ws.recv())
+        halt = asyncio.ensure_future(stop.wait())
+        while True:
+            done, _ = await asyncio.wait({recv, halt}, return_when=asyncio.FIRST_COMPLETED)
+            if halt in done:
+                recv.cancel()
+                return
+            buf += recv.result()
+            recv = asyncio.ensure_future(ws.recv())
+            now = time.time()
+            while True:
+                end = buf.find(b"\r\n")
+                if end < 0:
+                    break
+                if buf.startswith(b"MSG "):
+                    size = int(buf[:end].rsplit(b" ", 1)[1])
+                    if len(buf) < end + 2 + size + 2:
+                        break
+                    payload = buf[end + 2:end + 2 + size]
+                    buf = buf[end + 4 + size:]
+                    idx.append(struct.unpack_from("<I", payload, 8)[0])
+                    lat.append(now - struct.unpack_from("<d", payload, 24)[0])
+                    continue
+                line, buf = buf[:end], buf[end + 2:]
+                if line == b"PING":
+                    await ws.send(b"PONG\r\n")
+                elif line == b"PONG":
+                    ready.set()
+                elif line.startswith(b"-ERR"):
+                    rec["errors"].append(line.decode(errors="replace"))
+
+
+async def _subscribers_main(url: str, count: int, folder: Path, user: tuple[str, str]) -> None:
+    recs = [{"index": [], "latency": [], "errors": []} for _ in range(count)]
+    readies = [asyncio.Event() for _ in range(count)]
+    stop = asyncio.Event()
+    tasks = []
+    for k in range(count):
+        tasks.append(asyncio.ensure_future(_subscriber(url, user, recs[k], readies[k], stop)))
+        if k % 50 == 49:
+            await asyncio.sleep(0.05)  # do not storm the broker's accept queue
+    await asyncio.wait_for(asyncio.gather(*(r.wait() for r in readies)), 120)
+    (folder / f"ready-{os.getpid()}").write_text("1")
+    while not (folder / "stop").exists():
+        await asyncio.sleep(0.2)
+    stop.set()
+    results = await asyncio.gather(*tasks, return_exceptions=True)
+    errors = [repr(r) for r in results if isinstance(r, BaseException)]
+    np.savez(folder / f"subs-{os.getpid()}.npz",
+             index=np.array([np.array(r["index"], np.int64) for r in recs], dtype=object),
+             latency=np.array([np.array(r["latency"], np.float64) for r in recs], dtype=object),
+             errors=np.array(errors + [e for r in recs for e in r["errors"]]))
+
+
+# ---- the benchmark ----------------------------------------------------------------------------
+
+
+def _proc_cpu(pid: int) -> float:
+    stat = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(stat[11]) + int(stat[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _peak_rss(pid: int) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) * 1024
+    return 0
+
+
+def _play(pipeline_loaded: dict, seconds: float, publish: bool, broker_url: str) -> tuple[np.ndarray, np.ndarray, dict]:
+    """One engine run of ``seconds`` of the clip in real time: per frame, the hop compute (ms) and its own
+    part (less the run-queue wait, as ``performer bench latency`` reports it), and the publisher's stats."""
+    import socket
+
+    from models.features.audio_io import bundled_clip_path, load_audio
+    from realtime.audio_input import FileSource
+    from realtime.engine import Engine, EngineConfig
+    from realtime.nats_server import PUBLISHER
+    from realtime.osc_out import OscSink
+    from realtime.pipeline import build_pipeline
+    from realtime.publish import BrokerPublisher, Credentials
+
+    pipe = build_pipeline(None, loaded=pipeline_loaded)
+    audio, sr = load_audio(bundled_clip_path(), 44100, mono=False)
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    sinks: list = [OscSink("127.0.0.1", rx.getsockname()[1], "vmc")]
+    route = None
+    if publish:
+        pub = BrokerPublisher(broker_url, credentials=Credentials(user=PUBLISHER[0], password=PUBLISHER[1]))
+        route = pub.route("main", SUBJECT)
+        sinks.append(route)
+    eng = Engine(FileSource(audio[: int(seconds * sr)], sr, realtime=True), pipe.extractor_factory, pipe.model, sinks,
+                 EngineConfig(warmup_s=1.0, stats_size=1 << 16, runqueue_wait=True))
+    eng.start()
+    eng.wait(seconds + 60)
+    hop = eng.compute_ms.values()
+    own = hop - eng.compute_wait_ms.values()  # less the run-queue wait: another process had the CPU
+    stats = route.stats() if route is not None else {}
+    eng.close()
+    rx.close()
+    return hop, own, stats
+
+
+def run_size(n: int, seconds: float, procs: int, cluster: int, loaded: dict) -> dict:
+    from realtime.nats_server import VIEWER, LocalBroker, free_port
+
+    folder = Path(tempfile.mkdtemp(prefix=f"audience-{n}-"))
+    if cluster > 1:
+        cports = [free_port() for _ in range(cluster)]
+        brokers = [LocalBroker(folder / f"n{i}", name=f"n{i}", cluster_port=cports[i],
+                               routes=[p for j, p in enumerate(cports) if j != i]) for i in range(cluster)]
+    else:
+        brokers = [LocalBroker(folder)]
+    for b in brokers:
+        b.start()
+    time.sleep(1.0 if cluster > 1 else 0.1)  # routes connect
+    subs = []
+    try:
+        per = [n // procs + (1 if k < n % procs else 0) for k in range(procs)]
+        for k, count in enumerate(per):
+            url = brokers[k % len(brokers)].ws_url
+            subs.append(subprocess.Popen([sys.executable, __file__, "--subscriber-process", str(count), "--url", url,
+                                          "--folder", str(folder)]))
+        deadline = time.monotonic() + 180
+        while len(list(folder.glob("ready-*"))) < procs:
+            if time.monotonic() > deadline or any(p.poll() is not None for p in subs):
+                raise RuntimeError("subscribers did not connect")
+            time.sleep(0.2)
+        time.sleep(1.0)
+        hops = {False: [], True: []}
+        owns = {False: [], True: []}
+        published = 0
+        pub_stats: list[dict] = []
+        broker_cpu = 0.0
+        broker_wall = 0.0
+        sub_cpu0 = sum(_proc_cpu(p.pid) for p in subs)
+        t_sub = time.monotonic()
+        for publish in (False, True, False, True):
+            c0 = sum(b.cpu_rss()[0] for b in brokers)
+            t0 = time.monotonic()
+            hop, own, stats = _play(loaded, seconds, publish, brokers[0].url)
+            skip = int(len(hop) * 0.05)  # the first hops of a run (caches, the first code steps)
+            hops[publish].append(hop[skip:])
+            owns[publish].append(own[skip:])
+            if publish:
+                broker_cpu += sum(b.cpu_rss()[0] for b in brokers) - c0
+                broker_wall += time.monotonic() - t0
+                published += int(stats["published"])
+                pub_stats.append(stats)
+            time.sleep(1.0)  # the last frames reach every subscriber
+        sub_cpu = (sum(_proc_cpu(p.pid) for p in subs) - sub_cpu0) / (time.monotonic() - t_sub)
+        rss = [_peak_rss(b.proc.pid) for b in brokers]
+        (folder / "stop").write_text("1")
+        for p in subs:
+            p.wait(120)
+    finally:
+        (folder / "stop").write_text("1")
+        for p in subs:
+            if p.poll() is None:
+                p.kill()
+        for b in brokers:
+            b.stop()
+    index, latency, errors = [], [], []
+    for f in sorted(folder.glob("subs-*.npz")):
+        d = np.load(f, allow_pickle=True)
+        index += list(d["index"])
+        latency += list(d["latency"])
+        errors += list(d["errors"])
+    # Each publishing run restarts at frame 0: split a subscriber's indices where they go back.
+    frames_per_run = [int(s["published"]) + int(s["drops"]) + int(s["drops_down"]) for s in pub_stats]
+    runs = len(pub_stats)
+    got = [np.zeros(k, np.int64) for k in frames_per_run]
+    complete = 0
+    for ix in index:
+        ix = np.asarray(ix, np.int64)
+        starts = np.r_[0, np.nonzero(np.diff(ix) < 0)[0] + 1, len(ix)]
+        ok = len(starts) - 1 == runs
+        for r in range(min(runs, len(starts) - 1)):
+            part = ix[starts[r]:starts[r + 1]]
+            part = part[part < frames_per_run[r]]
+            got[r][part] += 1
+            ok = ok and len(part) == frames_per_run[r] and bool(np.all(np.diff(part) == 1))
+        complete += ok
+    per_frame = np.concatenate(got) / max(1, len(index))
+    lat_ms = np.concatenate([np.asarray(x) for x in latency]) * 1e3 if latency else np.array([np.nan])
+    off, on = np.concatenate(hops[False]), np.concatenate(hops[True])
+    off_own, on_own = np.concatenate(owns[False]), np.concatenate(owns[True])
+    return {
+        "subscribers": n, "connected": len(index), "cluster_nodes": len(brokers), "procs": procs,
+        "frames_published": published, "frames_dropped": sum(int(s["drops"]) + int(s["drops_down"]) for s in pub_stats),
+        "min_share_of_subscribers_per_frame": float(per_frame.min()) if per_frame.size else float("nan"),
+        "share_of_subscribers_complete_in_order": complete / max(1, len(index)),
+        "latency_ms_p50": float(np.percentile(lat_ms, 50)), "latency_ms_p99": float(np.percentile(lat_ms, 99)),
+        "hop_ms_p99_without": float(np.percentile(off, 99)), "hop_ms_p99_with": float(np.percentile(on, 99)),
+        "hop_ratio_p99": float(np.percentile(on, 99) / np.percentile(off, 99)),
+        "hop_own_ms_p99_without": float(np.percentile(off_own, 99)),
+        "hop_own_ms_p99_with": float(np.percentile(on_own, 99)),
+        "hop_own_ratio_p99": float(np.percentile(on_own, 99) / np.percentile(off_own, 99)),
+        "hops": [len(off), len(on)],
+        "broker_cpu_share": broker_cpu / max(1e-9, broker_wall), "broker_peak_rss_mb": [r / 2**20 for r in rss],
+        "subscriber_procs_cpu_share": sub_cpu, "errors": [str(e) for e in errors[:5]],
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--subscribers", type=int, nargs="+", default=[100, 500, 1000], metavar="N",
+                   help="audience sizes, one run each (default 100 500 1000)")
+    p.add_argument("--seconds", type=float, default=15.0, help="seconds of audio per engine run; 4 runs per size")
+    p.add_argument("--procs", type=int, default=2, help="subscriber processes (default 2)")
+    p.add_argument("--cluster", type=int, default=1, metavar="K", help="K routed nats-server nodes (default 1); "
+                   "the performer publishes to the first, subscriber process k connects to node k mod K")
+    p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    p.add_argument("--subscriber-process", type=int, help=argparse.SUPPRESS)
+    p.add_argument("--url", help=argparse.SUPPRESS)
+    p.add_argument("--folder", help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    if args.subscriber_process is not None:
+        from realtime.nats_server import VIEWER
+
+        asyncio.run(_subscribers_main(args.url, args.subscriber_process, Path(args.folder), VIEWER))
+        return 0
+    from realtime.nats_server import find_nats_server
+
+    if find_nats_server() is None:
+        print("audience: nats-server is not installed (apt-get install nats-server; make setup)", file=sys.stderr)
+        return 2
+    if not 1 <= args.procs <= 16 or args.cluster < 1 or not 1 <= args.seconds <= 600 \
+            or any(n < 1 for n in args.subscribers):
+        p.error("--procs 1..16, --cluster >= 1, --seconds 1..600, --subscribers >= 1")
+    loaded: dict = {}
+    results = []
+    for n in args.subscribers:
+        r = run_size(n, args.seconds, args.procs, args.cluster, loaded)
+        results.append(r)
+        print(json.dumps(r), flush=True)
+    print("\n| subscribers | nodes | frames | delivered in order (min share per frame / complete subscribers) "
+          "| publish-to-receive p50 / p99 ms | hop p99 ms without / with (ratio) | hop own p99 ms without / with "
+          "(ratio) | broker CPU, peak RSS | subscribers' CPU |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for r in results:
+        print(f"| {r['subscribers']} | {r['cluster_nodes']} | {r['frames_published']} "
+              f"(+{r['frames_dropped']} dropped) | {100 * r['min_share_of_subscribers_per_frame']:.2f} % / "
+              f"{100 * r['share_of_subscribers_complete_in_order']:.2f} % | {r['latency_ms_p50']:.1f} / "
+              f"{r['latency_ms_p99']:.1f} | {r['hop_ms_p99_without']:.2f} / {r['hop_ms_p99_with']:.2f} "
+              f"({r['hop_ratio_p99']:.3f}) | {r['hop_own_ms_p99_without']:.2f} / {r['hop_own_ms_p99_with']:.2f} "
+              f"({r['hop_own_ratio_p99']:.3f}) | {100 * r['broker_cpu_share']:.0f} % of a core, "
+              f"{max(r['broker_peak_rss_mb']):.0f} MB | {100 * r['subscriber_procs_cpu_share']:.0f} % |")
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
