@@ -14,7 +14,11 @@ the hips, which follows the skeletons' ``center``; the Hips' heading):
 * inside: the share of frames whose root lies inside the stage (a 1-mm tolerance);
 * speed p99.9: the 99.9th percentile of the root's horizontal speed, m/s, frame to frame;
 * facing +-45: with ``facing audience``, the share of dancing frames (idle weight 0) whose
-  heading lies within 45 degrees of +Z.
+  heading lies within 45 degrees of +Z;
+* edge: the share of frames within the stage's margin of an edge; bent: the share of those
+  whose path the stage bent (heading out, turned in); inward: the share of the movements
+  chosen there whose own travel heads inwards (``stage.INWARDS`` prefers them;
+  ``--no-inwards`` switches that off: then only the bend keeps it inside).
 
 The shared music recordings (``--music``, no dancer) are danced the same way and give the
 performer's figures alone. Prints one table per setting and the ratios to the dancers::
@@ -84,8 +88,10 @@ def pose_track(poses: np.ndarray) -> np.ndarray:
     return np.stack([poses[:, 0], poses[:, 2], h], 1).astype(np.float64)
 
 
-def dance(model, features: np.ndarray, stage: str, facing: str, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """(root track (T, 3), dancing (T,) bool): a fresh stream pushed one frame at a time, as live."""
+def dance(model, features: np.ndarray, stage: str, facing: str, seed: int = 0,
+          counts: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(root track (T, 3), dancing (T,) bool): a fresh stream pushed one frame at a time, as live;
+    ``counts``: updated with the stage's edge counts (``Stage.counts``)."""
     from models.networks.dance_stream import DanceStream
     from models.networks.streaming import sanitize_features
 
@@ -96,6 +102,9 @@ def dance(model, features: np.ndarray, stage: str, facing: str, seed: int = 0) -
     for t in range(len(x)):
         poses[t] = s.push(x[t: t + 1])[0]
         dancing[t] = s.idle_weight <= 0.0
+    if counts is not None:
+        for k, v in s.stage.counts.items():
+            counts[k] = counts.get(k, 0) + v
     return pose_track(poses), dancing
 
 
@@ -136,8 +145,9 @@ def run(checkpoint: str, data_root: str, music: str | None, cache: str | None, s
         if not isinstance(src, Path):
             res["dancer"] = track_figures(dancer_track(data_root, name, len(feats)))
         for label, stage, facing in SETTINGS:
-            tr, dancing = dance(lm.model, feats, stage, facing, seed)
-            res[label] = track_figures(tr, dancing, parse_stage(stage))
+            counts: dict = {}
+            tr, dancing = dance(lm.model, feats, stage, facing, seed, counts)
+            res[label] = {**track_figures(tr, dancing, parse_stage(stage)), **counts}
         out["music" if isinstance(src, Path) else "songs"][name] = res
     return out
 
@@ -151,7 +161,7 @@ def table(results: dict) -> str:
             continue
         lines.append(f"{'validation songs' if group == 'songs' else 'shared music'} ({len(res)}):")
         lines.append(f"  {'setting':<14}{'path/min':>9}{'turns/min':>10}{'inside':>8}{'speed p99.9':>12}"
-                     f"{'facing45':>9}{'path x':>8}{'turns x':>8}{'speed x':>8}")
+                     f"{'facing45':>9}{'edge':>7}{'bent':>7}{'inward':>8}{'path x':>8}{'turns x':>8}{'speed x':>8}")
         labels = (["dancer"] if group == "songs" else []) + [s[0] for s in SETTINGS]
         for label in labels:
             rows = [r[label] for r in res.values()]
@@ -167,12 +177,20 @@ def table(results: dict) -> str:
                 ratio = (f"{mean['path_per_min'] / dm['path_per_min']:8.2f}{mean['turns_per_min'] / dm['turns_per_min']:8.2f}"
                          f"{p999 / dsp:8.2f}")
             inside = "" if label == "dancer" else f"{100 * mean['inside']:7.1f}%"
+            edge = ""
+            if label != "dancer":  # frames near an edge, the share of them bent, movements chosen there heading in
+                c = {k: sum(r.get(k, 0) for r in rows) for k in ("edge_frames", "steered_frames", "edge_choices",
+                                                                 "inward_choices")}
+                n = sum(r["minutes"] * 60 * 30 for r in rows)
+                edge = (f"{100 * c['edge_frames'] / max(n, 1):6.1f}%{100 * c['steered_frames'] / max(c['edge_frames'], 1):6.1f}%"
+                        f"{100 * c['inward_choices'] / max(c['edge_choices'], 1):7.1f}%")
             lines.append(f"  {label:<14}{mean['path_per_min']:9.1f}{mean['turns_per_min']:10.2f}{inside:>8}"
-                         f"{p999:12.2f}{100 * mean['facing45']:8.1f}%{ratio}")
+                         f"{p999:12.2f}{100 * mean['facing45']:8.1f}%{edge:>22}{ratio}")
     return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
+    global SETTINGS
     p = argparse.ArgumentParser(description=__doc__.split("\nExit status")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="Exit status 2 on a missing or unreadable checkpoint, dataset or recording.")
@@ -183,12 +201,22 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cache", default=".cache/corpus", metavar="DIR", help="corpus cache (default .cache/corpus)")
     p.add_argument("--seed", type=int, default=0, help="generation seed (default 0)")
     p.add_argument("--json", metavar="OUT", help="also write every song's figures as JSON")
+    p.add_argument("--no-inwards", action="store_true",
+                   help="near an edge, choose movements as in the middle (stage.INWARDS off): only the bend")
+    p.add_argument("--settings", nargs="+", metavar="LABEL", choices=[s[0] for s in SETTINGS],
+                   help="only these settings (default all: " + ", ".join(s[0] for s in SETTINGS) + ")")
     a = p.parse_args(argv)
     import torch
 
     from models.errors import PerformerError
 
     torch.set_num_threads(1)
+    if a.settings:
+        SETTINGS = tuple(s for s in SETTINGS if s[0] in a.settings)
+    if a.no_inwards:
+        from models.networks import stage
+
+        stage.INWARDS = False
     try:
         results = run(a.checkpoint, a.data, a.music, a.cache, a.seed, log=lambda m: print(m, file=sys.stderr))
     except (PerformerError, OSError) as e:

@@ -19,6 +19,8 @@ about +Y, 0 = facing the audience at +Z), and every frame
    performer's heading inwards (at most :data:`STEER_RATE`), and the part of the step
    towards the edge shrinks with the distance left, so the performer never crosses it (a
    smooth slow-down on that axis only: it keeps dancing along the edge, never a teleport);
+   Near an edge the next movement is chosen among those whose own travel heads inwards
+   (:meth:`Stage.inwards`, :data:`INWARDS`), so the dance turns in before the bend must;
 4. with ``facing audience`` pulls the heading back towards +Z (:data:`FACING_TAU`) and damps
    turns away from it past :data:`FACING_CONE`; ``home()`` adds a walk to the centre;
 5. writes x, z into ``pose[0]``, ``pose[2]`` and composes the heading onto the Hips' rotation.
@@ -72,6 +74,10 @@ MAX_TURN: float = math.radians(720.0)
 #: heading too: 1.5-1.7x, the last movement's spin carried on; DANCE_W_5, R_5, C_2 on 6x5).
 CARRY_ROWS: float = 16.0
 CARRY_TURN_ROWS: float = 4.0
+#: Near an edge (within :data:`MARGIN`) the movement chosen next is one whose own travel heads
+#: inwards where the drawn codes have any (:meth:`Stage.inwards`), so the path turns in by the
+#: dance's choice before the stage has to bend it (False: only the bend).
+INWARDS: bool = True
 #: facing audience: time constant (s) of the pull of the heading back to +Z.
 FACING_TAU: float = 0.5
 #: facing audience: beyond this angle from +Z (radians) turns further away are damped,
@@ -149,8 +155,8 @@ def _wrap(a: float) -> float:
 class Stage:
     """World position and heading of one performer on a ``width`` x ``depth`` m stage (see the
     module docstring). State: :attr:`x`, :attr:`z` (m), :attr:`heading` (rad, 0 facing +Z),
-    the playing movement's travel track (``3 seg`` rows of x, z, heading in its own frame) and
-    where it was last read. ``reset()`` puts the performer at the centre facing +Z; the stage
+    the playing movement's travel track (``3 seg`` rows of x, z, heading in its own frame),
+    where it was last read, and :attr:`counts` (edge frames and choices, for measuring). ``reset()`` puts the performer at the centre facing +Z; the stage
     and facing are settings and survive it."""
 
     def __init__(self, seg: int, stage=0, facing: str = "free") -> None:
@@ -198,6 +204,9 @@ class Stage:
         self._read = 0.0  # where it was read
         self._homing = False
         self._home_w = 0.0
+        # counts for measuring (benchmarks/studies/stage_travel.py): frames near an edge and those
+        # the stage bent; movements chosen near an edge and those whose own travel heads inwards
+        self.counts = {"edge_frames": 0, "steered_frames": 0, "edge_choices": 0, "inward_choices": 0}
 
     # -- the player's side ---------------------------------------------------------------
     def handover(self, at: float, travel: np.ndarray | None, first: bool) -> None:
@@ -207,6 +216,13 @@ class Stage:
         carried on from the last movement's value at ``at + seg``. ``first``: nothing played
         before (the rows before are the new movement's first)."""
         tr, s = self._track, self.seg
+        near = self._near() if self.active and not first else None
+        if near is not None:  # counted: a movement chosen near an edge, and whether its own travel heads inwards
+            self.counts["edge_choices"] += 1
+            if travel is not None:
+                ch, sh = math.cos(self.heading), math.sin(self.heading)
+                mx, mz = float(travel[s, 0]), float(travel[s, 1])
+                self.counts["inward_choices"] += (mx * ch + mz * sh) * near[0] + (-mx * sh + mz * ch) * near[1] >= -1e-6
         if first:
             tr[:s] = 0.0
             base = (0.0, 0.0, 0.0)
@@ -270,6 +286,9 @@ class Stage:
         wx, wz = self._home_step(wx, wz)
         if not leaving:
             wx, wz, steer = self._bound(wx, wz)
+            if self._near() is not None:
+                self.counts["edge_frames"] += 1
+                self.counts["steered_frames"] += steer != 0.0
             turn += steer
         if self.facing == "audience" or leaving:
             turn = self._face_audience(turn)
@@ -303,17 +322,34 @@ class Stage:
         speed = min(HOME_SPEED / FPS * self._home_w, dist / (HOME_RAMP * FPS))
         return wx + speed * ex / max(dist, 1e-9), wz + speed * ez / max(dist, 1e-9)
 
+    def _near(self) -> tuple[float, float] | None:
+        """The inward normal (nx, nz) the near edges add up to, each weighted 0 at :data:`MARGIN`
+        from it .. 1 at it; None where no edge is that near."""
+        hx, hz = 0.5 * self.width, 0.5 * self.depth
+        mx, mz = min(MARGIN, MARGIN_FRACTION * hx), min(MARGIN, MARGIN_FRACTION * hz)
+        nx = min(max(1.0 - (self.x + hx) / mx, 0.0), 1.0) - min(max(1.0 - (hx - self.x) / mx, 0.0), 1.0)
+        nz = min(max(1.0 - (self.z + hz) / mz, 0.0), 1.0) - min(max(1.0 - (hz - self.z) / mz, 0.0), 1.0)
+        return None if nx == 0.0 and nz == 0.0 else (nx, nz)
+
+    def inwards(self, moves: np.ndarray) -> np.ndarray | None:
+        """Which candidate movements head inwards here: ``moves`` (n, 2) each one's own travel over a
+        movement (x, z m, in its own frame: ``member_travel[c, j, seg, :2]``) -> (n,) bool, True where
+        it (turned by the heading) moves no further towards a near edge; None where no edge is near,
+        :data:`INWARDS` is off, or none heads inwards (then any may play)."""
+        n = self._near() if self.active and INWARDS and not self._homing else None
+        if n is None:
+            return None
+        ch, sh = math.cos(self.heading), math.sin(self.heading)
+        wx, wz = moves[:, 0] * ch + moves[:, 1] * sh, -moves[:, 0] * sh + moves[:, 1] * ch
+        keep = wx * n[0] + wz * n[1] >= -1e-6  # along the edge counts (a micrometre of rounding)
+        return keep if keep.any() else None
+
     def _bound(self, wx: float, wz: float) -> tuple[float, float, float]:
         """(the step (wx, wz) with its part towards a near edge shrunk, the heading turn that
         bends a path heading out of the stage inwards)."""
         hx, hz = 0.5 * self.width, 0.5 * self.depth
         mx, mz = min(MARGIN, MARGIN_FRACTION * hx), min(MARGIN, MARGIN_FRACTION * hz)
-        # how near each edge is (0 at the margin, 1 at the edge) and the inward normal they add up to
-        px_hi = min(max(1.0 - (hx - self.x) / mx, 0.0), 1.0)
-        px_lo = min(max(1.0 - (self.x + hx) / mx, 0.0), 1.0)
-        pz_hi = min(max(1.0 - (hz - self.z) / mz, 0.0), 1.0)
-        pz_lo = min(max(1.0 - (self.z + hz) / mz, 0.0), 1.0)
-        nx, nz = px_lo - px_hi, pz_lo - pz_hi
+        nx, nz = self._near() or (0.0, 0.0)  # the inward normal of the near edges
         steer = 0.0
         speed = math.hypot(wx, wz)
         if speed > 0.0 and (nx != 0.0 or nz != 0.0):
