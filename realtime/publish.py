@@ -326,6 +326,11 @@ class BrokerPublisher:
         if self._event is not None:
             self._event.set()
 
+    def _tick(self) -> None:
+        """On the loop, every META_PERIOD_S: the hello and state are due again."""
+        self._ticker = self._loop.call_later(META_PERIOD_S, self._tick)
+        self._set_event(True)
+
     def _run(self) -> None:
         asyncio.set_event_loop(self._loop)
         try:
@@ -349,7 +354,10 @@ class BrokerPublisher:
 
         async def on_error(exc: Exception) -> None:
             text = f"{type(exc).__name__}: {exc}".strip()
-            if "authorization" in text.lower() or "permissions violation" in text.lower():
+            if isinstance(exc, ssl.SSLCertVerificationError) and self.reconnects == self.disconnects == 0 \
+                    and not self.connected:
+                self._fatal = str(exc).strip()  # the broker's certificate is not trusted: retrying cannot help
+            elif "authorization" in text.lower() or "permissions violation" in text.lower():
                 if not self.connected and self.reconnects == 0 and self.disconnects == 0:
                     self._fatal = str(exc).strip() or type(exc).__name__
                 elif self.errors == 0:
@@ -397,8 +405,9 @@ class BrokerPublisher:
             try:
                 return await nats.connect(**kwargs)
             except Exception as exc:  # noqa: BLE001 - not there yet (NoServersError, OSError, timeout): retried
-                if self._fatal is None and "authorization" in str(exc).lower():
-                    self._fatal = str(exc).strip()
+                if self._fatal is None and ("authorization" in str(exc).lower()
+                                            or isinstance(exc, ssl.SSLCertVerificationError)):
+                    self._fatal = str(exc).strip()  # a wrong login or certificate: retrying cannot help
                 if self._fatal is not None:
                     self._first.set()
                     return None
@@ -421,17 +430,14 @@ class BrokerPublisher:
             log.warning("broker %s reached; publishing", self.display)
         self.down_since = None
         self._first.set()
-        next_meta = 0.0
+        self._ticker = self._loop.call_soon(self._tick)  # the meta messages' period: a timer, not a time-out per wake
         try:
             while not self._closed:
-                with contextlib.suppress(asyncio.TimeoutError):
-                    await asyncio.wait_for(self._event.wait(), max(0.0, next_meta - self._loop.time()))
+                await self._event.wait()  # one plain wait per wake-up (the engine's end_hop, the timer)
                 self._event.clear()
                 self._wake_pending = False  # before popping: a frame appended from now on wakes the loop
-                now = self._loop.time()
-                if self._meta_due or now >= next_meta:
+                if self._meta_due:
                     self._meta_due = False
-                    next_meta = now + META_PERIOD_S
                     for r in list(self._routes.values()):
                         for text in (r.hello, r.state):
                             if text is not None:
@@ -440,6 +446,7 @@ class BrokerPublisher:
                     subject, data = self._queue.popleft()
                     await self._publish(nc, subject, data)
         finally:
+            self._ticker.cancel()
             self.connected = False
             with contextlib.suppress(Exception):
                 await asyncio.wait_for(nc.drain(), 2.0)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import asyncio
 import json
+import shutil
+import subprocess
 import threading
 import time
 
@@ -269,3 +271,23 @@ def test_credentials_from_a_file_or_the_environment(tmp_path):
     f.write_text('token = "t"\nuser = "u"\npassword = "p"\n')
     with pytest.raises(ConfigError, match="not both"):
         load_credentials(f)
+
+
+@pytest.mark.skipif(shutil.which("openssl") is None, reason="openssl is not installed (makes the test certificate)")
+def test_tls_with_the_brokers_ca_and_a_clear_error_without_it(tmp_path):
+    subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", tmp_path / "key.pem",
+                    "-out", tmp_path / "cert.pem", "-days", "1", "-subj", "/CN=localhost",
+                    "-addext", "subjectAltName=IP:127.0.0.1"], check=True, capture_output=True)
+    broker = LocalBroker(tmp_path)
+    with open(broker.conf, "a") as f:
+        f.write(f'tls {{ cert_file: "{tmp_path / "cert.pem"}", key_file: "{tmp_path / "key.pem"}" }}\n')
+    creds = Credentials(user=PUBLISHER[0], password=PUBLISHER[1])
+    with broker:
+        url = broker.url.replace("nats://", "tls://")
+        pub = BrokerPublisher(url, credentials=creds, tls_ca=tmp_path / "cert.pem", offsets=np.zeros((21, 3)))
+        try:
+            assert pub.connected
+        finally:
+            pub.close()
+        with pytest.raises(NetworkError, match="certificate verify failed"):
+            BrokerPublisher(url, credentials=creds, offsets=np.zeros((21, 3)))  # the system's CAs do not know it
