@@ -4,9 +4,10 @@ For each audience size, a fresh nats-server (realtime/nats_server.py: the publis
 subscribe-only viewer accounts) and N asyncio subscribers in ``--procs`` processes, each a
 plain NATS-over-WebSocket client (``websockets``: CONNECT as the viewer, SUB
 ``performer.main.frames``, answer PINGs), as the browser's nats.ws speaks it. The real engine
-(the packaged checkpoint, the bundled clip in real time, VMC to a local UDP socket) then plays
-``--seconds`` of audio four times, alternating without and with the broker output
-(``realtime/publish.py``), so both conditions share the machine's state. Reported:
+(the packaged checkpoint, the bundled clip looped in real time, VMC to a local UDP socket) then
+plays ``--seconds`` of audio with the broker output (``realtime/publish.py``) behind a gate
+that passes every other block of ``--block`` frames (2 s): one run holds both conditions in
+turns, so the machine's changing load (other programs) falls on both alike. Reported:
 
 * delivery: for every frame published, the share of subscribers that received it, in order
   (the least over frames, and the share of subscribers that got every frame in order);
@@ -17,7 +18,7 @@ plain NATS-over-WebSocket client (``websockets``: CONNECT as the viewer, SUB
 * the broker's CPU (share of one core over the publishing phases) and peak RSS, and the
   subscriber processes' CPU, from /proc.
 
-    .venv/bin/python benchmarks/audience.py --subscribers 100 500 1000 --seconds 15
+    .venv/bin/python benchmarks/audience.py --subscribers 100 500 1000 --seconds 60
     .venv/bin/python benchmarks/audience.py --subscribers 300 --cluster 3 --procs 3   # 3 routed nodes
 
 Everything runs on this machine: the subscribers' and the broker's CPU compete with the
@@ -128,9 +129,42 @@ def _peak_rss(pid: int) -> int:
     return 0
 
 
-def _play(pipeline_loaded: dict, seconds: float, publish: bool, broker_url: str) -> tuple[np.ndarray, np.ndarray, dict]:
-    """One engine run of ``seconds`` of the clip in real time: per frame, the hop compute (ms) and its own
-    part (less the run-queue wait, as ``performer bench latency`` reports it), and the publisher's stats."""
+class _Gate:
+    """A Sink in front of the broker route: passes frames only in every other block of ``block``
+    frames (the first block off), and remembers the indices it passed. One engine run then holds
+    both conditions, alternating every couple of seconds, so a change in the machine's load
+    (other programs) falls on both alike."""
+
+    def __init__(self, route, block: int) -> None:
+        self.route, self.block, self.name = route, block, route.name
+        self.passed: list[int] = []
+
+    def on(self, index: int) -> bool:
+        return (index // self.block) % 2 == 1
+
+    def send(self, frame) -> None:
+        if self.on(frame.index):
+            self.passed.append(frame.index)
+            self.route.send(frame)
+
+    def begin_hop(self) -> None:
+        self.route.begin_hop()
+
+    def end_hop(self) -> None:
+        self.route.end_hop()
+
+    def stats(self) -> dict:
+        return self.route.stats()
+
+    def close(self) -> None:
+        self.route.close()
+
+
+def _play(seconds: float, block: int, broker_url: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, _Gate, dict]:
+    """One engine run of ``seconds`` of the clip (looped) in real time, VMC to a local socket and the
+    broker route behind a :class:`_Gate`. Returns per frame the hop compute (ms), its own part (less
+    the run-queue wait, as ``performer bench latency`` reports it) and whether publishing was on;
+    the gate; the publisher's stats."""
     import socket
 
     from models.features.audio_io import bundled_clip_path, load_audio
@@ -141,30 +175,30 @@ def _play(pipeline_loaded: dict, seconds: float, publish: bool, broker_url: str)
     from realtime.pipeline import build_pipeline
     from realtime.publish import BrokerPublisher, Credentials
 
-    pipe = build_pipeline(None, loaded=pipeline_loaded)
+    pipe = build_pipeline(None)
     audio, sr = load_audio(bundled_clip_path(), 44100, mono=False)
+    n = int(seconds * sr)
+    audio = np.concatenate([audio] * (n // len(audio) + 1))[:n]
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
-    sinks: list = [OscSink("127.0.0.1", rx.getsockname()[1], "vmc")]
-    route = None
-    if publish:
-        pub = BrokerPublisher(broker_url, credentials=Credentials(user=PUBLISHER[0], password=PUBLISHER[1]))
-        route = pub.route("main", SUBJECT)
-        sinks.append(route)
-    eng = Engine(FileSource(audio[: int(seconds * sr)], sr, realtime=True), pipe.extractor_factory, pipe.model, sinks,
-                 EngineConfig(warmup_s=1.0, stats_size=1 << 16, runqueue_wait=True))
+    pub = BrokerPublisher(broker_url, credentials=Credentials(user=PUBLISHER[0], password=PUBLISHER[1]))
+    gate = _Gate(pub.route("main", SUBJECT), block)
+    eng = Engine(FileSource(audio, sr, realtime=True), pipe.extractor_factory, pipe.model,
+                 [OscSink("127.0.0.1", rx.getsockname()[1], "vmc"), gate],
+                 EngineConfig(warmup_s=1.0, stats_size=1 << 17, runqueue_wait=True))
     eng.start()
-    eng.wait(seconds + 60)
+    eng.wait(seconds + 120)
     hop = eng.compute_ms.values()
-    own = hop - eng.compute_wait_ms.values()  # less the run-queue wait: another process had the CPU
-    stats = route.stats() if route is not None else {}
+    own = hop - eng.compute_wait_ms.values()
+    stats = gate.stats()
     eng.close()
     rx.close()
-    return hop, own, stats
+    on = np.array([gate.on(i) for i in range(len(hop))])
+    return hop, own, on, gate, stats
 
 
-def run_size(n: int, seconds: float, procs: int, cluster: int, loaded: dict) -> dict:
-    from realtime.nats_server import VIEWER, LocalBroker, free_port
+def run_size(n: int, seconds: float, procs: int, cluster: int, block: int) -> dict:
+    from realtime.nats_server import LocalBroker, free_port
 
     folder = Path(tempfile.mkdtemp(prefix=f"audience-{n}-"))
     if cluster > 1:
@@ -189,28 +223,14 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, loaded: dict) -> 
                 raise RuntimeError("subscribers did not connect")
             time.sleep(0.2)
         time.sleep(1.0)
-        hops = {False: [], True: []}
-        owns = {False: [], True: []}
-        published = 0
-        pub_stats: list[dict] = []
-        broker_cpu = 0.0
-        broker_wall = 0.0
+        c0 = sum(b.cpu_rss()[0] for b in brokers)
         sub_cpu0 = sum(_proc_cpu(p.pid) for p in subs)
-        t_sub = time.monotonic()
-        for publish in (False, True, False, True):
-            c0 = sum(b.cpu_rss()[0] for b in brokers)
-            t0 = time.monotonic()
-            hop, own, stats = _play(loaded, seconds, publish, brokers[0].url)
-            skip = int(len(hop) * 0.05)  # the first hops of a run (caches, the first code steps)
-            hops[publish].append(hop[skip:])
-            owns[publish].append(own[skip:])
-            if publish:
-                broker_cpu += sum(b.cpu_rss()[0] for b in brokers) - c0
-                broker_wall += time.monotonic() - t0
-                published += int(stats["published"])
-                pub_stats.append(stats)
-            time.sleep(1.0)  # the last frames reach every subscriber
-        sub_cpu = (sum(_proc_cpu(p.pid) for p in subs) - sub_cpu0) / (time.monotonic() - t_sub)
+        t0 = time.monotonic()
+        hop, own, on, gate, stats = _play(seconds, block, brokers[0].url)
+        wall = time.monotonic() - t0
+        broker_cpu = (sum(b.cpu_rss()[0] for b in brokers) - c0) / wall
+        sub_cpu = (sum(_proc_cpu(p.pid) for p in subs) - sub_cpu0) / wall
+        time.sleep(1.0)  # the last frames reach every subscriber
         rss = [_peak_rss(b.proc.pid) for b in brokers]
         (folder / "stop").write_text("1")
         for p in subs:
@@ -228,38 +248,36 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, loaded: dict) -> 
         index += list(d["index"])
         latency += list(d["latency"])
         errors += list(d["errors"])
-    # Each publishing run restarts at frame 0: split a subscriber's indices where they go back.
-    frames_per_run = [int(s["published"]) + int(s["drops"]) + int(s["drops_down"]) for s in pub_stats]
-    runs = len(pub_stats)
-    got = [np.zeros(k, np.int64) for k in frames_per_run]
+    passed = np.array(gate.passed, np.int64)
+    got = np.zeros(len(passed), np.int64)
+    where = {int(i): k for k, i in enumerate(passed)}
     complete = 0
     for ix in index:
         ix = np.asarray(ix, np.int64)
-        starts = np.r_[0, np.nonzero(np.diff(ix) < 0)[0] + 1, len(ix)]
-        ok = len(starts) - 1 == runs
-        for r in range(min(runs, len(starts) - 1)):
-            part = ix[starts[r]:starts[r + 1]]
-            part = part[part < frames_per_run[r]]
-            got[r][part] += 1
-            ok = ok and len(part) == frames_per_run[r] and bool(np.all(np.diff(part) == 1))
-        complete += ok
-    per_frame = np.concatenate(got) / max(1, len(index))
+        in_order = bool(np.all(np.diff(ix) > 0))
+        for i in ix:
+            k = where.get(int(i))
+            if k is not None:
+                got[k] += 1
+        complete += in_order and len(ix) == len(passed) and bool(np.array_equal(ix, passed))
+    per_frame = got / max(1, len(index))
     lat_ms = np.concatenate([np.asarray(x) for x in latency]) * 1e3 if latency else np.array([np.nan])
-    off, on = np.concatenate(hops[False]), np.concatenate(hops[True])
-    off_own, on_own = np.concatenate(owns[False]), np.concatenate(owns[True])
+    skip = 2 * block  # the first off and on blocks: the engine's first code steps, the first subscribers' wake-ups
+    hop, own, on = hop[skip:], own[skip:], on[skip:len(hop) + skip]
+    p99 = lambda x: float(np.percentile(x, 99))  # noqa: E731
     return {
         "subscribers": n, "connected": len(index), "cluster_nodes": len(brokers), "procs": procs,
-        "frames_published": published, "frames_dropped": sum(int(s["drops"]) + int(s["drops_down"]) for s in pub_stats),
+        "frames_published": int(stats["published"]), "frames_dropped": int(stats["drops"]) + int(stats["drops_down"]),
         "min_share_of_subscribers_per_frame": float(per_frame.min()) if per_frame.size else float("nan"),
         "share_of_subscribers_complete_in_order": complete / max(1, len(index)),
-        "latency_ms_p50": float(np.percentile(lat_ms, 50)), "latency_ms_p99": float(np.percentile(lat_ms, 99)),
-        "hop_ms_p99_without": float(np.percentile(off, 99)), "hop_ms_p99_with": float(np.percentile(on, 99)),
-        "hop_ratio_p99": float(np.percentile(on, 99) / np.percentile(off, 99)),
-        "hop_own_ms_p99_without": float(np.percentile(off_own, 99)),
-        "hop_own_ms_p99_with": float(np.percentile(on_own, 99)),
-        "hop_own_ratio_p99": float(np.percentile(on_own, 99) / np.percentile(off_own, 99)),
-        "hops": [len(off), len(on)],
-        "broker_cpu_share": broker_cpu / max(1e-9, broker_wall), "broker_peak_rss_mb": [r / 2**20 for r in rss],
+        "latency_ms_p50": float(np.percentile(lat_ms, 50)), "latency_ms_p99": p99(lat_ms),
+        "hop_ms_p99_without": p99(hop[~on]), "hop_ms_p99_with": p99(hop[on]),
+        "hop_ratio_p99": p99(hop[on]) / p99(hop[~on]),
+        "hop_own_ms_p99_without": p99(own[~on]), "hop_own_ms_p99_with": p99(own[on]),
+        "hop_own_ratio_p99": p99(own[on]) / p99(own[~on]),
+        "hop_own_ms_p50_without": float(np.median(own[~on])), "hop_own_ms_p50_with": float(np.median(own[on])),
+        "hops": [int((~on).sum()), int(on.sum())],
+        "broker_cpu_share": broker_cpu, "broker_peak_rss_mb": [r / 2**20 for r in rss],
         "subscriber_procs_cpu_share": sub_cpu, "errors": [str(e) for e in errors[:5]],
     }
 
@@ -268,7 +286,9 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--subscribers", type=int, nargs="+", default=[100, 500, 1000], metavar="N",
                    help="audience sizes, one run each (default 100 500 1000)")
-    p.add_argument("--seconds", type=float, default=15.0, help="seconds of audio per engine run; 4 runs per size")
+    p.add_argument("--seconds", type=float, default=60.0,
+                   help="seconds of audio per audience size, publishing on and off in turns (default 60)")
+    p.add_argument("--block", type=int, default=60, help="frames per on or off block (default 60: 2 s)")
     p.add_argument("--procs", type=int, default=2, help="subscriber processes (default 2)")
     p.add_argument("--cluster", type=int, default=1, metavar="K", help="K routed nats-server nodes (default 1); "
                    "the performer publishes to the first, subscriber process k connects to node k mod K")
@@ -287,13 +307,12 @@ def main(argv: list[str] | None = None) -> int:
     if find_nats_server() is None:
         print("audience: nats-server is not installed (apt-get install nats-server; make setup)", file=sys.stderr)
         return 2
-    if not 1 <= args.procs <= 16 or args.cluster < 1 or not 1 <= args.seconds <= 600 \
+    if not 1 <= args.procs <= 16 or args.cluster < 1 or not 4 <= args.seconds <= 3600 \
             or any(n < 1 for n in args.subscribers):
-        p.error("--procs 1..16, --cluster >= 1, --seconds 1..600, --subscribers >= 1")
-    loaded: dict = {}
+        p.error("--procs 1..16, --cluster >= 1, --seconds 4..3600, --subscribers >= 1")
     results = []
     for n in args.subscribers:
-        r = run_size(n, args.seconds, args.procs, args.cluster, loaded)
+        r = run_size(n, args.seconds, args.procs, args.cluster, args.block)
         results.append(r)
         print(json.dumps(r), flush=True)
     print("\n| subscribers | nodes | frames | delivered in order (min share per frame / complete subscribers) "
