@@ -2,7 +2,7 @@
 
 For each audience size, a fresh nats-server (realtime/nats_server.py: the publisher and the
 subscribe-only viewer accounts) and N asyncio subscribers in ``--procs`` processes, each a
-plain NATS-over-WebSocket client (``websockets``: CONNECT as the viewer, SUB
+lean NATS-over-WebSocket client (:class:`_Subscriber`: CONNECT as the viewer, SUB
 ``performer.main.frames``, answer PINGs), as the browser's nats.ws speaks it. The real engine
 (the packaged checkpoint, the bundled clip looped in real time, VMC to a local UDP socket) then
 plays ``--seconds`` of audio with the broker output (``realtime/publish.py``) behind a gate
@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import base64
 import json
 import os
 import struct
@@ -50,68 +51,122 @@ SUBJECT = "performer.main"
 # ---- subscriber process -------------------------------------------------------------------
 
 
-async def _subscriber(url: str, user: tuple[str, str], rec: dict, ready: asyncio.Event, stop: asyncio.Event) -> None:
-    from websockets.asyncio.client import connect
+class _Subscriber(asyncio.Protocol):
+    """One audience member: a WebSocket client (RFC 6455 by hand: the upgrade request, unmasked
+    server frames, masked client frames) speaking the NATS protocol as nats.ws does: CONNECT
+    as the viewer, SUB to the frames, PONG to the server's PING. Lean on purpose (about 5 us a
+    message): a thousand of them share two cores with the broker and the performer."""
 
-    idx, lat = rec["index"], rec["latency"]
-    async with connect(url, compression=None, max_size=None, ping_interval=None, open_timeout=60) as ws:
-        await ws.recv()  # INFO
-        login = json.dumps({"user": user[0], "pass": user[1], "verbose": False, "pedantic": False, "protocol": 1,
-                            "name": "audience-bench"})
-        await ws.send(f"CONNECT {login}\r\nSUB {SUBJECT}.frames 1\r\nPING\r\n".encode())
-        buf = b""
-        recv = asyncio.ensure_future(ws.recv())
-        halt = asyncio.ensure_future(stop.wait())
-        while True:
-            done, _ = await asyncio.wait({recv, halt}, return_when=asyncio.FIRST_COMPLETED)
-            if halt in done:
-                recv.cancel()
+    received_at = 0.0  # monotonic time of the last data, any subscriber of the process
+
+    def __init__(self, host: str, port: int, user: tuple[str, str], ready: asyncio.Event) -> None:
+        self.host, self.port, self.user, self.ready = host, port, user, ready
+        self.index: list[int] = []
+        self.latency: list[float] = []
+        self.errors: list[str] = []
+        self.buf = bytearray()
+        self.nats = bytearray()
+        self.upgraded = False
+
+    def connection_made(self, transport) -> None:
+        self.tr = transport
+        key = base64.b64encode(os.urandom(16)).decode()
+        transport.write(f"GET / HTTP/1.1\r\nHost: {self.host}:{self.port}\r\nUpgrade: websocket\r\n"
+                        f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n"
+                        .encode())
+
+    def send(self, data: bytes) -> None:
+        """One masked binary frame (a zero mask key: the XOR leaves the data as it is)."""
+        n = len(data)
+        head = bytes([0x82, 0x80 | n]) if n < 126 else bytes([0x82, 0x80 | 126]) + n.to_bytes(2, "big")
+        self.tr.write(head + b"\0\0\0\0" + data)
+
+    def data_received(self, data: bytes) -> None:
+        now = time.time()
+        _Subscriber.received_at = time.monotonic()
+        buf = self.buf
+        buf += data
+        if not self.upgraded:
+            end = buf.find(b"\r\n\r\n")
+            if end < 0:
                 return
-            buf += recv.result()
-            recv = asyncio.ensure_future(ws.recv())
-            now = time.time()
-            while True:
-                end = buf.find(b"\r\n")
-                if end < 0:
-                    break
-                if buf.startswith(b"MSG "):
-                    size = int(buf[:end].rsplit(b" ", 1)[1])
-                    if len(buf) < end + 2 + size + 2:
-                        break
-                    payload = buf[end + 2:end + 2 + size]
-                    buf = buf[end + 4 + size:]
-                    idx.append(struct.unpack_from("<I", payload, 8)[0])
-                    lat.append(now - struct.unpack_from("<d", payload, 24)[0])
-                    continue
-                line, buf = buf[:end], buf[end + 2:]
-                if line == b"PING":
-                    await ws.send(b"PONG\r\n")
-                elif line == b"PONG":
-                    ready.set()
-                elif line.startswith(b"-ERR"):
-                    rec["errors"].append(line.decode(errors="replace"))
+            if b" 101 " not in buf[:end].split(b"\r\n", 1)[0]:
+                self.errors.append(bytes(buf[:end]).decode(errors="replace")[:200])
+                self.tr.close()
+                return
+            del buf[:end + 4]
+            self.upgraded = True
+        while len(buf) >= 2:
+            opcode, n, off = buf[0] & 0x0F, buf[1] & 0x7F, 2
+            if n == 126:
+                if len(buf) < 4:
+                    return
+                n, off = int.from_bytes(buf[2:4], "big"), 4
+            elif n == 127:
+                if len(buf) < 10:
+                    return
+                n, off = int.from_bytes(buf[2:10], "big"), 10
+            if len(buf) < off + n:
+                return
+            payload = bytes(buf[off:off + n])
+            del buf[:off + n]
+            if opcode in (0, 1, 2):
+                self._nats(payload, now)
+            elif opcode == 9:  # ping -> pong
+                self.tr.write(bytes([0x8A, 0x80 | len(payload)]) + b"\0\0\0\0" + payload)
+
+    def _nats(self, data: bytes, now: float) -> None:
+        nb = self.nats
+        nb += data
+        while True:
+            end = nb.find(b"\r\n")
+            if end < 0:
+                return
+            if nb.startswith(b"MSG "):
+                size = int(nb[:end].rsplit(b" ", 1)[1])
+                if len(nb) < end + 4 + size:
+                    return
+                start = end + 2
+                self.index.append(int.from_bytes(nb[start + 8:start + 12], "little"))
+                self.latency.append(now - struct.unpack_from("<d", nb, start + 24)[0])
+                del nb[:end + 4 + size]
+                continue
+            line = bytes(nb[:end])
+            del nb[:end + 2]
+            if line.startswith(b"INFO "):
+                login = json.dumps({"user": self.user[0], "pass": self.user[1], "verbose": False,
+                                    "pedantic": False, "protocol": 1, "name": "audience-bench"})
+                self.send(f"CONNECT {login}\r\nSUB {SUBJECT}.frames 1\r\nPING\r\n".encode())
+            elif line == b"PING":
+                self.send(b"PONG\r\n")
+            elif line == b"PONG":
+                self.ready.set()
+            elif line.startswith(b"-ERR"):
+                self.errors.append(line.decode(errors="replace"))
 
 
 async def _subscribers_main(url: str, count: int, folder: Path, user: tuple[str, str]) -> None:
-    recs = [{"index": [], "latency": [], "errors": []} for _ in range(count)]
-    readies = [asyncio.Event() for _ in range(count)]
-    stop = asyncio.Event()
-    tasks = []
-    for k in range(count):
-        tasks.append(asyncio.ensure_future(_subscriber(url, user, recs[k], readies[k], stop)))
+    from urllib.parse import urlsplit
+
+    u = urlsplit(url)
+    loop = asyncio.get_running_loop()
+    subs = [_Subscriber(u.hostname, u.port, user, asyncio.Event()) for _ in range(count)]
+    for k, sub in enumerate(subs):
+        await loop.create_connection(lambda sub=sub: sub, u.hostname, u.port)
         if k % 50 == 49:
             await asyncio.sleep(0.05)  # do not storm the broker's accept queue
-    await asyncio.wait_for(asyncio.gather(*(r.wait() for r in readies)), 120)
+    await asyncio.wait_for(asyncio.gather(*(s.ready.wait() for s in subs)), 120)
     (folder / f"ready-{os.getpid()}").write_text("1")
     while not (folder / "stop").exists():
         await asyncio.sleep(0.2)
-    stop.set()
-    results = await asyncio.gather(*tasks, return_exceptions=True)
-    errors = [repr(r) for r in results if isinstance(r, BaseException)]
+    while time.monotonic() - _Subscriber.received_at < 2.0:  # what the broker still holds arrives
+        await asyncio.sleep(0.2)
+    for s in subs:
+        s.tr.close()
     np.savez(folder / f"subs-{os.getpid()}.npz",
-             index=np.array([np.array(r["index"], np.int64) for r in recs], dtype=object),
-             latency=np.array([np.array(r["latency"], np.float64) for r in recs], dtype=object),
-             errors=np.array(errors + [e for r in recs for e in r["errors"]]))
+             index=np.array([np.array(s.index, np.int64) for s in subs], dtype=object),
+             latency=np.array([np.array(s.latency, np.float64) for s in subs], dtype=object),
+             errors=np.array([e for s in subs for e in s.errors]))
 
 
 # ---- the benchmark ----------------------------------------------------------------------------
