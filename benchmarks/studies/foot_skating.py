@@ -13,6 +13,13 @@ For the validation dances (``models.data.split.VAL_DANCES``, or ``--dances``) pr
 - ``dancers travelling``: the same motion with its root position and heading
   (``--travel``; retargeted from the mocap the same way, not canonicalised).
 
+The performer's motion against the dancers in place: band amplitude, jitter and jerk as
+``performer evaluate`` computes them; ``jitter_mirrored``: the jitter of every sequence (the
+performer's and the dancers') followed by itself backwards (:func:`mirrored`), which leaves out
+the step an FFT sees where a sequence's end wraps round to its start; ``jitter_canonical``: the
+performer's poses canonicalised first (``models.data.canonical``: root x, z and the Hips'
+heading taken out, as the dancers in place are).
+
 ``--plot PNG`` draws one foot of one dance (``--plot-dance``, 8 s from ``--plot-start``) with the
 feet step and without, in place and on the ``--stage`` (default 6x5): its path seen from
 above and its speed, contact frames marked::
@@ -67,9 +74,11 @@ def rows_for(data_root: str, checkpoint: str, dances: list[str] | None, seed: in
 
     from models.evaluation.evaluate import EvalOptions, load_clips, positions, validation_names
     from models.evaluation.foot_skating import foot_skating
+    from models.data.canonical import canonicalize
     from models.evaluation.metrics import band_ratios, jerk
     from models.generate import load_model
     from models.networks import dance_stream
+    from models.rig.motion import Motion
 
     lm = load_model(checkpoint)
     opts = EvalOptions(cache_dir=cache, progress=False)
@@ -79,11 +88,13 @@ def rows_for(data_root: str, checkpoint: str, dances: list[str] | None, seed: in
     where = {k: v for k, v in (("stage", stage), ("facing", facing)) if v is not None}
     out: dict[str, dict[str, dict]] = {label: {}, "dancers in place": {}}
     pos: dict[str, list] = {label: [], "dancers in place": []}
+    canon: list[np.ndarray] = []  # the performer canonicalised as the dancers in place are
     if travel:
         out["dancers travelling"] = {}
     for clip in clips:
         with torch.no_grad():
             poses = dance_stream.DanceStream(lm.model, seed=seed, feet=feet, **where).push(clip.features)
+        canon.append(positions(canonicalize(Motion.from_vector(poses)).to_vector()))
         for row, p in ((label, poses), ("dancers in place", clip.poses)):
             pos[row].append(positions(p))
             out[row][clip.name] = foot_skating(p, pos[row][-1])
@@ -92,8 +103,20 @@ def rows_for(data_root: str, checkpoint: str, dances: list[str] | None, seed: in
             out["dancers travelling"][clip.name] = foot_skating(world)
     real = pos["dancers in place"]
     bands = band_ratios(pos[label], real)
-    motion = {label: {"band_amp": bands["band_amp"], "jitter": bands["jitter"], "jerk": jerk(pos[label]) / jerk(real)}}
+    ends = band_ratios(mirrored(pos[label]), mirrored(real), root=None)
+    motion = {label: {"band_amp": bands["band_amp"], "jitter": bands["jitter"], "jerk": jerk(pos[label]) / jerk(real),
+                      "jitter_mirrored": ends["jitter"], "jitter_canonical": band_ratios(canon, real)["jitter"]}}
     return out, motion
+
+
+def mirrored(pos: list[np.ndarray]) -> list[np.ndarray]:
+    """Each sequence (T, J, 3) put in place and followed by itself backwards (2T frames): its FFT then
+    sees no step where the end wraps round to the start. ``band_ratios``' jitter (above 6 Hz) counts
+    that step's broadband energy: a performer that ends a song turned or standing elsewhere than it
+    began (on a stage) gets one the in-place dance does not have."""
+    from models.evaluation.metrics import in_place
+
+    return [np.concatenate([in_place(p), in_place(p)[::-1]]) for p in pos]
 
 
 def plot_foot(data_root: str, checkpoint: str, dance: str, start_s: float, stage: str, seed: int,
