@@ -210,14 +210,18 @@ def test_loud_applause_after_a_song_idles_within_2_s_thanks_to_the_sure_count(lm
     assert settle_once is not None and settle_once > 2.0, settle_once
 
 
+def constant_network(logit: float) -> np.ndarray:
+    """Packed parameters of a network whose logit is ``logit`` whatever it hears."""
+    zeros = np.zeros((mg.HIDDEN, mg.N_STATS))
+    return mg.pack(np.zeros(mg.N_STATS), np.ones(mg.N_STATS), zeros, np.zeros(mg.HIDDEN), np.zeros(mg.HIDDEN), logit)
+
+
 def test_the_dancing_performer_judges_by_the_stop_network_the_idle_one_by_the_detector() -> None:
     """A detector that always hears music and a stop network that never does: a dancing
     performer's frame is not music, an idle one's is; without a stop network both are."""
     d = 64
     rng = np.random.default_rng(0)
-    zeros = np.zeros((mg.HIDDEN, mg.N_STATS))
-    music = mg.pack(np.zeros(mg.N_STATS), np.ones(mg.N_STATS), zeros, np.zeros(mg.HIDDEN), np.zeros(mg.HIDDEN), 10.0)
-    never = mg.pack(np.zeros(mg.N_STATS), np.ones(mg.N_STATS), zeros, np.zeros(mg.HIDDEN), np.zeros(mg.HIDDEN), -10.0)
+    music, never = constant_network(10.0), constant_network(-10.0)
     row = rng.normal(size=d).astype(np.float32)
     row[mg.ENERGY_COL] = -20.0  # above the silence threshold
     def hears(stop_params: np.ndarray, dancing: bool) -> list[bool]:  # 10 frames in one state
@@ -228,6 +232,31 @@ def test_the_dancing_performer_judges_by_the_stop_network_the_idle_one_by_the_de
     assert all(hears(np.zeros(mg.N_PARAMS), dancing=False)) and all(hears(np.zeros(mg.N_PARAMS), dancing=True))
     assert mg.MusicGate(np.zeros(d), np.ones(d), music, -60.0, clarity_col=60, stop_params=never).has_stop
     assert not mg.MusicGate(np.zeros(d), np.ones(d), music, -60.0, clarity_col=60).has_stop
+
+
+def test_a_voice_over_the_music_is_music_while_the_music_keeps_a_floor() -> None:
+    """The voice-over rule: a stop network that never hears music and a voice network that always
+    does. A dancing performer's steady sound (a voice over music: no pauses) stays music; the
+    same with the level falling 25 dB every other frame (a voice alone, pausing) does not, nor
+    with the rule switched off or without a voice network."""
+    d = 64
+    rng = np.random.default_rng(0)
+    music, never = constant_network(10.0), constant_network(-10.0)
+    row = rng.normal(size=d).astype(np.float32)
+    rows = np.repeat(row[None], 40, 0)
+    rows[:, mg.ENERGY_COL] = -20.0  # above the silence threshold
+    pausing = rows.copy()
+    pausing[1::2, mg.ENERGY_COL] = -20.0 - mg.FLOOR_DB - 7.0  # still above it
+
+    def hears(x: np.ndarray, voice: np.ndarray, rule: bool = True) -> list[bool]:  # dancing throughout
+        g = mg.MusicGate(np.zeros(d), np.ones(d), music, -60.0, clarity_col=60, stop_params=never,
+                         voice_params=voice, voice_rule=rule)
+        return [g.step(r, True) for r in x]
+
+    assert all(hears(rows, music))
+    assert not any(hears(pausing, music)[4:])
+    assert not any(hears(rows, music, rule=False)) and not any(hears(rows, np.zeros(mg.N_PARAMS)))
+    assert not any(hears(rows, never))  # the voice network hears no music: a crowd, noise
 
 
 def test_the_stop_network_gives_the_beat_statistics_no_weight() -> None:

@@ -31,7 +31,9 @@ features as the engine computes them):
   The between-songs targets of issue 43: silence idle within 3 s (a song's 2-s break is
   danced through), speech within 2 s, crowd and noise within 2.5 s.
 
-``--parts`` picks the parts (default all: ``recordings,mixes,gaps``).
+``--parts`` picks the parts (default all: ``recordings,mixes,gaps``). ``--floor-db`` and
+``--voice-margin`` set the voice-over rule's ``music_gate.FLOOR_DB`` and ``VOICE_MARGIN`` (``inf``:
+that cue always holds; ``--floor-db 0``: the rule off), to measure its parts alone.
 
 It also prints the gate's own cost per frame (median and 99th percentile, microseconds).
 
@@ -175,6 +177,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", type=Path, help="write the results as JSON")
     p.add_argument("--parts", default="recordings,mixes,gaps",
                    help="comma-separated parts to run: recordings, mixes (voices and breaks), gaps (default all)")
+    p.add_argument("--floor-db", type=float, help="the voice-over rule's FLOOR_DB (models/networks/music_gate.py; "
+                   "inf: the voice network alone, 0: the rule off)")
+    p.add_argument("--voice-margin", type=float, help="the voice-over rule's VOICE_MARGIN (inf: the floor alone)")
     args = p.parse_args(argv)
     parts = set(args.parts.split(","))
     if parts - {"recordings", "mixes", "gaps"}:
@@ -185,8 +190,13 @@ def main(argv: list[str] | None = None) -> int:
     from models.features.spectral import extract_features
     from models.generate import load_model
     from models.networks.dance_stream import DanceStream
+    from models.networks import music_gate as gate
     from models.training import music_gate as mg
 
+    if args.floor_db is not None:
+        gate.FLOOR_DB = args.floor_db
+    if args.voice_margin is not None:
+        gate.VOICE_MARGIN = args.voice_margin
     try:
         lm = load_model(args.checkpoint)
         if not getattr(lm.model, "takes_style", False):

@@ -315,6 +315,9 @@ class DanceVQ(nn.Module):
         # its stop network (models.networks.music_gate: judges while the performer dances, without
         # the beat statistics); all zeros (checkpoints from before it): `presence` in both states
         self.register_buffer("presence_stop", torch.zeros(PRESENCE_PARAMS))
+        # its voice network (models.networks.music_gate, issue 43: a voice over the music is music;
+        # fitted with voices over music labelled music); all zeros (checkpoints from before it): no such rule
+        self.register_buffer("presence_voice", torch.zeros(PRESENCE_PARAMS))
         # choreographic memory (models.training.dance_vq.fit_members): for each code, up to
         # `members` real 2 * seg-frame windows of the dancers' poses whose encoding is nearest the
         # code (the first seg frames are the movement, the rest its natural continuation, float16),
@@ -346,7 +349,8 @@ class DanceVQ(nn.Module):
                               error_msgs) -> None:
         """Checkpoints saved before the style, tempo or travel memory or the presence detector
         existed load without them (zeros: unknown, not fitted, in place)."""
-        for name in ("member_style", "style_prior", "member_period", "member_travel", "presence", "presence_stop"):
+        for name in ("member_style", "style_prior", "member_period", "member_travel", "presence", "presence_stop",
+                     "presence_voice"):
             state_dict.setdefault(prefix + name, torch.zeros_like(getattr(self, name)))
         super()._load_from_state_dict(state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys,
                                       error_msgs)

@@ -7,7 +7,8 @@ weight (``w_idle``: 0 dancing, 1 idle; a smoothstep of it blends the pose,
 length of the current break. Which frames sound like music is the detector's call:
 
 * a model with a fitted presence detector (:class:`models.networks.music_gate.MusicGate`, the
-  shipped one): its detector while idle, its stop network while dancing;
+  shipped one): its detector while idle, its stop network while dancing (a voice over the
+  music kept as music by its voice network, the voice-over rule);
 * an older one: the log frame energy above the model's silence threshold, and a logistic music
   detector on a 0.5-s running mean of the spectral shape (MFCC 1-12) and the beat tracker's
   pulse clarity (:data:`GATE_TAU_RETURN`, :data:`GATE_MARGIN`).
@@ -74,14 +75,17 @@ class IdleGate:
     model: the dance_vq model whose gate runs (its ``presence``/``presence_stop`` networks, or
     its logistic ``gate``/``gate_w``); feat_mean, feat_std: its feature standardisation (D,);
     hold_breaks: False judges break frames by the detector like any other (as before breaks
-    were held: silence stopped after :data:`ABSENT_FRAMES`).
+    were held: silence stopped after :data:`ABSENT_FRAMES`); voice_rule: False hears a voice
+    over the music as the stop network does (``music_gate.MusicGate``'s voice-over rule off;
+    ``presence.voice_rule`` switches it on a running gate).
 
     State (``reset``): ``music`` (bool), ``run`` (frames of disagreement, weighted),
     ``w_idle`` (0..1), ``level`` (dB), ``break_frames`` (the current break's length),
     ``break_silent`` (every frame of it silent), ``forced_idle``.
     """
 
-    def __init__(self, model: DanceVQ, feat_mean: np.ndarray, feat_std: np.ndarray, hold_breaks: bool = True) -> None:
+    def __init__(self, model: DanceVQ, feat_mean: np.ndarray, feat_std: np.ndarray, hold_breaks: bool = True,
+                 voice_rule: bool = True) -> None:
         c = model.config
         self.hold_breaks = bool(hold_breaks)
         self.energy_min, self._gate_b = (float(v) for v in model.gate)
@@ -96,7 +100,8 @@ class IdleGate:
         self._level_a = math.exp(-1.0 / LEVEL_TAU)
         fitted = bool(model.presence.abs().sum() > 0) and self._ecol == ENERGY_COL  # else the logistic detector
         self.presence = MusicGate(feat_mean, feat_std, model.presence.numpy(), self.energy_min, c.clarity_col,
-                                  c.gate_col, c.gate_tau, model.presence_stop.numpy()) if fitted else None
+                                  c.gate_col, c.gate_tau, model.presence_stop.numpy(), model.presence_voice.numpy(),
+                                  voice_rule) if fitted else None
         self.forced_idle = False
         self.reset()
 

@@ -42,6 +42,17 @@ below ``-``:data:`MARGIN_STOP`; while it is not, with
 :data:`TAU_IDLE` (so they forget the gap quickly) and it starts again above
 :data:`MARGIN_START`. In silence (log energy at most the model's threshold) the
 statistics are frozen and the gate says "no music".
+
+**A voice over the music is music** (issue 43: a rapper, a DJ or a host over a track). Both
+networks hear a voice as "no music", over a song too. A model may carry a third, the **voice
+network** (``presence_voice``, the stop network's statistics, fitted with espeak-ng voices over
+half the music clips labelled music; all zeros: none, no such rule). While the performer
+dances, a frame the stop network hears as no music still counts as music when the voice
+network hears music (logit above ``-``:data:`VOICE_MARGIN`) and the music keeps a floor under
+the voice: the log energy's range over the last :data:`FLOOR_FRAMES` sounding frames is under
+:data:`FLOOR_DB` (a voice alone falls 20-30 dB between its words, over music only to the
+music's level; a crowd or noise has no pauses, but there the voice network hears no music).
+``voice_rule=False`` switches it off.
 """
 
 from __future__ import annotations
@@ -84,6 +95,13 @@ MARGIN_START: float = 1.5
 #: Frames of music an idle performer must hear before it dances again (0.1 s; the fade
 #: after it takes 0.53 s: back within a second).
 START_FRAMES: int = 3
+#: The voice-over rule (module docstring): the voice network's logit above minus this hears
+#: music, while the log energy's range (dB) over the last FLOOR_FRAMES sounding frames (1 s) lies
+#: under FLOOR_DB. Chosen on espeak-ng voices over training songs and synthetic music
+#: (benchmarks/studies/idle_gate.py reports the shared readers over the shared recordings).
+VOICE_MARGIN: float = 1.0
+FLOOR_FRAMES: int = 30
+FLOOR_DB: float = 18.0
 #: Feature columns read: MFCC 1-2, log energy, MFCC 1-12 differences, energy difference, onset
 #: (and the beat columns: the model's ``clarity_col`` and its neighbours).
 MFCC_COLS: tuple[int, ...] = (1, 2)
@@ -190,6 +208,23 @@ def presence_logit(stats, mean, std, w1, b1, w2, b2):  # pragma: no cover - comp
     return out
 
 
+@njit(cache=True, nogil=True)
+def floor_range(ring, state, e):  # pragma: no cover - compiled
+    """Push log energy ``e`` (dB) into ``ring`` (FLOOR_FRAMES,) float64 (NaN: not yet filled) at
+    ``state[0]`` (the next slot, advanced in place) and return the ring's range (max - min, dB)."""
+    i = int(state[0])
+    ring[i] = e
+    state[0] = (i + 1) % ring.shape[0]
+    lo = e
+    hi = e
+    for k in range(ring.shape[0]):
+        v = ring[k]
+        if v == v:  # not NaN
+            lo = min(lo, v)
+            hi = max(hi, v)
+    return hi - lo
+
+
 class MusicGate:
     """Frame-by-frame music presence: :meth:`step` takes one feature row (D,) and the
     performer's current state (dancing or not) and says whether this frame sounds like
@@ -201,12 +236,15 @@ class MusicGate:
     ``gate_col``; -1: none, statistic 0 is MFCC 1's mean); tau_music: the statistics' time
     constant (frames) while dancing (the model's ``gate_tau``); stop_params: the packed stop
     network that judges while dancing (the model's ``presence_stop``; None or all zeros:
-    ``params`` in both states).
+    ``params`` in both states); voice_params: the packed voice network (the model's
+    ``presence_voice``; None or all zeros: no voice-over rule); voice_rule: False switches the
+    voice-over rule off (module docstring).
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
                  clarity_col: int, steadiness_col: int = -1, tau_music: float = TAU_MUSIC,
-                 stop_params: np.ndarray | None = None) -> None:
+                 stop_params: np.ndarray | None = None, voice_params: np.ndarray | None = None,
+                 voice_rule: bool = True) -> None:
         self._ccol = int(clarity_col)
         self._scol = int(steadiness_col)
         self._mfcc_mean = np.asarray(feat_mean, np.float64)[list(MFCC_COLS)]
@@ -215,6 +253,11 @@ class MusicGate:
         self._start = self._network(params)
         self.has_stop = stop_params is not None and bool(np.any(np.asarray(stop_params) != 0))
         self._stop = self._network(stop_params) if self.has_stop else self._start
+        self.has_voice = voice_params is not None and bool(np.any(np.asarray(voice_params) != 0))
+        self._voice = self._network(voice_params) if self.has_voice else self._start
+        self.voice_rule = bool(voice_rule)
+        self._ring = np.full(FLOOR_FRAMES, np.nan)  # the last sounding frames' log energy (dB)
+        self._ring_at = np.zeros(1)
         self.energy_min = float(energy_min)
         self._a_music = math.exp(-1.0 / tau_music)
         self._a_idle = math.exp(-1.0 / TAU_IDLE)
@@ -231,6 +274,10 @@ class MusicGate:
         self._state = np.zeros(N_STATE)
         self.stats = np.zeros(N_STATS)
         self.logit = 0.0  # the running mean of the detector's logit
+        self._ring[:] = np.nan
+        self._ring_at[0] = 0.0
+        self.floor_db = 0.0  # the log energy's range over the last FLOOR_FRAMES sounding frames
+        self.voice_frames = 0  # frames the voice-over rule kept as music
 
     def step(self, row: np.ndarray, dancing: bool) -> bool:
         """True when frame ``row`` (D,) sounds like music to a performer that is ``dancing``."""
@@ -241,7 +288,16 @@ class MusicGate:
         z = presence_logit(self.stats, *(self._stop if dancing else self._start))
         a = self._a_logit if dancing else 0.0  # idle: the music's return is heard at once
         self.logit = a * self.logit + (1.0 - a) * z
-        return self.logit > (-MARGIN_STOP if dancing else MARGIN_START)
+        self.floor_db = floor_range(self._ring, self._ring_at, float(row[ENERGY_COL]))
+        if not dancing:
+            return self.logit > MARGIN_START
+        if self.logit > -MARGIN_STOP:
+            return True
+        if self.voice_rule and self.has_voice and self.floor_db < FLOOR_DB \
+                and presence_logit(self.stats, *self._voice) > -VOICE_MARGIN:
+            self.voice_frames += 1  # a voice over the music: still music
+            return True
+        return False
 
     def stop_count(self) -> float:
         """Frames a dancing performer's frame that :meth:`step` heard as no music counts towards

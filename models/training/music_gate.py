@@ -24,7 +24,9 @@ the RMS level of the signal, ``20 log10(rms)``.
 Two networks are fitted on the same programmes: the detector (both time constants, all 12
 statistics), which the idle performer judges by, and the **stop network** the dancing one
 judges by (``presence_stop``: the dancing time constant only, the beat statistics
-``BEAT_STATS`` left out; ``--no-stop-network``: none, as before it).
+``BEAT_STATS`` left out; ``--no-stop-network``: none, as before it). ``--voice-network`` fits
+only a third, the voice network of the voice-over rule (``presence_voice``: the stop network's
+fit on programmes with half their music clips voiced, labelled music; the shipped one at seed 0).
 
 Refit a checkpoint's detector (the rest of the checkpoint is copied unchanged); with
 ``--steadiness`` it also adds the spectral steadiness column (models/features/steadiness.py)
@@ -289,6 +291,9 @@ STEADY_MUSIC_WEIGHT: float = 2.0
 #: but one fit idled a drums-and-bass recording alone 15 % of its length: not shipped
 #: (docs/history.md, "Listening, second round").
 VOICE_OVER: float = 0.0
+#: Share of voiced music clips in the voice network's programmes (``--voice-network``, the
+#: voice-over rule of models/networks/music_gate.py; the shipped one: 0.5, seed 0).
+VOICE_NETWORK_SHARE: float = 0.5
 #: The label of those clips' frames: music to the stop network; the detector that starts an idle
 #: performer leaves them out (fitted on them, it started on a host's voice alone: a reading
 #: between two songs held the idle 74 % of its length instead of 100 %).
@@ -540,14 +545,31 @@ def fit_network(x: np.ndarray, y: np.ndarray, seed: int = 0, steps: int = 400, m
 
 def fit_presence(model, fcfg, songs: list[np.ndarray], rng: np.random.Generator, minutes: float = 60.0,
                  progress: bool = False, music_weight: float = 1.0, stop: bool = True,
-                 stop_only: bool = False, voice_over: float = VOICE_OVER) -> dict[str, float]:
+                 stop_only: bool = False, voice_over: float = VOICE_OVER, voice_network: bool = False) -> dict[str, float]:
     """Fit ``model``'s presence detector (its ``presence`` buffer) on ``songs`` (training songs'
     audio, (n,) at 22050 Hz) and the synthetic material (:func:`fit_network`'s ``music_weight``),
     and with ``stop`` its stop network (``presence_stop``: the same programmes' statistics at
     the dancing time constant only, the beat statistics ``BEAT_STATS`` left out; else zeros);
     returns the training accuracy per class (``stop_`` keys: the stop network's). ``stop_only``:
     the model's detector is kept as it is and only the stop network is fitted; ``voice_over``:
-    :func:`programme`'s."""
+    :func:`programme`'s. ``voice_network``: only the voice network (``presence_voice``, the
+    voice-over rule of models/networks/music_gate.py) is fitted, as the stop network is but on
+    programmes with ``voice_over`` (:data:`VOICE_NETWORK_SHARE` when 0) of their music voiced;
+    the detector and the stop network are kept."""
+    if voice_network:
+        progs = programme_features(fcfg, songs, rng, minutes, progress=progress,
+                                   voice_over=voice_over or VOICE_NETWORK_SHARE)
+        xs, ys = training_rows(model, progs, taus=(model.config.gate_tau,))
+        ys = np.minimum(ys, 1.0)  # a voice over music is music
+        rng.integers(1 << 30)  # the detector's seed, unused: the same draws as --voice-over --stop-only
+        pv = fit_network(xs, ys, int(rng.integers(1 << 30)), music_weight=music_weight, drop=mg.BEAT_STATS)
+        with torch.no_grad():
+            model.presence_voice.copy_(torch.from_numpy(pv))
+        acc = {f"voice_{k}": v for k, v in _accuracy(pv, xs, ys).items()}
+        if progress:
+            print(f"music gate: voice network {acc['voice_music_acc']:.3f} of music frames (voiced too), "
+                  f"{acc['voice_other_acc']:.3f} of other frames right ({len(ys)} rows)")
+        return acc
     progs = programme_features(fcfg, songs, rng, minutes, progress=progress, voice_over=voice_over)
     x, y = training_rows(model, progs)
     x, y = x[y != VOICED], y[y != VOICED]  # the idle performer's detector: a voice over music left out
@@ -608,6 +630,10 @@ def main(argv: list[str] | None = None) -> int:
                         f"(default {VOICE_OVER:g}: none)")
     p.add_argument("--stop-only", action="store_true",
                    help="keep the checkpoint's detector (the idle performer's) and refit only the stop network")
+    p.add_argument("--voice-network", action="store_true",
+                   help="fit only the voice network of the voice-over rule (presence_voice: a voice over the music "
+                        f"is music) on programmes with --voice-over (default {VOICE_NETWORK_SHARE:g}) of the music "
+                        "voiced; the detector and the stop network are kept")
     p.add_argument("--steadiness", action="store_true",
                    help="add the spectral steadiness column to the checkpoint's features (models/features/steadiness.py): "
                         "the detector reads it instead of MFCC 1, the predictor never does")
@@ -633,6 +659,7 @@ def main(argv: list[str] | None = None) -> int:
         songs = song_audio(a.data, training_songs(a.data))
         fit_presence(lm.model, fcfg, songs, np.random.default_rng(a.seed), a.minutes, progress=True,
                      stop=not a.no_stop_network, stop_only=a.stop_only, voice_over=a.voice_over,
+                     voice_network=a.voice_network,
                      music_weight=STEADY_MUSIC_WEIGHT if fcfg.steadiness else 1.0)
         save_checkpoint(a.out, lm.model, model_name=meta["model_name"], generator_config=lm.model.config,
                         feature_config=feature_config, rig=meta["rig"], extra=meta.get("extra"))
