@@ -204,8 +204,9 @@ def run(spec: dict) -> dict:
         performers = []
         lanes = []
         for k, p in enumerate(ensemble):
-            # in place, as performer run's ensembles (their own spots on one stage are not built)
-            pipe = build_pipeline(spec["checkpoint"], seed=int(p.get("seed", 0)), loaded=loaded, stage=0)
+            # each on its own spot of performer run's default 3x2 stage, as performer run's ensembles
+            pipe = build_pipeline(spec["checkpoint"], seed=int(p.get("seed", 0)), loaded=loaded,
+                                  spot=(k, len(ensemble)))
             mine = [OscSink("127.0.0.1", int(p["osc_port"]), mode="vmc"),
                     server.route(f"/ws/{p['name']}", p["name"], default=k == 0), TimingSink(frames_max)]
             lanes.append((p["name"], mine))
