@@ -42,19 +42,9 @@ class Pipeline:
 
 def _load(checkpoint, library, mix: bool):
     """:func:`load_model` of ``checkpoint``, its memory replaced by (or mixed with) ``library``."""
-    import dataclasses
+    from models.networks.library_player import with_library
 
-    lm = load_model(checkpoint)
-    if library is None:
-        if mix:
-            raise CheckpointError("--mix needs --library FILE.npz", source=lm.path)
-        return lm
-    if not getattr(lm.model, "takes_style", False):
-        raise CheckpointError(f"model {lm.name!r} cannot dance a library (--library needs a dance_vq model)",
-                              source=lm.path)
-    from models.networks.library_player import load_library_model
-
-    return dataclasses.replace(lm, model=load_library_model(lm.model, library, mix=mix))
+    return with_library(load_model(checkpoint), library, mix)
 
 
 def build_pipeline(checkpoint: str | Path | None = None, *, window: int = 128, hop: int = 64, seed: int = 0,

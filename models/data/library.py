@@ -16,6 +16,8 @@ read without pickle; C clips, N frames in all, K scored points):
   (C, K) float64, NaN where a clip's file has no joint for that point
 - ``clip_offsets`` (C, 21, 3), ``clip_end_offsets`` (C, 9, 3) float64: each clip's own rest
   skeleton at the rig's scale (the one its error is measured on)
+- ``clip_bpm`` (C,) float64, optional: the clip's tempo given at build time (``--bpm``), 0 where
+  none was (the player then reads it from the motion: models/networks/library_player.py)
 """
 
 from __future__ import annotations
@@ -53,10 +55,12 @@ class LibraryClip:
     scale: float
     error_mean_cm: float
     error_max_cm: float
+    bpm: float = 0.0  # given at build time; 0: from the motion when played
 
 
-def save_library(path: str | Path, clips: list[ImportedClip]) -> None:
-    """Write ``clips`` to ``path`` (.npz) atomically: a temporary file renamed into place."""
+def save_library(path: str | Path, clips: list[ImportedClip], bpm: list[float] | None = None) -> None:
+    """Write ``clips`` to ``path`` (.npz) atomically: a temporary file renamed into place.
+    ``bpm``: per clip its tempo in beats per minute, 0 unknown (None: all unknown)."""
     path = Path(path)
     if not clips:
         raise DataError("no clips to write", source=path)
@@ -89,6 +93,7 @@ def save_library(path: str | Path, clips: list[ImportedClip]) -> None:
         "clip_point_error_max_cm": per_point("error_max_cm"),
         "clip_offsets": np.stack([c.skeleton.offsets for c in clips]),
         "clip_end_offsets": np.stack([c.skeleton.end_offsets for c in clips]),
+        "clip_bpm": np.array([float(b) for b in bpm] if bpm is not None else [0.0] * len(clips)),
     }
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
@@ -138,6 +143,7 @@ def load_library(path: str | Path) -> list[LibraryClip]:
                 units=str(data["clip_units"][i]), up=str(data["clip_up"][i]), mirrored=bool(data["clip_mirrored"][i]),
                 source_fps=float(data["clip_source_fps"][i]), scale=float(data["clip_scale"][i]),
                 error_mean_cm=float(data["clip_error_mean_cm"][i]), error_max_cm=float(data["clip_error_max_cm"][i]),
+                bpm=float(data["clip_bpm"][i]) if "clip_bpm" in data else 0.0,
             ))
     except (RigError, TypeError, ValueError, IndexError) as exc:
         raise DataError(f"bad library arrays: {exc}", source=path) from None

@@ -43,11 +43,12 @@ from models.networks.blend import blend_track
 from models.networks.dance_jit import (joint_speed, match_exemplar, push_history, renorm_pose, sanitize_rows,
                                        warp_pose)
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
-from models.networks.dance_vq import DanceVQ, style_token
+from models.networks.dance_vq import DanceVQ
 from models.networks import feet as feet_part
 from models.networks.feet import FeetLock
 from models.networks.stage import SpotStage, Stage, cached_travel
 from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate
+from models.networks.library_player import resolve_style
 from models.networks.streaming import FEATURE_LIMIT
 from models.networks.tempo import DENSITY_WINDOW, TEMPO_RANGE, TempoFollower, danced_beat, onset_density
 from models.rig.humanoid import BONE_INDEX
@@ -583,7 +584,7 @@ class DanceStream:
         self.feature_dim = c.input_dim  # columns push() takes: the predictor's, + the gate's steadiness column
         self._fd = c.feature_dim  # the predictor's columns, the first of each row
         self.seed = int(seed)
-        self.style = style_token(style)
+        self.style, self._pstyle = resolve_style(model, style)  # exemplars' token, predictor's (library_player)
         self._feat_mean = model.feat_mean.numpy().astype(np.float32)
         self._feat_std = model.feat_std.numpy().astype(np.float32)
         self._idle = IdleGate(model, self._feat_mean, self._feat_std)  # music present or not, the idle weight
@@ -669,6 +670,7 @@ class DanceStream:
         self._density = 0.0  # their onset density (per s), taken at each code step
         self._lag = WARP_LAG  # exemplar frames the beat warp plays behind the movement
         self._has_cont = False  # the playing movement has a real continuation to match the next one to
+        self.playing_member: tuple[int, int] | None = None  # (code, exemplar) of the playing movement; None: decoded
         self._idle.reset()  # no music, fully idle: a stream starts at rest and fades in on music
         self._played_contact = np.zeros((3 * self.seg, 3), np.float32)  # each foot's contact and the lift, as _played
         self._at = float(self.seg)  # where in _played the last frame was read
@@ -682,8 +684,9 @@ class DanceStream:
         self._stage.reset()  # the centre of the stage, facing the audience
 
     def set_style(self, style: str | None) -> None:
-        """Dance this style from the next code on: None/"auto", "chacha", "rumba", "waltz" (ConfigError otherwise)."""
-        self.style = style_token(style)
+        """Dance this style from the next code on: None/"auto", "chacha", "rumba", "waltz", or a library
+        folder (models/networks/library_player.py); ConfigError otherwise."""
+        self.style, self._pstyle = resolve_style(self.model, style)
 
     def set_energy(self, energy: float) -> None:
         """How lively the movements are, from the next code on: 0 (the calmest the music
@@ -818,12 +821,12 @@ class DanceStream:
 
     def _next_code(self) -> None:
         m, pred = self.model, self._predictor
-        guided = bool(self.style) and STYLE_GUIDANCE != 1.0
+        guided = bool(self._pstyle) and STYLE_GUIDANCE != 1.0
         with single_thread_blas():
             token = pred.embed(self._hist.reshape(-1), self._last)
             prefix = self._prefix
-            if prefix is None or prefix.style != self.style:  # the first step, or the style changed since
-                prefix = Prefix(pred, list(self._tokens), self.style)
+            if prefix is None or prefix.style != self._pstyle:  # the first step, or the style changed since
+                prefix = Prefix(pred, list(self._tokens), self._pstyle)
             logits = pred.logits_after(prefix, token)
             if guided:  # classifier-free guidance towards the requested style
                 auto = self._prefix_auto if self._prefix_auto is not None else Prefix(pred, list(self._tokens), 0)
@@ -842,7 +845,7 @@ class DanceStream:
             self._tokens.append(token)
             # the next step's window but its newest token is known now: its layers run on the frames between
             nxt = list(self._tokens)[-(pred.window - 1):]
-            self._prefix = Prefix(pred, nxt, self.style)
+            self._prefix = Prefix(pred, nxt, self._pstyle)
             self._prefix_auto = Prefix(pred, nxt, 0) if guided else None
         draws = [m.sample(logits, self.rng) for _ in range(DRAWS)]
         if int(self._counts[draws[0]]) == 0:  # no exemplars (members = 0): the decoder writes the movement
@@ -852,6 +855,7 @@ class DanceStream:
             window = np.concatenate([segment, np.repeat(segment[-1:], self.seg, axis=0)])
             self._stage.handover(self._advance(self.seg), None, not self.codes_drawn)  # in place
             self._play(window, 1.0)  # no continuation to play into: its own pace (no contacts known)
+            self.playing_member = None
             self._own_speed = 0.0
             self._commit(draws[0])
             self._has_cont = False
@@ -885,6 +889,7 @@ class DanceStream:
         if self._has_cont and SPEED_MATCH > 0.0:  # the speed the bend adds or takes away, undone
             rate = self._speed_matched(cands[i], best, rate)
         self._stage.handover(self._advance(self.seg), self._travel[pairs[i]], not self.codes_drawn)
+        self.playing_member = pairs[i]
         self._play(best, rate, self._bone_limit(best, max(rate, self._rate)), self._contacts[pairs[i]])
         self._own_speed = float(self._member_speed[pairs[i]])
         self._commit(pairs[i][0])

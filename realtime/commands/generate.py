@@ -19,10 +19,13 @@ EPILOG = """\
 examples:
   performer generate song.mp3 --out song.bvh
   performer generate song.wav --out song.npz --checkpoint runs/causal/best.pt
+  performer generate song.wav --out song.bvh --library my.npz --style hiphop
 """
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from realtime.commands.library import add_play_options
+
     p = subparsers.add_parser("generate", help="generate motion for an audio file (BVH/NPZ)",
                               description=DESCRIPTION, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -31,8 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--checkpoint", metavar="CKPT", help="model checkpoint (default: the packaged models/assets/default.pt)")
     p.add_argument("--window", type=int, default=128, help="causal model: window length in frames (default 128)")
     p.add_argument("--hop", type=int, default=64, help="causal model: hop between windows in frames, a multiple of 16 (default 64)")
-    p.add_argument("--style", choices=("auto", "chacha", "rumba", "waltz"), default="auto",
-                   help="dance_vq models: dance this style (default auto: the style the music suggests)")
+    add_play_options(p)  # --style, --library, --mix (realtime/commands/library.py)
     p.add_argument("--energy", type=float, default=1.0, metavar="E",
                    help="dance_vq models: how lively, 0 (calmest) .. 2 (liveliest); default 1: as the music asks "
                         "(docs/show.md, \"Energy\")")
@@ -66,7 +68,12 @@ def run(args: argparse.Namespace) -> int:
     check_output_path(args.out)  # fail before loading anything
     stage = parse_stage(args.stage) if args.stage is not None else None
     check_facing(args.facing)
-    loaded = load_model(args.checkpoint)
+    args.style = args.style or "auto"
+    if args.style not in ("auto", "chacha", "rumba", "waltz") and args.library is None:
+        raise ConfigError(f"--style {args.style}: choose auto, chacha, rumba or waltz (or a folder of --library)")
+    from models.networks.library_player import with_library
+
+    loaded = with_library(load_model(args.checkpoint), args.library, bool(args.mix))
     if stage is None:  # the default: a small stage for the dancing models, in place for the others
         stage = DEFAULT_STAGE if getattr(loaded.model, "takes_style", False) else 0
     with torch_threads(args.threads):

@@ -33,6 +33,14 @@ status 2, and nothing is written. A map file names the joints yourself, one per 
 
 Rig names: Spine Chest Neck Head, and Left/Right + UpperArm LowerArm Hand HandTip
 UpperLeg LowerLeg Foot Toes. Unmapped ones are still found by name.
+
+Each clip's tempo (what the performer's tempo following plays it against) is read from its
+motion when it is danced, unless --bpm gives it: --bpm 120 for every clip, --bpm hiphop=96
+for the clips of folder hiphop, --bpm take3=128 for the clip named take3 (repeatable; a
+clip's own value wins over its folder's, which wins over a bare number).
+
+Dance a library live or offline: performer run|generate --library FILE.npz [--style FOLDER]
+[--mix] (docs/library.md).
 """
 
 
@@ -52,6 +60,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     build.add_argument("--map", type=Path, metavar="FILE", help="joint names for rigs the conventions do not cover (see above)")
     build.add_argument("--units", default="auto", metavar="UNIT",
                        help="the files' length unit: auto (default: from the leg length), m, cm, mm, in, ft or mmd")
+    build.add_argument("--bpm", action="append", metavar="[NAME=]BPM",
+                       help="tempo of the clips (all), of folder NAME or of clip NAME, beats per minute, "
+                            "20..300; repeat (default: read from the motion when danced)")
     build.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                        help="show a progress bar on stderr (default: when stderr is a terminal)")
     build.set_defaults(func=build_command)
@@ -59,6 +70,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                           description="List the clips of a library file: source, folder, length, units, retarget error.")
     info.add_argument("library", type=Path, metavar="FILE.npz")
     info.set_defaults(func=info_command)
+
+
+def add_play_options(group) -> None:
+    """``--style``, ``--library`` and ``--mix`` of ``performer run`` and ``performer generate`` (defaults None)."""
+    group.add_argument("--style", metavar="NAME",
+                       help="dance this style to any music: auto (default: the style the music suggests), chacha, "
+                            "rumba, waltz, or with --library a folder of the library; dance_vq models only "
+                            "(performer run, live: /performer/style)")
+    group.add_argument("--library", metavar="FILE.npz",
+                       help="dance your own motion library (performer library build) instead of the checkpoint's "
+                            "memory: its windows play, the music chooses among them; dance_vq models (docs/library.md)")
+    group.add_argument("--mix", action=argparse.BooleanOptionalAction, default=None,
+                       help="with --library: the checkpoint's dancers and the library together (default: the library "
+                            "alone)")
 
 
 def collect(paths: list[Path]) -> list[Path]:
@@ -121,6 +146,29 @@ def _point_table(clips) -> str:
     return "\n".join(rows)
 
 
+def clip_bpm(specs: list[str], clips) -> list[float]:
+    """Per clip its --bpm tempo (0: none given) from ``specs`` ("BPM", "FOLDER=BPM" or "CLIP=BPM");
+    ConfigError naming a bad value or a name that is neither a clip nor a folder."""
+    from models.errors import ConfigError
+
+    every, by_name = 0.0, {}
+    for spec in specs:
+        name, sep, value = spec.rpartition("=")
+        try:
+            bpm = float(value)
+        except ValueError:
+            bpm = float("nan")
+        if not 20.0 <= bpm <= 300.0:  # NaN fails too
+            raise ConfigError(f"--bpm {spec}: the tempo must be a number of beats per minute in 20..300")
+        if not sep:
+            every = bpm
+        elif any(name in (c.name, c.folder) for c in clips):
+            by_name[name] = bpm
+        else:
+            raise ConfigError(f"--bpm {spec}: no clip or folder named {name!r} in this build")
+    return [by_name.get(c.name, by_name.get(c.folder, every)) for c in clips]
+
+
 def build_command(args: argparse.Namespace) -> int:
     from models.data.bvh_import import UNITS, import_bvh, read_map
     from models.data.library import save_library
@@ -146,7 +194,7 @@ def build_command(args: argparse.Namespace) -> int:
             bar.set_postfix_str(f.name[:30], refresh=False)
             clips.append(import_bvh(f, joint_map, units=args.units, name=name, folder=f.parent.name))
             bar.update(f.stat().st_size)
-    save_library(args.out, clips)
+    save_library(args.out, clips, clip_bpm(args.bpm or [], clips))
     seconds = sum(c.motion.num_frames for c in clips) / 30.0
     print(_table(clips))
     print()

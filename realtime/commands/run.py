@@ -66,6 +66,8 @@ examples:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from realtime.commands.library import add_play_options
+
     p = subparsers.add_parser(
         "run", help="stream poses from live audio or a file (OSC/VMC, WebSocket, record)",
         description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -130,9 +132,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "for several; without it a non-loopback --control-osc is open to anyone (warned about)")
     m = p.add_argument_group("model and timing")
     m.add_argument("--checkpoint", metavar="CKPT", help="model checkpoint (default: the packaged one)")
-    m.add_argument("--style", choices=("auto", "chacha", "rumba", "waltz"),
-                   help="dance this style to any music (default auto: the style the music suggests); "
-                        "dance_vq models only")
+    add_play_options(m)  # --style, --library, --mix (realtime/commands/library.py)
     m.add_argument("--energy", type=float, metavar="E",
                    help="how lively the dance is, 0 (calmest) .. 2 (liveliest); default 1: as the music asks. "
                         "dance_vq models only; live: /performer/energy (docs/show.md, \"Energy\")")
@@ -238,6 +238,7 @@ def _open_ensemble(cfg, specs, source, fallback):
     for k, spec in enumerate(specs):
         try:  # each performer dances on its own spot of the stage (models/networks/stage.py, ensemble_spots)
             pipelines.append(build_pipeline(spec.checkpoint, seed=spec.seed, loaded=loaded, energy=spec.energy,
+                                            library=cfg.library, mix=cfg.mix,
                                             lead=spec.lead, stage=cfg.stage, facing=cfg.facing,
                                             spot=(k, len(specs)),
                                             style=None if spec.style == "auto" else spec.style))
@@ -333,7 +334,8 @@ def run(args: argparse.Namespace) -> int:
         engine, sinks, server, lines = _open_ensemble(cfg, specs, source, fallback)
     else:
         pipeline = build_pipeline(cfg.checkpoint, seed=cfg.seed, style=None if cfg.style == "auto" else cfg.style,
-                                  energy=cfg.energy, lead=cfg.lead, stage=cfg.stage, facing=cfg.facing)
+                                  energy=cfg.energy, lead=cfg.lead, stage=cfg.stage, facing=cfg.facing,
+                                  library=cfg.library, mix=cfg.mix)
         sinks = _open_sinks(cfg, source.sample_rate)
         engine = Engine(
             source, pipeline.extractor_factory, pipeline.model, sinks,

@@ -1,0 +1,297 @@
+"""A user's motion library (docs/library.md) danced live like the default (issue 40, items 2-3).
+
+The default's codebook encoder reads motion only, and its code predictor (trained on music
+and motion together) picks a code every ``seg`` frames. :func:`library_model` gives a copy of
+a ``dance_vq`` model a new choreographic memory made of the library's own windows:
+
+1. every clip is put in place facing +Z (:func:`models.data.canonical.canonicalize`, as the
+   training motion is) and cut into ``2 seg``-frame windows every :data:`WINDOW_STRIDE` frames;
+   the model's encoder codes each window's first ``seg`` frames with its codebook;
+2. per code and per folder (a folder is a style) up to :data:`LIBRARY_MEMBERS` windows are kept:
+   those the encoder assigned to that code, nearest its vector first, then, where the folder
+   has fewer, the folder's windows nearest the code vector (every code of every folder plays
+   the user's motion); windows of one clip closer than ``seg`` frames are not kept twice;
+3. each window's tempo is its clip's: a beats-per-minute value given at build time
+   (``performer library build --bpm``), else the clip's kinematic tempo
+   (:func:`kinematic_period`: the autocorrelation of its mean joint speed), so the tempo
+   following, the speed caps and the beat warp of :class:`~models.networks.dance_stream.DanceStream`
+   work as for the default; its travel and turns come from the clip's own root
+   (``member_travel``, the stage's format: models/training/travel_memory.py);
+4. the style prior of a folder is how much likelier each code is among its windows than
+   among the other folders' (``models.training.dance_vq.prior_from_counts``' formula).
+
+Style tokens: 1..3 are the default's dancers (cha-cha, rumba, waltz), :data:`STYLE_BASE` + i
+the library's i-th folder. The predictor hears a library style as "auto" (it knows only its
+three); the stream plays that folder's exemplars and adds its prior (:func:`resolve_style`).
+
+``mix=True`` keeps the default's exemplars in front of the library's (together: the music and
+the motion matching choose among both; ``--style waltz`` or ``--style FOLDER`` picks one).
+The checkpoint file is never changed: the library model lives in memory only.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import numpy as np
+import torch
+
+from models.errors import ConfigError, DataError
+from models.networks.dance_vq import STYLES, DanceVQ, style_token
+
+#: Exemplars kept per code and per library folder (style). 8 x 512 codes = 4,096 windows a folder at most.
+LIBRARY_MEMBERS: int = 8
+#: Frames between the starts of two candidate windows of a clip (the default's memory: 4).
+WINDOW_STRIDE: int = 2
+#: member_style token of the library's first folder (0 unknown, 1..3 the default's dancers).
+STYLE_BASE: int = 4
+#: Most folders (styles) one library may bring (the memory grows by LIBRARY_MEMBERS slots per code each).
+MAX_STYLES: int = 16
+#: Most exemplars per code in all (mixed in or not): the motion matching's cost per code step grows with it.
+MAX_MEMBERS: int = 64
+#: Lags (frames) the kinematic tempo searches (:func:`kinematic_period`): 225 down to 25 bpm.
+KIN_LAGS: tuple[int, int] = (8, 72)
+#: Beats per minute the kinematic tempo is folded into (its octave is not in the motion).
+KIN_BAND: tuple[float, float] = (75.0, 150.0)
+
+
+def clip_tracks(motion) -> tuple[np.ndarray, np.ndarray]:
+    """(poses (T, P) float32 in place facing +Z with w >= 0 quaternions, as the training clips
+    are; root track (T, 3) float64: x, z (m) and unwrapped Hips heading (rad)) of a
+    :class:`~models.rig.motion.Motion` at 30 fps."""
+    from models.data.canonical import canonicalize
+    from models.training.travel_memory import root_track
+
+    poses = canonicalize(motion).to_vector().astype(np.float32)
+    q = poses[:, 3:].reshape(len(poses), -1, 4)
+    q *= np.where(q[..., 3:] < 0, -1.0, 1.0).astype(np.float32)
+    return poses, root_track(motion)
+
+
+def kinematic_period(poses: np.ndarray) -> float:
+    """A clip's beat period (frames at 30 fps) from its motion alone: the lag of the highest
+    autocorrelation peak of its mean joint speed (FK on the default skeleton, smoothed over 2
+    frames, its 4-s trend removed) between :data:`KIN_LAGS` frames, moved by octaves into
+    :data:`KIN_BAND`; 0 for a clip under 4 s or without a periodic pulse. ``poses`` (T, P).
+
+    Dancers dip in speed on every beat or on every other one (DANCE_C_2, a 129-bpm cha-cha:
+    a peak at 29.5 frames, 61 bpm), so the octave is not in the motion; the band takes the
+    one nearest common dance music. ``performer library build --bpm`` gives the tempo instead."""
+    from scipy.ndimage import gaussian_filter1d
+
+    from models.evaluation.beats import motion_speed
+    from models.evaluation.evaluate import positions
+    from models.timebase import FPS
+
+    if len(poses) < 4 * FPS:
+        return 0.0
+    v = gaussian_filter1d(motion_speed(positions(poses)), 2.0, mode="nearest")
+    v = v - gaussian_filter1d(v, 4.0 * FPS, mode="nearest")
+    v = v - v.mean()
+    f = np.fft.rfft(v, 2 * len(v))
+    ac = np.fft.irfft(f * np.conj(f))[: len(v)]
+    if ac[0] <= 0:
+        return 0.0
+    ac = ac / ac[0]
+    lo, hi = KIN_LAGS
+    lags = [k for k in range(lo, min(hi, len(ac) - 2) + 1) if ac[k] > ac[k - 1] and ac[k] >= ac[k + 1]]
+    if not lags:
+        return 0.0
+    k = max(lags, key=lambda j: ac[j])
+    if ac[k] <= 0.05:
+        return 0.0
+    a, b, c = ac[k - 1], ac[k], ac[k + 1]
+    den = a - 2 * b + c
+    p = k + (0.5 * (a - c) / den if den < 0 else 0.0)
+    slow, fast = 60.0 * FPS / KIN_BAND[0], 60.0 * FPS / KIN_BAND[1]
+    while p > slow:
+        p *= 0.5
+    while p < fast:
+        p *= 2.0
+    return float(p)
+
+
+def library_styles(model) -> tuple[str, ...]:
+    """The library folders a model plays (:func:`library_model`), in token order; () for a checkpoint's own."""
+    return tuple(getattr(model, "library_styles", ()))
+
+
+def resolve_style(model, style: str | None) -> tuple[int, int]:
+    """(member token, predictor token) of ``style`` for ``model``: None/"auto" (0, 0); a default
+    style (1..3, the same) where the model plays the default's exemplars; a library folder
+    (:data:`STYLE_BASE` + i, 0: the predictor hears "auto"). ConfigError naming the choices otherwise."""
+    names = library_styles(model)
+    if style is None or style == "auto":
+        return 0, 0
+    if style in names:
+        return STYLE_BASE + names.index(style), 0
+    own = getattr(model, "default_styles", True)
+    if own and not names:
+        tok = style_token(style)  # its own error for an unknown name
+        return tok, tok
+    if own and style in STYLES:
+        tok = style_token(style)
+        return tok, tok
+    choices = ", ".join(("auto",) + (STYLES if own else ()) + names)
+    raise ConfigError(f"unknown style {style!r}; this performer dances: {choices}")
+
+
+@dataclasses.dataclass
+class _Windows:
+    """Candidate windows of a library: clip index, start frame, folder index, code, encoding (N, C)."""
+
+    clip: np.ndarray
+    start: np.ndarray
+    folder: np.ndarray
+    code: np.ndarray
+    z: torch.Tensor
+
+
+@torch.no_grad()
+def _encode(model: DanceVQ, poses: list[np.ndarray], folders: list[int], stride: int) -> _Windows:
+    s = model.config.seg
+    clip, start, folder, zs = [], [], [], []
+    for ci, p in enumerate(poses):
+        for ph in range(0, s, stride):
+            n = (len(p) - ph) // s
+            if n < 3:
+                continue
+            z = model.encoder(model.standardize_poses(torch.from_numpy(p[ph: ph + n * s])[None]))[0].T  # (n, C)
+            k = np.arange(n - 1)  # windows of 2 seg frames inside the clip
+            zs.append(z[: n - 1])
+            clip.append(np.full(len(k), ci))
+            start.append(ph + k * s)
+            folder.append(np.full(len(k), folders[ci]))
+    if not zs:
+        raise DataError(f"every clip is shorter than {3 * s} frames: nothing to dance", source="library")
+    z = torch.cat(zs)
+    return _Windows(np.concatenate(clip), np.concatenate(start), np.concatenate(folder),
+                    model.quantizer.codes(z.T[None])[0].numpy(), z)
+
+
+def _pick(order: np.ndarray, w: _Windows, n: int, seg: int) -> list[int]:
+    """Up to ``n`` windows from ``order`` (best first), none within ``seg`` frames of a kept one of the same clip."""
+    kept: list[int] = []
+    for i in order:
+        if all(w.clip[i] != w.clip[j] or abs(int(w.start[i]) - int(w.start[j])) >= seg for j in kept):
+            kept.append(int(i))
+            if len(kept) == n:
+                break
+    return kept
+
+
+@torch.no_grad()
+def library_model(model: DanceVQ, clips: list, mix: bool = False, members: int = LIBRARY_MEMBERS,
+                  bpm: list[float] | None = None) -> DanceVQ:
+    """A copy of ``model`` whose choreographic memory is the library ``clips``
+    (:class:`models.data.library.LibraryClip`; see the module docstring). ``mix``: the
+    default's exemplars stay too. ``bpm``: per clip its tempo (beats per minute; 0 or None:
+    from its motion, :func:`kinematic_period`). The copy has ``library_styles`` (the folder
+    names, in token order) and ``clip_periods`` (frames per beat per clip, 0 unknown).
+    ``model`` is left as it was. ConfigError for too many folders, DataError for clips too short."""
+    from models.rig.motion import Motion
+    from models.training.dance_vq import window_travel
+
+    if not isinstance(model, DanceVQ):
+        raise ConfigError(f"a library plays through a dance_vq model, got {type(model).__name__}")
+    if not clips:
+        raise DataError("the library has no clips", source="library")
+    c = model.config
+    s = c.seg
+    names: list[str] = []
+    for cl in clips:
+        if cl.folder not in names:
+            names.append(cl.folder)
+    if len(names) > MAX_STYLES:
+        raise ConfigError(f"the library has {len(names)} folders (styles); at most {MAX_STYLES}")
+    lib_slots = members * len(names)
+    base = c.members if mix else 0
+    if base + lib_slots > MAX_MEMBERS:
+        members = max(1, (MAX_MEMBERS - base) // len(names))
+        lib_slots = members * len(names)
+    folders = [names.index(cl.folder) for cl in clips]
+    poses, tracks, periods = [], [], []
+    for i, cl in enumerate(clips):
+        m = cl.motion if cl.motion.fps == 30.0 else None
+        if m is None:
+            raise DataError(f"clip {cl.name} is at {cl.motion.fps} fps, a library holds 30", source="library")
+        p, t = clip_tracks(Motion(root_pos=np.asarray(m.root_pos, np.float64), rotations=m.rotations, fps=m.fps))
+        poses.append(p)
+        tracks.append(t)
+        given = float(bpm[i]) if bpm is not None and bpm[i] else 0.0
+        from models.networks.tempo import fold_period
+
+        periods.append(fold_period(1800.0 / given) if given > 0 else kinematic_period(p))
+    model.eval()
+    w = _encode(model, poses, folders, WINDOW_STRIDE)
+    emb = model.quantizer.embed
+    d_all = torch.cdist(w.z, emb).numpy()  # (N, K) distance of every window to every code vector
+
+    out = copy.deepcopy(model)
+    new_cfg = dataclasses.replace(c, members=base + lib_slots)
+    out.config = new_cfg
+    K = c.codebook
+    poses_t = torch.zeros(K, new_cfg.members, 2 * s, c.pose_dim, dtype=torch.float16)
+    count = torch.zeros(K, dtype=torch.int64)
+    style = torch.zeros(K, new_cfg.members, dtype=torch.int64)
+    period = torch.zeros(K, new_cfg.members)
+    travel = torch.zeros(K, new_cfg.members, 2 * s, 3, dtype=torch.float16)
+    prior = torch.zeros(K, STYLE_BASE + len(names))
+    if mix:  # the default's exemplars first, as they are
+        poses_t[:, :base] = model.member_poses
+        count += model.member_count
+        style[:, :base] = model.member_style
+        period[:, :base] = model.member_period
+        travel[:, :base] = model.member_travel
+        prior[:, :4] = model.style_prior
+    counts = np.zeros((K, len(names)), np.int64)
+    np.add.at(counts, (w.code, w.folder), 1)
+    for f in range(len(names)):
+        mine = np.flatnonzero(w.folder == f)
+        for k in range(K):
+            own = mine[w.code[mine] == k]
+            order = np.concatenate([own[np.argsort(d_all[own, k])], mine[np.argsort(d_all[mine, k])]])
+            for i in _pick(order, w, members, s):
+                j = int(count[k])
+                a, ci = int(w.start[i]), int(w.clip[i])
+                poses_t[k, j] = torch.from_numpy(poses[ci][a: a + 2 * s])
+                style[k, j] = STYLE_BASE + f
+                period[k, j] = periods[ci]
+                travel[k, j] = torch.from_numpy(window_travel(tracks[ci][a: a + 2 * s]))
+                count[k] = j + 1
+    if len(names) > 1:  # a folder's prior: how much likelier each code is among its windows
+        lik = (counts + 1.0) / (counts.sum(0, keepdims=True) + K)
+        prior[:, STYLE_BASE:] = torch.from_numpy(np.log(lik / lik.sum(1, keepdims=True))).float()
+    for name, value in (("member_poses", poses_t), ("member_count", count), ("member_style", style),
+                        ("member_period", period), ("member_travel", travel), ("style_prior", prior)):
+        setattr(out, name, value)  # registered buffers: replaced, shapes of the new memory
+    out.library_styles = tuple(names)
+    out.default_styles = bool(mix)
+    out.clip_periods = tuple(periods)
+    for attr in [a for a in vars(out) if a.endswith("_cache") or a == "_numpy_predictor"]:
+        delattr(out, attr)  # caches of the original's memory (dance_stream)
+    return out.eval()
+
+
+def load_library_model(model: DanceVQ, path, mix: bool = False) -> DanceVQ:
+    """:func:`library_model` of the library file ``path`` (:func:`models.data.library.load_library`),
+    with the tempi given at build time (``--bpm``) where there are any."""
+    from models.data.library import load_library
+
+    clips = load_library(path)
+    return library_model(model, clips, mix=mix, bpm=[getattr(cl, "bpm", 0.0) for cl in clips])
+
+
+def with_library(loaded, library, mix: bool = False):
+    """``loaded`` (:class:`models.generate.LoadedModel`) with its model's memory replaced by the
+    library file ``library`` (or mixed with it: ``mix``), as ``performer run|generate --library``
+    load it; None: ``loaded`` as it is. ConfigError for ``mix`` without a library or a model that
+    is not dance_vq."""
+    if library is None:
+        if mix:
+            raise ConfigError("--mix plays the checkpoint's dancers together with a library: give --library FILE.npz")
+        return loaded
+    if not isinstance(loaded.model, DanceVQ):
+        raise ConfigError(f"--library needs a dance_vq model; {loaded.path} is a {loaded.name!r} model")
+    return dataclasses.replace(loaded, model=load_library_model(loaded.model, library, mix=mix))
