@@ -5,7 +5,7 @@ subscribe-only viewer accounts) and N asyncio subscribers in ``--procs`` process
 lean NATS-over-WebSocket client (:class:`_Subscriber`: CONNECT as the viewer, SUB
 ``performer.main.frames``, answer PINGs), as the browser's nats.ws speaks it. The real engine
 (the packaged checkpoint, the bundled clip looped in real time, VMC to a local UDP socket) then
-plays ``--seconds`` of audio with the broker output (``realtime/publish.py``) behind a gate
+plays ``--seconds`` of audio with the broker output (``realtime/publish_process.py``, as ``performer run --publish``) behind a gate
 that passes every other block of ``--block`` frames (2 s): one run holds both conditions in
 turns, so the machine's changing load (other programs) falls on both alike. Reported:
 
@@ -202,12 +202,6 @@ class _Gate:
             self.passed.append(frame.index)
             self.route.send(frame)
 
-    def begin_hop(self) -> None:
-        self.route.begin_hop()
-
-    def end_hop(self) -> None:
-        self.route.end_hop()
-
     def stats(self) -> dict:
         return self.route.stats()
 
@@ -228,7 +222,8 @@ def _play(seconds: float, block: int, broker_url: str) -> tuple[np.ndarray, np.n
     from realtime.nats_server import PUBLISHER
     from realtime.osc_out import OscSink
     from realtime.pipeline import build_pipeline
-    from realtime.publish import BrokerPublisher, Credentials
+    from realtime.publish import Credentials
+    from realtime.publish_process import BrokerProcess
 
     pipe = build_pipeline(None)
     audio, sr = load_audio(bundled_clip_path(), 44100, mono=False)
@@ -236,7 +231,7 @@ def _play(seconds: float, block: int, broker_url: str) -> tuple[np.ndarray, np.n
     audio = np.concatenate([audio] * (n // len(audio) + 1))[:n]
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
-    pub = BrokerPublisher(broker_url, credentials=Credentials(user=PUBLISHER[0], password=PUBLISHER[1]))
+    pub = BrokerProcess(broker_url, credentials=Credentials(user=PUBLISHER[0], password=PUBLISHER[1]))
     gate = _Gate(pub.route("main", SUBJECT), block)
     eng = Engine(FileSource(audio, sr, realtime=True), pipe.extractor_factory, pipe.model,
                  [OscSink("127.0.0.1", rx.getsockname()[1], "vmc"), gate],

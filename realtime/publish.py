@@ -135,22 +135,56 @@ def check_subject(subject: object) -> str:
     return subject
 
 
-class BrokerRoute:
-    """One performer's frames and meta messages on the broker (a :class:`realtime.frame.Sink`):
-    subjects ``SUBJECT.frames`` and ``SUBJECT.meta``. ``close()`` releases it; the publisher
-    closes with its last route."""
+class RouteBase:
+    """What a performer's route shares with its publisher (``owner``: ``stats()``, ``notice()``,
+    ``_route_closed()``): its counters, the status-line notice, and ``close()``, which releases
+    the route (the publisher closes with its last)."""
 
-    def __init__(self, publisher: "BrokerPublisher", performer: str, subject: str) -> None:
+    def __init__(self, owner) -> None:
+        self.owner = owner
+        self.frames = self.skipped = 0
+        self._closed = False
+
+    def stats(self) -> dict[str, float]:
+        """frames (handed over by the engine), skipped (non-finite), and the publisher's counters."""
+        return {"frames": self.frames, "skipped": self.skipped, **self.owner.stats()}
+
+    def notice(self) -> str | None:
+        return self.owner.notice()
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self.owner._route_closed()
+
+
+class OwnerBase:
+    """A publisher's count of open routes: it closes itself when the last route is closed."""
+
+    _open_routes = 0
+
+    def _route_closed(self) -> None:
+        self._open_routes -= 1
+        if self._open_routes <= 0:
+            self.close()
+
+    def close(self) -> None: ...
+
+
+class BrokerRoute(RouteBase):
+    """One performer's frames and meta messages on the broker (a :class:`realtime.frame.Sink`):
+    subjects ``SUBJECT.frames`` and ``SUBJECT.meta``."""
+
+    def __init__(self, publisher: "BrokerPublisher", performer: str, subject: str, hello: str | None = None) -> None:
+        super().__init__(publisher)
         self.publisher = publisher
         self.performer = performer
         self.subject = subject
         self.frames_subject = f"{subject}.frames"
         self.meta_subject = f"{subject}.meta"
         self.name = f"publish:{publisher.display}/{subject}"
-        self.hello = json.dumps({**publisher._hello, "performer": performer, "subject": subject})
+        self.hello = hello or json.dumps({**publisher._hello, "performer": performer, "subject": subject})
         self.state: str | None = None
-        self.frames = self.skipped = 0
-        self._closed = False
 
     def send(self, frame: PoseFrame) -> None:
         """Encode one frame and hand it to the publisher's thread; returns at once (drops the oldest when full)."""
@@ -172,20 +206,8 @@ class BrokerRoute:
     def end_hop(self) -> None:
         self.publisher.end_hop()
 
-    def stats(self) -> dict[str, float]:
-        """frames (handed over by the engine), skipped (non-finite), and the publisher's counters."""
-        return {"frames": self.frames, "skipped": self.skipped, **self.publisher.stats()}
 
-    def notice(self) -> str | None:
-        return self.publisher.notice()
-
-    def close(self) -> None:
-        if not self._closed:
-            self._closed = True
-            self.publisher._route_closed()
-
-
-class BrokerPublisher:
+class BrokerPublisher(OwnerBase):
     """One NATS connection publishing every route's frames from a daemon thread.
 
     Args:
@@ -201,7 +223,7 @@ class BrokerPublisher:
 
     def __init__(self, url: str, *, credentials: Credentials | None = None, tls_ca: str | Path | None = None,
                  offsets: np.ndarray | None = None, queue_frames: int = QUEUE_FRAMES,
-                 connect_wait: float = 2.0, fps: float = FPS) -> None:
+                 connect_wait: float = 2.0, fps: float = FPS, hello: dict | None = None) -> None:
         try:
             import nats  # noqa: F401
         except ImportError:
@@ -215,7 +237,7 @@ class BrokerPublisher:
             raise ConfigError(f"publish_tls_ca {str(self.tls_ca)!r} is not a file")
         if queue_frames < 1:
             raise ConfigError(f"publish queue_frames must be at least 1, got {queue_frames}")
-        self._hello = hello_message(rest_offsets(offsets), fps=fps)
+        self._hello = hello if hello is not None else hello_message(rest_offsets(offsets), fps=fps)
         self._routes: dict[str, BrokerRoute] = {}
         self._open_routes = 0
         self._queue: deque[tuple[str, bytes]] = deque()
@@ -247,12 +269,13 @@ class BrokerPublisher:
 
     # ---- engine thread -------------------------------------------------------------
 
-    def route(self, performer: str, subject: str) -> BrokerRoute:
-        """Add a performer publishing on ``subject``.frames / .meta (ConfigError for a subject given twice)."""
+    def route(self, performer: str, subject: str, hello: str | None = None) -> BrokerRoute:
+        """Add a performer publishing on ``subject``.frames / .meta (ConfigError for a subject given twice);
+        ``hello``: its hello as JSON text (default: made from this publisher's offsets)."""
         subject = check_subject(subject)
         if subject in self._routes:
             raise ConfigError(f"publish subject {subject!r} is given twice; give each performer its own")
-        r = BrokerRoute(self, performer, subject)
+        r = BrokerRoute(self, performer, subject, hello)
         self._routes[subject] = r
         self._open_routes += 1
         self._meta_changed()
@@ -303,11 +326,6 @@ class BrokerPublisher:
         if self.connected or self._closed:
             return None
         return f"broker {self.display} away ({self.drops_down} frames not published)"
-
-    def _route_closed(self) -> None:
-        self._open_routes -= 1
-        if self._open_routes <= 0:
-            self.close()
 
     def close(self) -> None:
         """Stop publishing: drain what nats-py holds (at most 2 s) and end the thread."""
@@ -497,17 +515,3 @@ def _buffered(nc) -> int:
             size += writer.transport.get_write_buffer_size()
     return size
 
-
-def open_routes(cfg, names: list[str]) -> list[BrokerRoute]:
-    """One route per performer name on one publisher for ``performer run``'s config (``publish``,
-    ``publish_subject``, ``publish_credentials``, ``publish_tls_ca``); [] when ``publish`` is unset."""
-    if getattr(cfg, "publish", None) is None:
-        return []
-    prefix = check_subject(cfg.publish_subject)
-    publisher = BrokerPublisher(cfg.publish, credentials=load_credentials(cfg.publish_credentials),
-                                tls_ca=cfg.publish_tls_ca)
-    try:
-        return [publisher.route(name, f"{prefix}.{name}") for name in names]
-    except BaseException:
-        publisher.close()
-        raise
