@@ -180,7 +180,7 @@ def _open_source(cfg):
 def _open_sinks(cfg, input_sample_rate: int) -> list:
     """OSC targets, WebSocket server and recorder; closes what it opened if one fails."""
     from realtime.osc_out import OscSink
-    from realtime.publish import open_routes
+    from realtime.publish_process import open_routes
     from realtime.recorder import Recorder
     from realtime.ws_server import WebSocketSink
 
@@ -229,7 +229,7 @@ def _open_ensemble(cfg, specs, source, fallback):
     from realtime.engine import Engine, EngineConfig, Performer
     from realtime.osc_out import OscSink
     from realtime.pipeline import build_pipeline
-    from realtime.publish import open_routes
+    from realtime.publish_process import open_routes
     from realtime.recorder import Recorder
     from realtime.ws_server import WebSocketSink
 
