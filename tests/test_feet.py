@@ -88,6 +88,36 @@ def test_no_knee_past_straight_and_the_ankle_stays_where_it_was():
     np.testing.assert_array_equal(np.stack([feet.step(p.copy(), 0.0, 0.0) for p in bent]), bent)
 
 
+def test_the_knee_straightens_smoothly_as_a_held_foot_leaves_the_legs_reach(monkeypatch):
+    """A planted foot's target walked away from the hip 2 mm at a time, past the leg's full
+    length: within SOFT_REACH (3 cm) of it the knee straightens along an exponential, at most
+    0.74 degrees a step; the exact two-bone solution snaps it by 4.06 in the last millimetres
+    (near full reach the flexion a distance needs changes without bound)."""
+    import models.networks.feet as feet_mod
+
+    pose = random_poses(1, seed=4, knee_deg=(40.0, 40.0))[0]
+    mid = midpoints(positions(pose[None]))[0]  # (2, 3)
+    hip = positions(pose[None])[0, [BONE_INDEX["LeftUpperLeg"], BONE_INDEX["RightUpperLeg"]]]
+    away = (mid - hip) * [1, 0, 1]
+    away /= np.linalg.norm(away, axis=-1, keepdims=True)
+
+    def knees() -> np.ndarray:
+        out = []
+        for k in range(250):
+            feet = FeetLock(floor=-10.0)
+            feet.planted[:] = 1
+            feet.weight[:] = 1.0
+            feet.plant[:] = mid + away * 0.002 * k
+            out.append(feet.step(pose.copy(), 1.0, 1.0))
+        return knee_flexion_deg(np.array(out))  # (250, 2)
+
+    soft = knees()
+    assert soft[-1].max() < 5.0  # out of reach at the end: (nearly) straight
+    assert np.abs(np.diff(soft, axis=0)).max() <= 1.5
+    monkeypatch.setattr(feet_mod, "SOFT_REACH", 0.0)
+    assert np.abs(np.diff(knees(), axis=0)).max() > 3.0
+
+
 def test_no_foot_goes_under_the_floor():
     poses = random_poses(200, seed=4)
     low = lambda x: np.minimum(*[a[..., 1] for a in foot_points(positions(x))])  # noqa: E731

@@ -83,6 +83,11 @@ LEASH: float = 0.4
 LEASH_PULL: float = 0.2
 #: The least knee flexion the IK leaves (degrees): never past straight.
 KNEE_MIN_DEG: float = 0.5
+#: Soft reach (m): a target within this of the leg's full length, or beyond it, is approached
+#: along an exponential and never quite met, so the knee straightens smoothly (near full reach
+#: the knee angle a distance needs changes without bound: a centimetre snapped it by tens of
+#: degrees). 0: the exact two-bone solution.
+SOFT_REACH: float = 0.03
 #: Grounding: the body's height is moved by the played exemplar's lift (what puts its window's
 #: lowest foot point on the floor, :func:`member_contacts`) through two one-pole low-passes of
 #: this rate a frame: the memory's dancers stand at different heights on the default skeleton,
@@ -235,7 +240,7 @@ def _leg_target(pose, f, bones, offs, planted, plant, weight, contact, leash, pu
 
 
 @njit(cache=True, nogil=True)
-def _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, target):  # pragma: no cover - compiled
+def _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target):  # pragma: no cover - compiled
     """Leg f of ``pose`` bent and swung so its ankle reaches ``target[f]`` (a leg of weight 0: its
     own ankle), raised onto the floor, the knee bent forwards by at least ``knee_min``; the foot
     keeps its world orientation. Left bit for bit as it is when there is nothing to do."""
@@ -263,6 +268,10 @@ def _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, target):  # pragma:
     q = -ok[1] * v[2] + ok[2] * v[1]
     r = math.sqrt(p * p + q * q)
     psi = math.atan2(q, p)  # delta that straightens the leg (the longest reach)
+    if held and soft > 0.0:  # soft reach: the last `soft` m of the leg's length approached, never met (no snap)
+        start = math.sqrt(max(l1sq + l2sq + 2.0 * (c0 + r), 0.0)) - soft
+        if dist > start:
+            dist = start + soft * (1.0 - math.exp(-(dist - start) / soft))
     c = (0.5 * (dist * dist - l1sq - l2sq) - c0) / max(r, 1e-12)
     alpha = math.acos(min(1.0, max(-1.0, c)))
     phi1 = (phi0 + psi + alpha + math.pi) % (2.0 * math.pi) - math.pi  # the flexion bent forwards, in [-pi, pi)
@@ -305,7 +314,7 @@ def _lowest(pose, f, bones, offs):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def feet_kernel(pose, bones, offs, ang_rest, planted, plant, weight, ground, target, contact, floor, leash, pull,
-                release, knee_min, ground_rate, plant_rate):  # pragma: no cover - compiled
+                release, knee_min, ground_rate, plant_rate, soft):  # pragma: no cover - compiled
     """Both legs of ``pose`` (P,) float32, in place; the state arrays updated (see :class:`FeetLock`)."""
     if ground_rate > 0.0:  # the body lowered or raised by the exemplar's lift (GROUND_RATE < 1: low-passed twice)
         ground[1] += ground_rate * (contact[2] - ground[1])
@@ -314,7 +323,7 @@ def feet_kernel(pose, bones, offs, ang_rest, planted, plant, weight, ground, tar
     for f in range(2):
         _leg_target(pose, f, bones, offs, planted, plant, weight, contact, leash, pull, release, plant_rate, target)
     for f in range(2):
-        _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, target)
+        _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target)
 
 
 class FeetLock:
@@ -360,7 +369,7 @@ class FeetLock:
         self._contact[0], self._contact[1], self._contact[2] = left, right, lift
         feet_kernel(pose, self._bones, self._offs, self._ang_rest, self.planted, self.plant, self.weight, self.ground,
                     self._target, self._contact, self.floor, LEASH, LEASH_PULL, self._release, self._knee_min, GROUND_RATE,
-                    self._plant)
+                    self._plant, SOFT_REACH)
         return pose
 
     def lift_of(self, pose: np.ndarray) -> float:
