@@ -99,3 +99,39 @@ def test_run_gives_an_ensemble_its_spots_and_names_them(tmp_path, capsys):
     assert (a[:, 0] <= -0.3 + 1e-6).all() and (b[:, 0] >= 0.3 - 1e-6).all()
     n = min(len(a), len(b))
     assert np.linalg.norm(a[:n] - b[:n], axis=1).min() >= MIN_SEPARATION
+
+
+def test_a_reload_of_an_ensemble_recuts_every_performers_spot(tmp_path):
+    """SIGHUP's reload (run.reload_settings) on a real two-performer engine: a new stage in the
+    file reaches both performers' models, each with its own spot of it, and the viewer's state."""
+    import numpy as np  # noqa: F811 - local for clarity
+
+    from models.timebase import SAMPLE_RATE
+    from realtime import cli
+    from realtime.audio_input import FileSource
+    from realtime.commands.run import reload_settings
+    from realtime.config import resolve_run_config
+    from realtime.engine import Engine, EngineConfig, Performer
+    from realtime.pipeline import build_pipeline
+
+    conf = tmp_path / "show.toml"
+    conf.write_text('audio = "x.wav"\nstage = "3x2"\n[[performer]]\nname = "a"\n[[performer]]\nname = "b"\n')
+    args = cli.build_parser().parse_args(["run", "--config", str(conf)])
+    cfg = resolve_run_config(args)
+    loaded: dict = {}
+    perfs = []
+    for k, name in enumerate("ab"):
+        p = build_pipeline(None, seed=k, loaded=loaded, stage=cfg.stage, spot=(k, 2))
+        perfs.append(Performer(name, p.model, p.extractor_factory, [], feature_key=p.feature_key))
+    eng = Engine(FileSource(np.zeros(SAMPLE_RATE, np.float32), SAMPLE_RATE), config=EngineConfig(), performers=perfs)
+    try:
+        assert [p.model.stage.state()["spot"] for p in perfs] == [[-0.9, 0.0, 1.2, 2.0], [0.9, 0.0, 1.2, 2.0]]
+        conf.write_text('audio = "x.wav"\nstage = "6x5"\nfacing = "audience"\n'
+                        '[[performer]]\nname = "a"\n[[performer]]\nname = "b"\n')
+        cfg = reload_settings(args, eng, cfg)
+        assert (cfg.stage, cfg.facing) == ("6x5", "audience")
+        states = [p.model.stage.state() for p in perfs]
+        assert [s["spot"] for s in states] == [[-1.65, 0.0, 2.7, 5.0], [1.65, 0.0, 2.7, 5.0]]
+        assert all(s["stage"] == [6.0, 5.0] and s["facing"] == "audience" for s in states)
+    finally:
+        eng.close()

@@ -436,14 +436,15 @@ def reload_settings(args: argparse.Namespace, engine, current):
             per, other = performer_live_changes(current, new)
             for name in per:
                 engine.update(name, **per[name])  # validated by the file's own checks already
+            live = {}
         else:
             live, other = live_changes(current, new)
             engine.update(**live)
-            for key in ("stage", "facing"):  # live controls of the model, like /performer/stage
-                if key in other and getattr(new, key) is not None:
-                    engine.control(key, getattr(new, key))
-                    other.remove(key)
-                    live[key] = getattr(new, key)
+        for key in ("stage", "facing"):  # live controls of the model, like /performer/stage (an
+            if key in other and getattr(new, key) is not None:  # ensemble's: every spot cut anew)
+                engine.control(key, getattr(new, key))
+                other.remove(key)
+                live[key] = getattr(new, key)
     except PerformerError as exc:
         log.error("config reload of %s failed, keeping the current settings: %s", args.config, exc)
         return current
@@ -452,9 +453,10 @@ def reload_settings(args: argparse.Namespace, engine, current):
     import dataclasses
 
     if current.performer:
-        changes = "; ".join(f"{name}: " + ", ".join(f"{k} -> {v:g}" for k, v in c.items()) for name, c in per.items())
+        changes = "; ".join([f"{name}: " + ", ".join(f"{k} -> {v:g}" for k, v in c.items()) for name, c in per.items()]
+                            + [f"{k} -> {v}" for k, v in live.items()])
         log.warning("config reloaded from %s: %s", args.config, changes or "no live changes")
-        kept = {k: getattr(new, k) for k in ("offset_ms", "smoothing")}
+        kept = {k: getattr(new, k) for k in ("offset_ms", "smoothing")} | live
         if "performer (names)" in other:
             return dataclasses.replace(current, **kept)
         by_name = {p.name: p for p in new.performer}
