@@ -183,6 +183,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="what the feet step does in place (dance_stream.FEET_IN_PLACE; default: the shipped one)")
     p.add_argument("--facing", default=None, help="with --stage: free or audience (default: the stream's)")
     p.add_argument("--cache", default=".cache/corpus", metavar="DIR", help="corpus cache (default .cache/corpus)")
+    p.add_argument("--set", action="append", default=[], metavar="PART.NAME=VALUE",
+                   help="set a constant of models/networks/feet.py or stage.py for this run, e.g. "
+                        "feet.SOFT_REACH=0 or feet.RELEASE_FRAMES=10 (repeatable)")
     p.add_argument("--plot", default=None, metavar="PNG", help="draw one foot instead of the tables (see above)")
     p.add_argument("--plot-dance", default="DANCE_W_5", metavar="NAME", help="--plot: the dance (default DANCE_W_5)")
     p.add_argument("--plot-start", type=float, default=40.0, metavar="S", help="--plot: first second (default 40)")
@@ -193,6 +196,19 @@ def main(argv: list[str] | None = None) -> int:
     from models.evaluation.foot_skating import pooled
 
     torch.set_num_threads(1)
+    for item in a.set:  # a script: the modules' settings for this one run
+        from models.networks import feet, stage
+
+        name, _, value = item.partition("=")
+        part, _, const = name.partition(".")
+        mod = {"feet": feet, "stage": stage}.get(part)
+        if mod is None or not const.isupper() or not hasattr(mod, const) or not value:
+            p.error(f"--set wants feet.NAME=VALUE or stage.NAME=VALUE of an existing constant, got {item!r}")
+        old = getattr(mod, const)
+        try:
+            setattr(mod, const, type(old)(float(value)) if not isinstance(old, bool) else value.lower() in ("1", "true"))
+        except ValueError:
+            p.error(f"--set {name}: not a number: {value!r}")
     if a.in_place is not None:  # a script: the module's setting for this one run
         from models.networks import dance_stream
 

@@ -134,12 +134,19 @@ def member_contacts(positions: np.ndarray, counts: np.ndarray) -> tuple[np.ndarr
     return np.concatenate([contact, np.broadcast_to(lift, (k, m, f, 1))], axis=-1).astype(np.float32), floor
 
 
+#: Bend the lift at a handover as the root's height is (:func:`bend_lift`; False: the new
+#: exemplar's lift as it is, which GROUND_RATE < 1 then low-passes: the behaviour before).
+BEND_LIFT: bool = True
+
+
 def bend_lift(rows: np.ndarray, lift0: float, lift1: float, decay: np.ndarray) -> None:
     """The lift channel ``rows[:, 2]`` (F, 3; a new movement's contacts, :func:`member_contacts`)
     bent, in place, to continue from the last movement's lift ``lift0`` at the handover (and its
     change a frame ``lift1 - lift0``) with the Hermite weights ``decay`` (2, D) that bend the
     root's position there (``dance_jit.match_exemplar``): the root's height and its lift then
     change together, so the grounded height never dips between two dancers' heights."""
+    if not BEND_LIFT:
+        return
     n = min(decay.shape[1], len(rows))
     d0 = lift0 - float(rows[0, 2])
     d1 = (lift1 - lift0) - float(rows[1, 2] - rows[0, 2]) if len(rows) > 1 else 0.0
