@@ -45,8 +45,9 @@ def ring_level(ring, seconds: float, sample_rate: int) -> tuple[float, float]:
     n = min(int(seconds * sample_rate), ring.capacity, end)
     if n <= 0:
         return FLOOR_DBFS, FLOOR_DBFS
-    idx = np.arange(end - n, end) % ring.capacity
-    x = ring._buf[idx].mean(axis=1, dtype=np.float64)
+    a, b = (end - n) % ring.capacity, end % ring.capacity  # the window: one slice, or two across the wrap
+    parts = [ring._buf[a:b]] if a < b else [ring._buf[a:], ring._buf[:b]]
+    x = np.concatenate(parts).mean(axis=1) if ring.channels > 1 else np.concatenate(parts)[:, 0]
     rms, peak = math.sqrt(float(np.dot(x, x)) / n), float(np.abs(x).max())
     db = lambda v: max(FLOOR_DBFS, 20.0 * math.log10(v)) if v > 0 else FLOOR_DBFS  # noqa: E731
     return db(rms), db(peak)
@@ -69,26 +70,38 @@ def receiver_state(name: str, stats: dict) -> str:
     return "recording" if name.startswith("record") else "sending"
 
 
-def style_now(model) -> str | None:
-    """The style the dance is in now: the most likely style of the last four movements drawn
-    (their codes' dancers' styles, ``style_prior``); None for a model without styles."""
+def style_now(model, prior: np.ndarray | None) -> str | None:
+    """The style the dance is in now: the most likely style of the last four movements drawn by
+    ``model`` (``prior``: its codes' dancers' styles, (K, 4), ``style_prior``); None without styles."""
     from models.networks.dance_vq import STYLES
 
-    prior = getattr(getattr(model, "model", None), "style_prior", None)
     codes = list(getattr(model, "codes_drawn", ()))[-4:]
-    if prior is None or not codes:
+    if prior is None or not codes or prior.shape[1] != len(STYLES) + 1:
         return None
-    weights = prior.numpy()[codes].sum(axis=0)
-    return STYLES[int(np.argmax(weights[1:]))] if len(weights) == len(STYLES) + 1 else None
+    return STYLES[int(np.argmax(prior[codes, 1:].sum(axis=0)))]
+
+
+def _prior(model) -> np.ndarray | None:
+    prior = getattr(getattr(model, "model", None), "style_prior", None)
+    return None if prior is None else np.asarray(prior.numpy() if hasattr(prior, "numpy") else prior)
 
 
 class DeskFeed:
     """Status of ``engine`` to the desks of ``server`` (:meth:`realtime.ws_server.WebSocketSink.send_status`)
-    at ``rate_hz``. ``extra()`` adds fields (``performer run``: the OSC control input's counters)."""
+    at ``rate_hz``. ``extra()`` adds fields (``performer run``: the OSC control input's counters).
+
+    Each message reads the level, the models' state and the applied controls; the engine's
+    counters (:meth:`Engine.stats`: percentiles, outputs, 0.5 ms) are read every ``slow_every``-th
+    message only (once a second at 5 Hz). Between its parts the thread yields the interpreter
+    lock, so the engine's worker never waits behind a whole message."""
 
     def __init__(self, engine, server, rate_hz: float = DESK_HZ, level_s: float = LEVEL_S,
-                 extra: Callable[[], dict] | None = None) -> None:
+                 extra: Callable[[], dict] | None = None, slow_every: int = 5) -> None:
         self.engine, self.server, self.extra = engine, server, extra
+        self.slow_every = int(slow_every)
+        self._priors = {name: _prior(m) for name, m in engine.models.items()}
+        self._stats: dict | None = None  # the last Engine.stats()
+        self._tick = 0
         self.interval = 1.0 / float(rate_hz)
         self.level_s = float(level_s)
         self.sent = 0
@@ -127,14 +140,19 @@ class DeskFeed:
     def snapshot(self) -> dict:
         """The status message (docs/protocol.md, "Desk")."""
         engine = self.engine
-        stats = engine.stats()
-        now, frames = time.monotonic(), int(stats.get("frames", 0))
+        if self._stats is None or self._tick % self.slow_every == 0:
+            self._stats = engine.stats()
+            time.sleep(0)  # let the worker have the interpreter lock
+        self._tick += 1
+        stats = self._stats
+        now, frames = time.monotonic(), engine.frames_out
         fps = None
         if self._last is not None and now > self._last[0]:
             fps = max(0.0, (frames - self._last[1]) / (now - self._last[0]))
         self._last = (now, frames)
         rms, peak = ring_level(engine.ring, self.level_s, engine.active_source.sample_rate)
         applied = engine.applied()
+        time.sleep(0)
         performers = []
         for name, model in engine.models.items():
             per = stats["performers"][name]
@@ -149,7 +167,7 @@ class DeskFeed:
                 "tempo_bpm": _finite(getattr(model, "tempo_bpm", None)),
                 "beat_phase": _finite(getattr(model, "beat_phase", None)),
                 "rate": _finite(getattr(model, "playback_rate", None)),
-                "style_now": style_now(model),
+                "style_now": style_now(model, self._priors.get(name)),
                 "frames": per["frames"],
                 "hop_p99_ms": _finite(per["compute_ms_p99"]),
                 "latency_p99_ms": _finite(per["latency_ms_p99"]),

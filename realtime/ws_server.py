@@ -399,7 +399,8 @@ class WebSocketSink:
         with self._lock:
             clients = [c for c in self._clients.values() if c.route == key]
         for c in clients:
-            self._enqueue(c, text)
+            if not self._write_now(c, text):  # straight into its socket when nothing is queued, as frames
+                self._enqueue(c, text)
 
     def begin_hop(self) -> None:
         """Hold the hand-off to the server thread until :meth:`end_hop` (the engine's worker, around

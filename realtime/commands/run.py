@@ -42,6 +42,10 @@ A bad message is logged once per address, counted in the status line
 In an ensemble these act on every performer, and /performer/NAME/reset (offset,
 smoothing, idle, style, energy, lead) on the one called NAME.
 
+show desk: http://HOST:PORT/desk.html on the WebSocket port (printed at start) shows what the
+performer hears and does and steers it like the addresses above; watching as the viewer may,
+steering only with --ws-token (docs/show.md, "The show desk").
+
 ensemble (several performers on one audio input; docs/show.md): repeat --performer,
 or give [[performer]] tables in --config. Each performer has its own checkpoint, style,
 energy, lead, seed, smoothing, offset, OSC targets and WebSocket path; the audio input and, where the
