@@ -427,7 +427,7 @@ def test_run_with_three_performers_to_real_receivers_equals_single_runs(tmp_path
     ws_port = free_port()
     take = tmp_path / "take.npz"
     cmd = [sys.executable, "-m", "realtime.cli", "run", "--audio", str(clip), "--duration", "3", "--warmup", "2",
-           "--osc-mode", "plain", "--ws", f"127.0.0.1:{ws_port}", "--record", str(take),
+           "--osc-mode", "plain", "--ws", f"127.0.0.1:{ws_port}", "--record", str(take), "--stage", "0",
            "--performer", f"alice,style=waltz,seed=1,osc=127.0.0.1:{rx['alice'].getsockname()[1]}",
            "--performer", f"bob,style=rumba,seed=2,osc=127.0.0.1:{rx['bob'].getsockname()[1]}",
            "--performer", f"carol,seed=3,osc=127.0.0.1:{gone}"]
@@ -492,15 +492,16 @@ def test_run_with_three_performers_to_real_receivers_equals_single_runs(tmp_path
     # one performer of the ensemble = a single-performer run with the same settings (alice: phase 0,
     # the default single run; bob: staggered, the same phase given). The single runs replay --fast,
     # so the model gets several frames per push where the paced run gave one: the same dance, the
-    # renormalisation rounded once per push (< 1e-7). An ensemble's performers dance in place (their
-    # own spots on one stage: not built yet), so the single runs do too (--stage 0)
+    # renormalisation rounded once per push (< 1e-7). The ensemble dances in place (--stage 0: on a
+    # stage each performer has its own spot, tests/test_stage_spots.py), so the single runs do too
     single = tmp_path / "single.npz"
     assert cli.main(["run", "--audio", str(clip), "--fast", "--duration", "3", "--warmup", "2", "--no-ws", "--no-osc",
                      "--quiet", "--style", "waltz", "--seed", "1", "--stage", "0", "--record", str(single)]) == 0
     with np.load(single) as z:
         np.testing.assert_allclose(z["pose"], recs["alice"], atol=1e-6)
     assert cli.main(["run", "--audio", str(clip), "--fast", "--duration", "3", "--warmup", "2", "--no-ws", "--no-osc",
-                     "--quiet", "--performer", "bob,style=rumba,seed=2,phase=2", "--record", str(single)]) == 0
+                     "--quiet", "--performer", "bob,style=rumba,seed=2,phase=2", "--stage", "0",
+                     "--record", str(single)]) == 0
     with np.load(tmp_path / "single-bob.npz") as z:
         np.testing.assert_allclose(z["pose"], recs["bob"], atol=1e-6)
     capsys.readouterr()
