@@ -13,6 +13,7 @@ import time
 import numpy as np
 import pytest
 from test_engine import TinyConvModel, extractor, noise
+from test_run_cli import clip, tiny_checkpoint  # noqa: F401 - fixtures
 
 from models.errors import ConfigError, NetworkError
 from models.timebase import SAMPLE_RATE
@@ -299,3 +300,28 @@ def test_tls_with_the_brokers_ca_and_a_clear_error_without_it(tmp_path):
             pub.close()
         with pytest.raises(NetworkError, match="certificate verify failed"):
             BrokerPublisher(url, credentials=creds, offsets=np.zeros((21, 3)))  # the system's CAs do not know it
+
+
+def test_performer_run_publishes_an_ensemble_from_its_config(broker, tmp_path, clip, tiny_checkpoint):  # noqa: F811
+    """``publish`` and ``publish_credentials`` in --config, two performers: one subject each."""
+    import subprocess
+    import sys
+
+    creds = tmp_path / "publisher.toml"
+    creds.write_text(f'user = "{PUBLISHER[0]}"\npassword = "{PUBLISHER[1]}"\n')
+    conf = tmp_path / "run.toml"
+    conf.write_text(f'publish = "{broker.url}"\npublish_credentials = "publisher.toml"\nno_osc = true\nno_ws = true\n'
+                    '[[performer]]\nname = "alice"\n[[performer]]\nname = "bob"\n')
+    viewers = [Viewer(broker.url, f"performer.{name}") for name in ("alice", "bob")]
+    try:
+        proc = subprocess.run([sys.executable, "-m", "realtime.cli", "run", "--config", str(conf), "--audio", str(clip),
+                               "--checkpoint", str(tiny_checkpoint), "--duration", "3", "--warmup", "0", "--quiet"],
+                              capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        for v, name in zip(viewers, ("alice", "bob")):
+            assert _wait(lambda v=v: len(v.frames) >= 85, 5), (name, len(v.frames))
+            assert [i for i, _ in v.frames] == list(range(len(v.frames)))
+            assert any(m.get("performer") == name for m in v.meta)
+    finally:
+        for v in viewers:
+            v.close()
