@@ -27,6 +27,7 @@ import logging
 import mmap
 import os
 import select
+import signal
 import struct
 import subprocess
 import sys
@@ -204,6 +205,10 @@ class BrokerProcess(OwnerBase):
 
 
 def _child(url: str, fd: int, counts_path: str, connect_wait: float, tls_ca: str | None) -> int:
+    # Ctrl-C at a terminal reaches the whole process group: the parent stops, then closes the
+    # pipe, and the end of the pipe ends this process (after publishing what it holds).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
     logging.basicConfig(level=logging.WARNING, format="performer run: %(message)s", stream=sys.stderr)
     try:
         pub = BrokerPublisher(url, credentials=load_credentials(), tls_ca=tls_ca, connect_wait=connect_wait, hello={})
