@@ -31,7 +31,11 @@ features as the engine computes them):
   The between-songs targets of issue 43: silence idle within 3 s (a song's 2-s break is
   danced through), speech within 2 s, crowd and noise within 2.5 s.
 
-``--parts`` picks the parts (default all: ``recordings,mixes,gaps``). ``--floor-db`` and
+* **Readers after each recording** (``--parts readers``, not in the default): 20 s from a third
+  (``--reader-at``: another share) into each ``--music`` recording, each ``--speech`` recording at its RMS level, the next
+  recording; settle, held and back as between songs (speech alone: idle within 2 s).
+
+``--parts`` picks the parts (default ``recordings,mixes,gaps``). ``--floor-db`` and
 ``--voice-margin`` set the voice-over rule's ``music_gate.FLOOR_DB`` and ``VOICE_MARGIN`` (``inf``:
 that cue always holds; ``--floor-db 0``: the rule off), to measure its parts alone.
 
@@ -177,13 +181,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", type=Path, help="write the results as JSON")
     p.add_argument("--parts", default="recordings,mixes,gaps",
                    help="comma-separated parts to run: recordings, mixes (voices and breaks), gaps (default all)")
+    p.add_argument("--reader-at", type=float, default=1 / 3,
+                   help="--parts readers: where the 20 s of each recording start, a share of its length (default 1/3)")
     p.add_argument("--floor-db", type=float, help="the voice-over rule's FLOOR_DB (models/networks/music_gate.py; "
                    "inf: the voice network alone, 0: the rule off)")
     p.add_argument("--voice-margin", type=float, help="the voice-over rule's VOICE_MARGIN (inf: the floor alone)")
     args = p.parse_args(argv)
     parts = set(args.parts.split(","))
-    if parts - {"recordings", "mixes", "gaps"}:
-        p.error(f"--parts: unknown part(s) {sorted(parts - {'recordings', 'mixes', 'gaps'})}")
+    if parts - {"recordings", "mixes", "gaps", "readers"}:
+        p.error(f"--parts: unknown part(s) {sorted(parts - {'recordings', 'mixes', 'gaps', 'readers'})}")
 
     from models.errors import PerformerError
     from models.features.audio_io import load_audio
@@ -261,6 +267,23 @@ def main(argv: list[str] | None = None) -> int:
             print(f"| {r['recording']} | " + " | ".join(f"{r[c]:.3f}" for c in cols) + " |")
         print(f"| worst | " + " | ".join(f"{max(r[c] for r in mix_rows):.3f}" for c in cols) + " |")
 
+    reader_rows = []
+    shared = [(n, a[int(len(a) * args.reader_at): int(len(a) * args.reader_at) + int(args.song_s * SR)]) for n, a in recordings
+              if n in {f.name for f in args.music.glob("*.ogg")}] if "readers" in parts else []
+    for i, (name, a) in enumerate(shared):
+        a = a[: len(a) // HOP * HOP]
+        for sname, talk in speech:
+            row = run_gap(lm, a, talk * 10 ** ((rms_dbfs(a) - rms_dbfs(talk)) / 20), shared[(i + 1) % len(shared)][1], args.seed)
+            reader_rows.append({"recording": name, "reader": sname, **{k: row[k] for k in ("settle_s", "held", "back_s")}})
+    if reader_rows:
+        print("\n| reader after (s ≤ 2) | " + " | ".join(n.removesuffix(".ogg") for n, _ in speech) + " | held | back (s) |")
+        print("| --- |" + " ---: |" * (len(speech) + 2))
+        for k in range(0, len(reader_rows), len(speech)):
+            rr = reader_rows[k: k + len(speech)]
+            f2 = lambda v: "never" if v is None else f"{v:.2f}"  # noqa: E731
+            print(f"| {rr[0]['recording']} | " + " | ".join(f2(r["settle_s"]) for r in rr)
+                  + f" | {min((r['held'] or 0.0) for r in rr):.2f} | {max((r['back_s'] or 99.0) for r in rr):.2f} |")
+
     rng = np.random.default_rng(1000 + args.seed)
     pool = [mg.utterance(rng) for _ in range(24)] if mg.espeak_available() else []
     cases = [(lab, gap_audio(kind, args.gap_s, lvl, rng, pool)) for lab, kind, lvl in GAPS
@@ -280,7 +303,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{settle_target(r['gap']):g} | {f(r['held'])} | "
               f"{f(r['back_s'])} | {r['max_step_deg']:.1f} | {f(r['idle_step_deg'])} | {r['dance_step_p99_deg']:.1f} |")
     if args.json:
-        args.json.write_text(json.dumps({"mixes": mix_rows, "gate_us_median": float(np.median(cost_us)),
+        args.json.write_text(json.dumps({"mixes": mix_rows, "readers": reader_rows, "gate_us_median": float(np.median(cost_us)),
                                          "gate_us_p99": float(np.percentile(cost_us, 99)), "recordings": rec_rows, "gaps": [{k: v for k, v in r.items() if k != "idle_w"}
                                                                              for r in gap_rows]}, indent=1))
     if args.plot:

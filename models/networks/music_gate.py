@@ -97,8 +97,8 @@ MARGIN_START: float = 1.5
 START_FRAMES: int = 3
 #: The voice-over rule (module docstring): the voice network's logit above minus this hears
 #: music, while the log energy's range (dB) over the last FLOOR_FRAMES sounding frames (1 s) lies
-#: under FLOOR_DB. Chosen on espeak-ng voices over training songs and synthetic music
-#: (benchmarks/studies/idle_gate.py reports the shared readers over the shared recordings).
+#: under FLOOR_DB. Chosen on espeak-ng voices over training songs and synthetic music; FLOOR_DB
+#: 18, not 21, after a shared reader took 3.07 s to idle at 21 (docs/history.md, issue 43).
 VOICE_MARGIN: float = 1.0
 FLOOR_FRAMES: int = 30
 FLOOR_DB: float = 18.0
