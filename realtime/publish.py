@@ -113,16 +113,16 @@ def check_broker_url(url: object) -> str:
     """A broker URL ``nats://HOST:PORT`` or ``tls://HOST:PORT`` with no password in it; ConfigError otherwise."""
     if not isinstance(url, str):
         raise ConfigError(f"publish must be a URL like nats://127.0.0.1:4222, got {url!r}")
-    parts = urlsplit(url)
-    if parts.scheme not in ("nats", "tls") or not parts.hostname:
+    try:
+        parts = urlsplit(url)
+        host, _ = parts.hostname, parts.port
+    except ValueError:  # an unclosed [IPv6 address, a port that is not a number
+        raise ConfigError(f"publish must be a URL like nats://HOST:4222 or tls://HOST:4222, got {url!r}") from None
+    if parts.scheme not in ("nats", "tls") or not host:
         raise ConfigError(f"publish must be a URL like nats://HOST:4222 or tls://HOST:4222, got {url!r}")
     if parts.password is not None:
         raise ConfigError("publish URL must not hold a password (it shows in the process list): "
                           f"use ${PASSWORD_ENV} or publish_credentials")
-    try:
-        parts.port
-    except ValueError:
-        raise ConfigError(f"publish URL has a bad port: {url!r}") from None
     return url
 
 

@@ -325,3 +325,12 @@ def test_performer_run_publishes_an_ensemble_from_its_config(broker, tmp_path, c
     finally:
         for v in viewers:
             v.close()
+
+
+@pytest.mark.parametrize("url", ["http://h:4222", "nats://[::1", "nats://h:x", "nats://u:secret@h:4222", "nats://"])
+def test_a_bad_publish_url_is_one_line_naming_it(url):
+    from realtime.publish import check_broker_url
+
+    with pytest.raises(ConfigError) as info:
+        check_broker_url(url)
+    assert "\n" not in str(info.value) and "publish" in str(info.value) and "secret" not in str(info.value)
