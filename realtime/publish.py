@@ -1,8 +1,10 @@
 """Broker output: every pose frame and the viewer's JSON messages to a NATS broker, for a web audience.
 
-``performer run --publish nats://HOST:4222`` opens one :class:`BrokerPublisher` (one NATS
-connection, an asyncio loop in its own daemon thread) and one :class:`BrokerRoute` per
-performer, a :class:`realtime.frame.Sink`. A performer called NAME publishes on two subjects
+A :class:`BrokerPublisher` is one NATS connection with an asyncio loop in its own daemon
+thread, and a :class:`BrokerRoute` per performer (a :class:`realtime.frame.Sink`).
+``performer run --publish nats://HOST:4222`` runs it in a process of its own
+(:mod:`realtime.publish_process`: the engine's process then has no publishing thread to take
+the interpreter lock from its worker). A performer called NAME publishes on two subjects
 (``PREFIX`` is ``performer`` unless ``publish_subject`` says otherwise; one performer alone is
 called ``main``):
 
