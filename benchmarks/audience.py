@@ -12,7 +12,9 @@ turns, so the machine's changing load (other programs) falls on both alike. Repo
 * delivery: for every frame published, the share of subscribers that received it, in order
   (the least over frames, and the share of subscribers that got every frame in order);
 * publish-to-receive: the subscriber's ``time.time()`` minus the frame's ``send_time``
-  (stamped in ``BrokerRoute.send``), p50 and p99 over every frame of every subscriber;
+  (stamped in ``ProcessRoute.send``), p50 and p99 over every frame of every subscriber, and
+  the same for a probe: one more subscriber in a process of its own (no other subscriber of
+  its process to wait for);
 * the performer's per-hop compute (the engine's own timer, per frame: all of it, and its own
   part less the run-queue wait), p99 without and with publishing, and their ratio;
 * the broker's CPU (share of one core over the publishing phases) and peak RSS, and the
@@ -145,7 +147,7 @@ class _Subscriber(asyncio.Protocol):
                 self.errors.append(line.decode(errors="replace"))
 
 
-async def _subscribers_main(url: str, count: int, folder: Path, user: tuple[str, str]) -> None:
+async def _subscribers_main(url: str, count: int, folder: Path, user: tuple[str, str], kind: str = "subs") -> None:
     from urllib.parse import urlsplit
 
     u = urlsplit(url)
@@ -163,7 +165,7 @@ async def _subscribers_main(url: str, count: int, folder: Path, user: tuple[str,
         await asyncio.sleep(0.2)
     for s in subs:
         s.tr.close()
-    np.savez(folder / f"subs-{os.getpid()}.npz",
+    np.savez(folder / f"{kind}-{os.getpid()}.npz",
              index=np.array([np.array(s.index, np.int64) for s in subs], dtype=object),
              latency=np.array([np.array(s.latency, np.float64) for s in subs], dtype=object),
              errors=np.array([e for s in subs for e in s.errors]))
@@ -260,15 +262,20 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int) -> di
     for b in brokers:
         b.start()
     time.sleep(1.0 if cluster > 1 else 0.1)  # routes connect
-    subs = []
+    subs: list = []
+    probe = None
     try:
         per = [n // procs + (1 if k < n % procs else 0) for k in range(procs)]
         for k, count in enumerate(per):
             url = brokers[k % len(brokers)].ws_url
             subs.append(subprocess.Popen([sys.executable, __file__, "--subscriber-process", str(count), "--url", url,
                                           "--folder", str(folder)]))
+        # The probe: one more subscriber with a process of its own, so its publish-to-receive
+        # has no other subscriber of its process before it (the broker's fan-out and scheduling).
+        probe = subprocess.Popen([sys.executable, __file__, "--subscriber-process", "1", "--url", brokers[-1].ws_url,
+                                  "--folder", str(folder), "--probe"])
         deadline = time.monotonic() + 180
-        while len(list(folder.glob("ready-*"))) < procs:
+        while len(list(folder.glob("ready-*"))) < procs + 1:
             if time.monotonic() > deadline or any(p.poll() is not None for p in subs):
                 raise RuntimeError("subscribers did not connect")
             time.sleep(0.2)
@@ -283,11 +290,11 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int) -> di
         time.sleep(1.0)  # the last frames reach every subscriber
         rss = [_peak_rss(b.proc.pid) for b in brokers]
         (folder / "stop").write_text("1")
-        for p in subs:
+        for p in [*subs, probe]:
             p.wait(120)
     finally:
         (folder / "stop").write_text("1")
-        for p in subs:
+        for p in [*subs, *([probe] if probe is not None else [])]:
             if p.poll() is None:
                 p.kill()
         for b in brokers:
@@ -311,6 +318,8 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int) -> di
                 got[k] += 1
         complete += in_order and len(ix) == len(passed) and bool(np.array_equal(ix, passed))
     per_frame = got / max(1, len(index))
+    probe_ms = np.concatenate([np.asarray(x) for f in folder.glob("probe-*.npz")
+                               for x in np.load(f, allow_pickle=True)["latency"]]) * 1e3
     lat_ms = np.concatenate([np.asarray(x) for x in latency]) * 1e3 if latency else np.array([np.nan])
     skip = 2 * block  # the first off and on blocks: the engine's first code steps, the first subscribers' wake-ups
     hop, own, on = hop[skip:], own[skip:], on[skip:len(hop) + skip]
@@ -321,6 +330,8 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int) -> di
         "min_share_of_subscribers_per_frame": float(per_frame.min()) if per_frame.size else float("nan"),
         "share_of_subscribers_complete_in_order": complete / max(1, len(index)),
         "latency_ms_p50": float(np.percentile(lat_ms, 50)), "latency_ms_p99": p99(lat_ms),
+        "probe_latency_ms_p50": float(np.percentile(probe_ms, 50)), "probe_latency_ms_p99": p99(probe_ms),
+        "probe_frames": int(probe_ms.size),
         "hop_ms_p99_without": p99(hop[~on]), "hop_ms_p99_with": p99(hop[on]),
         "hop_ratio_p99": p99(hop[on]) / p99(hop[~on]),
         "hop_own_ms_p99_without": p99(own[~on]), "hop_own_ms_p99_with": p99(own[on]),
@@ -346,11 +357,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--subscriber-process", type=int, help=argparse.SUPPRESS)
     p.add_argument("--url", help=argparse.SUPPRESS)
     p.add_argument("--folder", help=argparse.SUPPRESS)
+    p.add_argument("--probe", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.subscriber_process is not None:
         from realtime.nats_server import VIEWER
 
-        asyncio.run(_subscribers_main(args.url, args.subscriber_process, Path(args.folder), VIEWER))
+        asyncio.run(_subscribers_main(args.url, args.subscriber_process, Path(args.folder), VIEWER,
+                                      "probe" if args.probe else "subs"))
         return 0
     from realtime.nats_server import find_nats_server
 
@@ -366,14 +379,15 @@ def main(argv: list[str] | None = None) -> int:
         results.append(r)
         print(json.dumps(r), flush=True)
     print("\n| subscribers | nodes | frames | delivered in order (min share per frame / complete subscribers) "
-          "| publish-to-receive p50 / p99 ms | hop p99 ms without / with (ratio) | hop own p99 ms without / with "
+          "| publish-to-receive p50 / p99 ms (probe) | hop p99 ms without / with (ratio) | hop own p99 ms without / with "
           "(ratio) | broker CPU, peak RSS | subscribers' CPU |")
     print("|---|---|---|---|---|---|---|---|---|")
     for r in results:
         print(f"| {r['subscribers']} | {r['cluster_nodes']} | {r['frames_published']} "
               f"(+{r['frames_dropped']} dropped) | {100 * r['min_share_of_subscribers_per_frame']:.2f} % / "
               f"{100 * r['share_of_subscribers_complete_in_order']:.2f} % | {r['latency_ms_p50']:.1f} / "
-              f"{r['latency_ms_p99']:.1f} | {r['hop_ms_p99_without']:.2f} / {r['hop_ms_p99_with']:.2f} "
+              f"{r['latency_ms_p99']:.1f} ({r['probe_latency_ms_p50']:.1f} / {r['probe_latency_ms_p99']:.1f}) | "
+              f"{r['hop_ms_p99_without']:.2f} / {r['hop_ms_p99_with']:.2f} "
               f"({r['hop_ratio_p99']:.3f}) | {r['hop_own_ms_p99_without']:.2f} / {r['hop_own_ms_p99_with']:.2f} "
               f"({r['hop_own_ratio_p99']:.3f}) | {100 * r['broker_cpu_share']:.0f} % of a core, "
               f"{max(r['broker_peak_rss_mb']):.0f} MB | {100 * r['subscriber_procs_cpu_share']:.0f} % |")
