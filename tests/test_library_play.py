@@ -173,7 +173,7 @@ def test_the_shared_sample_plays_as_the_user_danced_it(loaded, tmp_path):
 
 def test_style_picks_the_folder_and_the_mix_plays_both(library, loaded, features):
     from models.networks.dance_stream import DanceStream, generate
-    from models.networks.library_player import load_library_model
+    from models.networks.library_player import LIBRARY_MEMBERS, MAX_MEMBERS, load_library_model
 
     model = load_library_model(loaded.model, library)
     assert model.library_styles == ("swing", "sway")
@@ -191,7 +191,8 @@ def test_style_picks_the_folder_and_the_mix_plays_both(library, loaded, features
         stream.set_style("waltz")  # the library alone: no default dancers
     before = loaded.model.member_poses.shape
     mixed = load_library_model(loaded.model, library, mix=True)
-    assert mixed.config.members == before[1] + 16  # the default's exemplars, then 8 a folder
+    per = min(LIBRARY_MEMBERS, (MAX_MEMBERS - before[1]) // 2)
+    assert mixed.config.members == before[1] + 2 * per and per >= 4  # the default's exemplars, then each folder's
     for style, tokens in (("waltz", {3}), ("swing", {4}), (None, {1, 2, 3, 4, 5})):
         s = DanceStream(mixed, seed=2, style=style)
         played = set()

@@ -104,6 +104,8 @@ class Tracks:
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--checkpoint", default=None, help="generating checkpoint (default: models/assets/default.pt)")
+    p.add_argument("--library", metavar="FILE.npz", help="the performer dances this motion library "
+                   "(performer run --library; docs/library.md)")
     p.add_argument("--data", default=os.environ.get("PERFORMER_DATA", str(REPO.parent / "shared" / "data" / "dwm")),
                    help="the dwm dataset directory (default: $PERFORMER_DATA or ../shared/data/dwm)")
     p.add_argument("--dance", default="DANCE_W_5",
@@ -171,11 +173,12 @@ def load_tracks(a: argparse.Namespace) -> Tracks:
     from models.evaluation.beats import music_beats
     from models.features.audio_io import load_audio
     from models.generate import load_model, run_model
+    from models.networks.library_player import with_library
     from models.timebase import HOP, SAMPLE_RATE
     from models.data.corpus import build_corpus
 
     torch.set_num_threads(min(2, torch.get_num_threads()))
-    loaded = load_model(a.checkpoint)
+    loaded = with_library(load_model(a.checkpoint), a.library)
     (clip,) = build_corpus(a.data, [a.dance], loaded.features, (1.0,), a.cache, progress=False)
     start = int(round(a.start_s * FPS)) - 1 - clip.first_frame
     frames = int(round(a.seconds * FPS))
@@ -201,7 +204,7 @@ def load_tracks(a: argparse.Namespace) -> Tracks:
     beats = f_lo + music_beats(song[f_lo * HOP : f_hi * HOP])
     names = sorted(d.name for d in Path(a.data).iterdir() if d.is_dir() and d.name.startswith("DANCE_"))
     split = "validation" if a.dance in split_names(names)[1] else "training"
-    label = loaded.path.name + (f", energy {a.energy:g}" if a.energy != 1.0 else "")
+    label = (Path(a.library).name if a.library else loaded.path.name) + (f", energy {a.energy:g}" if a.energy != 1.0 else "")
     label += f", stage {a.stage[0]:g}x{a.stage[1]:g} m" if a.stage is not None else ""
     return Tracks(real, generated, start, frames, clip.first_frame, a.dance, STYLES[a.dance.split("_")[1]],
                   label, loaded.name, beats, split, stage=a.stage)
@@ -218,10 +221,11 @@ def load_tempo_tracks(a: argparse.Namespace) -> Tracks:
     from models.features.audio_io import load_audio
     from models.features.spectral import extract_features
     from models.generate import load_model, run_model
+    from models.networks.library_player import with_library
     from models.timebase import SAMPLE_RATE
 
     torch.set_num_threads(min(2, torch.get_num_threads()))
-    loaded = load_model(a.checkpoint)
+    loaded = with_library(load_model(a.checkpoint), a.library)
     path = Path(a.audio) if a.audio else load_dance(Path(a.data) / a.dance).audio_path
     song = load_audio(path, SAMPLE_RATE)[0]
     end_s = a.start_s + a.seconds * max(a.tempo) + 1.0
@@ -239,7 +243,7 @@ def load_tempo_tracks(a: argparse.Namespace) -> Tracks:
     (pl, bl, al), (pr, br, ar) = sides
     name = a.dance if not a.audio else Path(a.audio).stem
     style = STYLES.get(a.dance.split("_")[1], "?") if not a.audio else "recording"
-    label = loaded.path.name + (f", energy {a.energy:g}" if a.energy != 1.0 else "")
+    label = (Path(a.library).name if a.library else loaded.path.name) + (f", energy {a.energy:g}" if a.energy != 1.0 else "")
     return Tracks(pl[al - start:], pr[ar - start:], start, frames, 0, name, style, label, loaded.name, np.array([]),
                   "tempo", a.tempo, (bl - (al - start), br - (ar - start)), a.start_s)
 

@@ -48,8 +48,10 @@ WINDOW_STRIDE: int = 2
 STYLE_BASE: int = 4
 #: Most folders (styles) one library may bring (the memory grows by LIBRARY_MEMBERS slots per code each).
 MAX_STYLES: int = 16
-#: Most exemplars per code in all (mixed in or not): the motion matching's cost per code step grows with it.
-MAX_MEMBERS: int = 64
+#: Most exemplars per code in all (mixed in or not; more folders share it, at least one each): the
+#: motion matching's cost per code step and a stream's start-up memory grow with it (a 30-minute
+#: library in 4 folders, 32 a code: peak 1.3 GB, per-hop own p99 3.3 ms; docs/library.md).
+MAX_MEMBERS: int = 16
 #: Lags (frames) the kinematic tempo searches (:func:`kinematic_period`): 225 down to 25 bpm.
 KIN_LAGS: tuple[int, int] = (8, 72)
 #: Beats per minute the kinematic tempo is folded into (its octave is not in the motion).
