@@ -53,14 +53,16 @@ class PulseServer:
             time.sleep(0.1)
         subprocess.run(["pactl", "set-default-source", f"{SINK}.monitor"], env=self.env, capture_output=True)
 
-    def play(self, audio: np.ndarray, rate: int = RATE) -> subprocess.Popen:
+    def play(self, audio: np.ndarray, rate: int = RATE, latency_ms: int = 20) -> subprocess.Popen:
         """Start playing ``audio`` (samples, channels) float32 into the sink in real time; returns the
-        ``pacat`` process (it exits when the audio has been played)."""
+        ``pacat`` process (it exits when the audio has been played). ``latency_ms``: pacat's buffer; on
+        a busy machine a short one underruns, and the sink plays silence in the gaps (the song then
+        arrives longer than it is: benchmarks/studies/live_input.py measures that drift)."""
         x = np.ascontiguousarray(audio, np.float32)
         if x.ndim == 1:
             x = x[:, None]
         proc = subprocess.Popen(["pacat", "--playback", f"--device={SINK}", "--format=float32le", f"--rate={rate}",
-                                 f"--channels={x.shape[1]}", "--latency-msec=20"],
+                                 f"--channels={x.shape[1]}", f"--latency-msec={int(latency_ms)}"],
                                 env=self.env, stdin=subprocess.PIPE, stderr=subprocess.DEVNULL)
 
         def feed() -> None:  # pacat takes it in real time: from a thread, so play() returns at once

@@ -11,7 +11,9 @@ song's start like the file run's. Printed: the beat hit rate of each (kinematic 
 frames of librosa's beats of the song) and their ratio, the mean joint speed of each and their
 ratio, and the sound-to-pose latency of each frame: its send time minus the moment its last audio
 sample was handed over (file: the replay's clock; live: the song's sample 0 handed to pacat, so the
-audio server's path and pacat's start are inside it), median and p99.
+audio server's path and pacat's start are inside it), median and p99; and the live input's drift:
+where the song's last 2 s lie in the capture against where its first 2 s put them (samples the
+live path lost, negative, or added).
 
     .venv/bin/python benchmarks/studies/live_input.py --data ../shared/data/dwm --song DANCE_C_2 \\
         --start-s 30 --seconds 60
@@ -104,6 +106,30 @@ def song_frames(sink: Collect, s0: int, frames: int, t0: float) -> tuple[np.ndar
     return poses, lat, state
 
 
+def file_draws(mono: np.ndarray, frames: int, beats: np.ndarray, n: int, seed: int = 0) -> list[dict]:
+    """The control: the excerpt streamed through the same model from the file (offline, as fast as it
+    goes) after ``n`` random silences of 0.5-2.5 s, as the live input hears it after some silence:
+    each its beat hit rate and mean joint speed over the song's frames (the draws a start point moves)."""
+    from models.evaluation.listening import beat_hits, mean_speed, positions
+    from models.timebase import HOP
+    from realtime.pipeline import build_pipeline
+
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        pipe = build_pipeline(None, seed=0)
+        prefix = int(rng.integers(RATE // 2, 5 * RATE // 2))
+        audio = np.concatenate([np.zeros(prefix, np.float32), mono.astype(np.float32)])
+        feats = pipe.extractor_factory(RATE).push(audio)
+        poses = pipe.model.push(feats)
+        ends = (np.arange(len(poses)) + 1) * 2 * HOP  # each frame's last input sample
+        k = np.rint((ends - prefix) / (2 * HOP)).astype(int) - 1
+        song = poses[(k >= 0)][:frames]
+        pos = positions(song)
+        out.append({"silence_s": prefix / RATE, "beat_hit": beat_hits(pos, beats)[0], "mean_speed": mean_speed(pos)})
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -111,6 +137,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--song", default="DANCE_C_2", help="a dance of --data (default DANCE_C_2)")
     p.add_argument("--start-s", type=float, default=30.0, help="where the excerpt starts, s (default 30)")
     p.add_argument("--seconds", type=float, default=60.0, help="excerpt length, s (default 60)")
+    p.add_argument("--pacat-latency-ms", type=int, default=100,
+                   help="the player's buffer (default 100: a shorter one underruns on a busy machine)")
+    p.add_argument("--draws", type=int, default=0,
+                   help="also N offline passes of the excerpt after random silences (the draws' spread)")
     p.add_argument("--json", metavar="FILE", help="write the figures here")
     a = p.parse_args(argv)
     path = Path(a.data) / a.song / "audio.mp3"
@@ -135,11 +165,14 @@ def main(argv: list[str] | None = None) -> int:
         start = dev.start
         tap: list[TapRing] = []
         dev.start = lambda ring: start(tap.append(TapRing(ring)) or tap[0])  # type: ignore[method-assign]
-        live, t_play = run_engine(dev, a.seconds, play=lambda: pulse.play(x))
+        live, t_play = run_engine(dev, a.seconds, play=lambda: pulse.play(x, latency_ms=a.pacat_latency_ms))
         heard = np.concatenate([b for b, _ in tap[0].blocks]).mean(axis=1)
         mono = x.mean(axis=1)
         ref = mono[: 2 * RATE]
         s0 = int(np.argmax(correlate(heard, ref, "valid", method="fft")))  # the song's sample 0 in the input
+        tail = mono[-2 * RATE:]  # where the song's last 2 s are: samples the live path lost (-) or added (+)
+        lo = s0 + len(mono) - len(tail) - RATE
+        drift = int(np.argmax(correlate(heard[lo: lo + len(tail) + 2 * RATE], tail, "valid", method="fft"))) - RATE
         wav = Path(tmp) / "excerpt.wav"
         sf.write(str(wav), x, RATE)
         source = FileSource.open(wav, sample_rate=RATE, realtime=True)
@@ -150,7 +183,8 @@ def main(argv: list[str] | None = None) -> int:
 
     frames = int(a.seconds * 30) - 2
     beats = heard_beats(librosa.resample(mono, orig_sr=RATE, target_sr=22050))
-    out = {"song": a.song, "start_s": a.start_s, "seconds": a.seconds, "song_start_sample": s0,
+    out = {"song": a.song, "start_s": a.start_s, "seconds": a.seconds, "pacat_latency_ms": a.pacat_latency_ms,
+           "song_start_sample": s0, "drift_samples": drift,
            "song_rms_dbfs": float(10 * np.log10(np.mean(mono.astype(np.float64) ** 2)))}
     for name, sink, t0, first in (("live", live, t_play, s0), ("file", filed, t_file[0], 0)):
         poses, lat, state = song_frames(sink, first, frames, t0)
@@ -161,6 +195,9 @@ def main(argv: list[str] | None = None) -> int:
         out[name] = {"frames": n, "beat_hit": hit, "beat_hit_half_shifted": control, "mean_speed": mean_speed(pos),
                      "tempo_bpm_median": float(np.nanmedian(state[:n, 0])), "idle_share": float(np.mean(state[:n, 1] > 0.5)),
                      "latency_ms_p50": float(np.nanmedian(lat) * 1000), "latency_ms_p99": float(np.nanpercentile(lat, 99) * 1000)}
+    if a.draws:
+        draws = file_draws(mono, frames, beats, a.draws)
+        out["file_draws"] = {k: [d[k] for d in draws] for k in ("silence_s", "beat_hit", "mean_speed")}
     out["beat_hit_ratio"] = out["live"]["beat_hit"] / out["file"]["beat_hit"]
     out["speed_ratio"] = out["live"]["mean_speed"] / out["file"]["mean_speed"]
     print(json.dumps(out, indent=1))
