@@ -227,3 +227,23 @@ def test_desk_reconnects_after_an_engine_restart(browser, tmp_path, clip, tiny_c
     finally:
         stop_engine(proc)
         page.close()
+
+
+def test_an_ensemble_has_one_strip_each_and_a_strip_steers_its_own_performer(browser, tmp_path, clip,
+                                                                               tiny_checkpoint):  # noqa: F811
+    port = free_port()
+    proc = start_engine(["--audio", str(clip), "--loop", "--no-osc", "--checkpoint", str(tiny_checkpoint),
+                         "--warmup", "0.2", "--quiet", "--performer", "alice", "--performer", "bob"],
+                        port, tmp_path / "engine.log")
+    page = open_desk(browser, port, f"?token={TOKEN}")
+    try:
+        wait_state(page, "s.control && s.status && s.status.performers.length === 2")
+        assert page.locator(".strip .name").all_inner_texts() == ["alice", "bob"]
+        page.locator(".strip[data-performer=bob] button.idle").click()
+        state = wait_state(page, "s.status.performers[1].idle", timeout=5)
+        assert state["status"]["performers"][0]["idle"] is False  # alice dances on
+        assert "active" in page.locator(".strip[data-performer=bob] button.idle").get_attribute("class")
+        assert not page.errors
+    finally:
+        page.close()
+        stop_engine(proc)
