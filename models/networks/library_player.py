@@ -141,13 +141,14 @@ def resolve_style(model, style: str | None) -> tuple[int, int]:
 
 @dataclasses.dataclass
 class _Windows:
-    """Candidate windows of a library: clip index, start frame, folder index, code, encoding (N, C)."""
+    """Candidate windows of a library: clip index, start frame, folder index, code (N,), and the
+    distance of each window's encoding to every code vector (N, K) float32."""
 
     clip: np.ndarray
     start: np.ndarray
     folder: np.ndarray
     code: np.ndarray
-    z: torch.Tensor
+    dist: np.ndarray
 
 
 @torch.no_grad()
@@ -168,8 +169,10 @@ def _encode(model: DanceVQ, poses: list[np.ndarray], folders: list[int], stride:
     if not zs:
         raise DataError(f"every clip is shorter than {3 * s} frames: nothing to dance", source="library")
     z = torch.cat(zs)
-    return _Windows(np.concatenate(clip), np.concatenate(start), np.concatenate(folder),
-                    model.quantizer.codes(z.T[None])[0].numpy(), z)
+    # in blocks: the quantizer's own nearest-code search over all windows at once held three
+    # (N, K) matrices (160 MB for a 30-minute library) in the performer's peak memory
+    dist = np.concatenate([torch.cdist(z[a: a + 2048], model.quantizer.embed).numpy() for a in range(0, len(z), 2048)])
+    return _Windows(np.concatenate(clip), np.concatenate(start), np.concatenate(folder), dist.argmin(1), dist)
 
 
 def _pick(order: np.ndarray, w: _Windows, n: int, seg: int) -> list[int]:
@@ -192,6 +195,7 @@ def library_model(model: DanceVQ, clips: list, mix: bool = False, members: int =
     from its motion, :func:`kinematic_period`). The copy has ``library_styles`` (the folder
     names, in token order) and ``clip_periods`` (frames per beat per clip, 0 unknown).
     ``model`` is left as it was. ConfigError for too many folders, DataError for clips too short."""
+    from models.networks.tempo import fold_period
     from models.rig.motion import Motion
     from models.training.dance_vq import window_travel
 
@@ -222,13 +226,10 @@ def library_model(model: DanceVQ, clips: list, mix: bool = False, members: int =
         poses.append(p)
         tracks.append(t)
         given = float(bpm[i]) if bpm is not None and bpm[i] else 0.0
-        from models.networks.tempo import fold_period
-
         periods.append(fold_period(1800.0 / given) if given > 0 else kinematic_period(p))
     model.eval()
     w = _encode(model, poses, folders, WINDOW_STRIDE)
-    emb = model.quantizer.embed
-    d_all = torch.cdist(w.z, emb).numpy()  # (N, K) distance of every window to every code vector
+    d_all = w.dist  # (N, K) distance of every window to every code vector
 
     out = copy.deepcopy(model)
     new_cfg = dataclasses.replace(c, members=base + lib_slots)

@@ -210,10 +210,11 @@ def info_command(args: argparse.Namespace) -> int:
     from models.data.library import load_library
 
     clips = load_library(args.library)
-    print(f"{'clip':<28} {'folder':<14} {'s':>7} {'units':>5} {'up':>3} {'mean cm':>7} {'max cm':>7}  source")
+    print(f"{'clip':<28} {'folder':<14} {'s':>7} {'units':>5} {'up':>3} {'mean cm':>7} {'max cm':>7} {'bpm':>5}  source")
     for c in clips:
+        bpm = f"{c.bpm:5.0f}" if c.bpm else "    -"  # -: read from the motion when danced
         print(f"{c.name[:28]:<28} {c.folder[:14]:<14} {c.motion.num_frames / c.motion.fps:7.1f} {c.units:>5} {c.up:>3} "
-              f"{c.error_mean_cm:7.2f} {c.error_max_cm:7.2f}  {c.source}")
+              f"{c.error_mean_cm:7.2f} {c.error_max_cm:7.2f} {bpm}  {c.source}")
     total = sum(c.motion.num_frames for c in clips) / 30.0
     print(f"{len(clips)} clip(s), {total / 60:.1f} min")
     return 0
