@@ -152,9 +152,14 @@ def main(argv: list[str] | None = None) -> int:
                     frames=int(a.seconds * RATE))
     if sr != RATE:
         p.error(f"{path}: {sr} Hz, expected {RATE}")
+    from models.errors import AudioError
     from realtime.pulse import PulseServer
 
-    with PulseServer() as pulse, tempfile.TemporaryDirectory() as tmp:
+    try:
+        pulse = PulseServer()
+    except AudioError as exc:
+        p.error(str(exc))
+    with pulse, tempfile.TemporaryDirectory() as tmp:
         os.environ.update(pulse.env)  # before PortAudio starts: its ALSA pulse device reads them
         from models.evaluation.listening import beat_hits, heard_beats, mean_speed, positions
         from realtime.audio_input import DeviceSource, FileSource
