@@ -7,7 +7,9 @@ PortAudio (44.1 kHz). File: the same excerpt replayed by the engine from a file 
 
 The live run keeps a copy of every captured block (a tap on the engine's ring) to find where the
 song starts in the input (cross-correlation, to the sample); its frames are then numbered from the
-song's start like the file run's. Printed: the beat hit rate of each (kinematic beats within 2
+song's start like the file run's; the excerpt is also streamed offline from the file after exactly
+the silence the live run heard before it (the same input but for what the live path changed).
+Printed: the beat hit rate of each (kinematic beats within 2
 frames of librosa's beats of the song) and their ratio, the mean joint speed of each and their
 ratio, and the sound-to-pose latency of each frame: its send time minus the moment its last audio
 sample was handed over (file: the replay's clock; live: the song's sample 0 handed to pacat, so the
@@ -106,19 +108,21 @@ def song_frames(sink: Collect, s0: int, frames: int, t0: float) -> tuple[np.ndar
     return poses, lat, state
 
 
-def file_draws(mono: np.ndarray, frames: int, beats: np.ndarray, n: int, seed: int = 0) -> list[dict]:
+def file_draws(mono: np.ndarray, frames: int, beats: np.ndarray, n: int, seed: int = 0,
+               prefixes: list[int] | None = None) -> list[dict]:
     """The control: the excerpt streamed through the same model from the file (offline, as fast as it
     goes) after ``n`` random silences of 0.5-2.5 s, as the live input hears it after some silence:
-    each its beat hit rate and mean joint speed over the song's frames (the draws a start point moves)."""
+    each its beat hit rate and mean joint speed over the song's frames (the draws a start point moves).
+    ``prefixes``: these silences (samples) instead of random ones."""
     from models.evaluation.listening import beat_hits, mean_speed, positions
     from models.timebase import HOP
     from realtime.pipeline import build_pipeline
 
     rng = np.random.default_rng(seed)
     out = []
-    for _ in range(n):
+    for j in range(n if prefixes is None else len(prefixes)):
         pipe = build_pipeline(None, seed=0)
-        prefix = int(rng.integers(RATE // 2, 5 * RATE // 2))
+        prefix = int(rng.integers(RATE // 2, 5 * RATE // 2)) if prefixes is None else int(prefixes[j])
         audio = np.concatenate([np.zeros(prefix, np.float32), mono.astype(np.float32)])
         feats = pipe.extractor_factory(RATE).push(audio)
         poses = pipe.model.push(feats)
@@ -200,6 +204,10 @@ def main(argv: list[str] | None = None) -> int:
         out[name] = {"frames": n, "beat_hit": hit, "beat_hit_half_shifted": control, "mean_speed": mean_speed(pos),
                      "tempo_bpm_median": float(np.nanmedian(state[:n, 0])), "idle_share": float(np.mean(state[:n, 1] > 0.5)),
                      "latency_ms_p50": float(np.nanmedian(lat) * 1000), "latency_ms_p99": float(np.nanpercentile(lat, 99) * 1000)}
+    same = file_draws(mono, frames, beats, 0, prefixes=[s0])[0]  # the file after the live run's own silence
+    out["file_same_silence"] = same
+    out["beat_hit_ratio_same_silence"] = out["live"]["beat_hit"] / same["beat_hit"]
+    out["speed_ratio_same_silence"] = out["live"]["mean_speed"] / same["mean_speed"]
     if a.draws:
         draws = file_draws(mono, frames, beats, a.draws)
         out["file_draws"] = {k: [d[k] for d in draws] for k in ("silence_s", "beat_hit", "mean_speed")}
