@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -193,7 +194,8 @@ def library_model(model: DanceVQ, clips: list, mix: bool = False, members: int =
     (:class:`models.data.library.LibraryClip`; see the module docstring). ``mix``: the
     default's exemplars stay too. ``bpm``: per clip its tempo (beats per minute; 0 or None:
     from its motion, :func:`kinematic_period`). The copy has ``library_styles`` (the folder
-    names, in token order) and ``clip_periods`` (frames per beat per clip, 0 unknown).
+    names, in token order) and ``clip_periods`` (frames per beat per clip, 0 unknown);
+    :func:`load_library_model` adds ``library_path``.
     ``model`` is left as it was. ConfigError for too many folders, DataError for clips too short."""
     from models.networks.tempo import fold_period
     from models.rig.motion import Motion
@@ -283,7 +285,9 @@ def load_library_model(model: DanceVQ, path, mix: bool = False) -> DanceVQ:
     from models.data.library import load_library
 
     clips = load_library(path)
-    return library_model(model, clips, mix=mix, bpm=[getattr(cl, "bpm", 0.0) for cl in clips])
+    out = library_model(model, clips, mix=mix, bpm=[getattr(cl, "bpm", 0.0) for cl in clips])
+    out.library_path = Path(path)
+    return out
 
 
 def with_library(loaded, library, mix: bool = False):

@@ -307,6 +307,9 @@ def _describe(sinks, source, pipeline, control=None) -> str:
     for s in sinks:
         outs.append(f"{s.name} (viewer {s.url})" if hasattr(s, "url") else s.name)
     text = f"{source.name} at {source.sample_rate} Hz -> {', '.join(outs) or 'no outputs'} [{pipeline.checkpoint.name}]"
+    lib = getattr(getattr(pipeline.model, "model", None), "library_path", None)  # performer run --library
+    if lib is not None:
+        text += f" dancing {lib.name} ({', '.join(pipeline.model.model.library_styles)})"
     stage = getattr(pipeline.model, "stage", None)
     if stage is not None and hasattr(stage, "width"):
         text += (f"; stage {stage.width:g}x{stage.depth:g} m, facing {stage.facing}" if stage.active
