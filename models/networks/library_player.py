@@ -83,13 +83,16 @@ def kinematic_period(poses: np.ndarray) -> float:
     one nearest common dance music. ``performer library build --bpm`` gives the tempo instead."""
     from scipy.ndimage import gaussian_filter1d
 
-    from models.evaluation.beats import motion_speed
-    from models.evaluation.evaluate import positions
+    from models.rig.kinematics import fk
+    from models.rig.motion import Motion
+    from models.rig.skeleton import load_default_skeleton
     from models.timebase import FPS
 
     if len(poses) < 4 * FPS:
         return 0.0
-    v = gaussian_filter1d(motion_speed(positions(poses)), 2.0, mode="nearest")
+    pos = fk(Motion.from_vector(np.asarray(poses, np.float32), fps=FPS), load_default_skeleton())
+    speed = np.linalg.norm(np.gradient(pos, axis=0) * FPS, axis=-1).mean(axis=1)  # models.evaluation.beats.motion_speed
+    v = gaussian_filter1d(speed, 2.0, mode="nearest")
     v = v - gaussian_filter1d(v, 4.0 * FPS, mode="nearest")
     v = v - v.mean()
     f = np.fft.rfft(v, 2 * len(v))
