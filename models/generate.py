@@ -298,3 +298,34 @@ def generate(
     export_motion(poses, out, source_audio=str(audio_path), checkpoint=str(loaded.path), model_name=loaded.name)
     timings["export"] = time.perf_counter() - t0
     return Generation(poses, len(audio) / SAMPLE_RATE, timings)
+
+
+def load_library_model(model, path: str | Path, mix: bool = False):
+    """A copy of the dance_vq ``model`` dancing the motion library file ``path``
+    (:func:`models.data.library.load_library`; ``mix``: with the model's own exemplars;
+    :func:`models.networks.library_player.library_model`), with the tempi given at build time
+    (``--bpm``) where there are any; it keeps the file's path as ``library_path``."""
+    from models.data.library import clip_tracks, load_library
+    from models.networks.library_player import library_model
+
+    clips = load_library(path)
+    tracks = [clip_tracks(c.motion) for c in clips]
+    out = library_model(model, [p for p, _ in tracks], [t for _, t in tracks], [c.folder for c in clips], mix=mix,
+                        bpm=[c.bpm for c in clips])
+    out.library_path = Path(path)
+    return out
+
+
+def with_library(loaded: LoadedModel, library: str | Path | None, mix: bool = False) -> LoadedModel:
+    """``loaded`` with its model's memory replaced by the library file ``library`` (or mixed with
+    it: ``mix``), as ``performer run|generate --library`` load it; None: ``loaded`` as it is.
+    ConfigError for ``mix`` without a library or a model that is not dance_vq."""
+    import dataclasses
+
+    if library is None:
+        if mix:
+            raise ConfigError("--mix plays the checkpoint's dancers together with a library: give --library FILE.npz")
+        return loaded
+    if not getattr(loaded.model, "takes_style", False):
+        raise ConfigError(f"--library needs a dance_vq model; {loaded.path} is a {loaded.name!r} model")
+    return dataclasses.replace(loaded, model=load_library_model(loaded.model, library, mix=mix))

@@ -42,7 +42,7 @@ class Pipeline:
 
 def _load(checkpoint, library, mix: bool):
     """:func:`load_model` of ``checkpoint``, its memory replaced by (or mixed with) ``library``."""
-    from models.networks.library_player import with_library
+    from models.generate import with_library
 
     return with_library(load_model(checkpoint), library, mix)
 

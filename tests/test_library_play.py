@@ -105,7 +105,7 @@ def nearest_rms(frames: np.ndarray, reference: np.ndarray) -> np.ndarray:
 
 
 def library_frames(path: Path, folder: str | None = None) -> np.ndarray:
-    from models.networks.library_player import clip_tracks
+    from models.data.library import clip_tracks
 
     return np.concatenate([body_frame(clip_tracks(c.motion)[0]) for c in load_library(path)
                            if folder is None or c.folder == folder])
@@ -135,7 +135,7 @@ def test_played_motion_is_the_library_not_the_default(library, loaded, features)
     recurs, so the handovers bend every movement (median 17 cm from the nearest library frame,
     0.87 nearer it than the default's); the shared sample below plays as recorded."""
     from models.networks.dance_stream import generate
-    from models.networks.library_player import load_library_model
+    from models.generate import load_library_model
 
     model = load_library_model(loaded.model, library)
     poses = generate(model, features, seed=0)
@@ -153,7 +153,7 @@ def test_the_shared_sample_plays_as_the_user_danced_it(loaded, tmp_path):
     from models.features.audio_io import load_audio
     from models.features.spectral import extract_features
     from models.networks.dance_stream import generate
-    from models.networks.library_player import load_library_model
+    from models.generate import load_library_model
 
     sample = REPO.parent / "shared" / "data" / "motion"
     song = REPO.parent / "shared" / "data" / "music" / "fishin_karissahobbs.ogg"
@@ -173,7 +173,8 @@ def test_the_shared_sample_plays_as_the_user_danced_it(loaded, tmp_path):
 
 def test_style_picks_the_folder_and_the_mix_plays_both(library, loaded, features):
     from models.networks.dance_stream import DanceStream, generate
-    from models.networks.library_player import LIBRARY_MEMBERS, MAX_MEMBERS, load_library_model
+    from models.generate import load_library_model
+    from models.networks.library_player import LIBRARY_MEMBERS, MAX_MEMBERS
 
     model = load_library_model(loaded.model, library)
     assert model.library_styles == ("swing", "sway")
@@ -205,7 +206,7 @@ def test_style_picks_the_folder_and_the_mix_plays_both(library, loaded, features
 
 
 def test_tempo_from_bpm_or_motion(library, loaded):
-    from models.networks.library_player import load_library_model
+    from models.generate import load_library_model
 
     clips = load_library(library)
     assert [c.bpm for c in clips] == [0.0, 100.0]

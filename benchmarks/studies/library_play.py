@@ -86,7 +86,7 @@ def dwm_frames(root: Path, cache: Path, skip: set[str]) -> np.ndarray:
     """Body-frame points of every DWM dance under ``root`` but those in ``skip``, cached per dance."""
     from models.data.corpus import clip_motion
     from models.data.dwm import dance_dirs, load_dance
-    from models.networks.library_player import clip_tracks
+    from models.data.library import clip_tracks
 
     cache.mkdir(parents=True, exist_ok=True)
     out = []
@@ -182,7 +182,9 @@ def main(argv: list[str] | None = None) -> int:
     from models.evaluation import listening as L
     from models.features.spectral import extract_features
     from models.generate import load_model
-    from models.networks.library_player import STYLE_BASE, clip_tracks, load_library_model
+    from models.data.library import clip_tracks
+    from models.generate import load_library_model
+    from models.networks.library_player import STYLE_BASE
 
     try:
         lm = load_model(None)

@@ -173,7 +173,7 @@ def load_tracks(a: argparse.Namespace) -> Tracks:
     from models.evaluation.beats import music_beats
     from models.features.audio_io import load_audio
     from models.generate import load_model, run_model
-    from models.networks.library_player import with_library
+    from models.generate import with_library
     from models.timebase import HOP, SAMPLE_RATE
     from models.data.corpus import build_corpus
 
@@ -221,7 +221,7 @@ def load_tempo_tracks(a: argparse.Namespace) -> Tracks:
     from models.features.audio_io import load_audio
     from models.features.spectral import extract_features
     from models.generate import load_model, run_model
-    from models.networks.library_player import with_library
+    from models.generate import with_library
     from models.timebase import SAMPLE_RATE
 
     torch.set_num_threads(min(2, torch.get_num_threads()))

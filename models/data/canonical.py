@@ -13,17 +13,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from models.rig.humanoid import BONE_INDEX
 from models.rig.kinematics import hemisphere_align
 from models.rig.motion import Motion
-
-_HIPS = BONE_INDEX["Hips"]
-
-
-def heading(hips_rot: Rotation) -> np.ndarray:
-    """(T,) heading angles in radians: the yaw of the Hips' forward (+Z) axis about +Y."""
-    fwd = hips_rot.apply(np.array([0.0, 0.0, 1.0]))
-    return np.arctan2(fwd[:, 0], fwd[:, 2])
+from models.rig.travel import _HIPS, heading  # noqa: F401  (heading: read here by its users)
 
 
 def canonicalize(motion: Motion) -> Motion:

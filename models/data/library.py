@@ -106,6 +106,20 @@ def save_library(path: str | Path, clips: list[ImportedClip], bpm: list[float] |
         tmp.unlink(missing_ok=True)
 
 
+def clip_tracks(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """(poses (T, P) float32 in place facing +Z with w >= 0 quaternions, as the training clips
+    are; root track (T, 3) float64: x, z (m) and unwrapped Hips heading (rad),
+    :func:`models.rig.travel.root_track`) of a clip's motion at 30 fps: what a library is danced
+    from (models/networks/library_player.py)."""
+    from models.data.canonical import canonicalize
+    from models.rig.travel import root_track
+
+    poses = canonicalize(motion).to_vector().astype(np.float32)
+    q = poses[:, 3:].reshape(len(poses), -1, 4)
+    q *= np.where(q[..., 3:] < 0, -1.0, 1.0).astype(np.float32)
+    return poses, root_track(motion)
+
+
 _KEYS = ("format", "bones", "fps", "root_pos", "rotations", "clip_start", "clip_frames", "clip_name",
          "clip_source", "clip_folder", "clip_units", "clip_up", "clip_mirrored", "clip_source_fps",
          "clip_scale", "clip_error_mean_cm", "clip_error_max_cm", "clip_offsets", "clip_end_offsets")  # fmt: skip

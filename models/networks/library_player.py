@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -57,19 +56,6 @@ MAX_MEMBERS: int = 16
 KIN_LAGS: tuple[int, int] = (8, 72)
 #: Beats per minute the kinematic tempo is folded into (its octave is not in the motion).
 KIN_BAND: tuple[float, float] = (75.0, 150.0)
-
-
-def clip_tracks(motion) -> tuple[np.ndarray, np.ndarray]:
-    """(poses (T, P) float32 in place facing +Z with w >= 0 quaternions, as the training clips
-    are; root track (T, 3) float64: x, z (m) and unwrapped Hips heading (rad)) of a
-    :class:`~models.rig.motion.Motion` at 30 fps."""
-    from models.data.canonical import canonicalize
-    from models.training.travel_memory import root_track
-
-    poses = canonicalize(motion).to_vector().astype(np.float32)
-    q = poses[:, 3:].reshape(len(poses), -1, 4)
-    q *= np.where(q[..., 3:] < 0, -1.0, 1.0).astype(np.float32)
-    return poses, root_track(motion)
 
 
 def kinematic_period(poses: np.ndarray) -> float:
@@ -191,29 +177,26 @@ def _pick(order: np.ndarray, w: _Windows, n: int, seg: int) -> list[int]:
 
 
 @torch.no_grad()
-def library_model(model: DanceVQ, clips: list, mix: bool = False, members: int = LIBRARY_MEMBERS,
-                  bpm: list[float] | None = None) -> DanceVQ:
-    """A copy of ``model`` whose choreographic memory is the library ``clips``
-    (:class:`models.data.library.LibraryClip`; see the module docstring). ``mix``: the
-    default's exemplars stay too. ``bpm``: per clip its tempo (beats per minute; 0 or None:
-    from its motion, :func:`kinematic_period`). The copy has ``library_styles`` (the folder
+def library_model(model: DanceVQ, poses: list[np.ndarray], tracks: list[np.ndarray], folders: list[str],
+                  mix: bool = False, members: int = LIBRARY_MEMBERS, bpm: list[float] | None = None) -> DanceVQ:
+    """A copy of ``model`` whose choreographic memory is a library's clips (see the module
+    docstring): per clip its poses (T, P) in place facing +Z with w >= 0 quaternions and its
+    root track (T, 3) (:func:`models.data.library.clip_tracks`), the name of its folder, and
+    ``bpm`` its tempo (beats per minute; 0 or None: from its motion, :func:`kinematic_period`).
+    ``mix``: the default's exemplars stay too. The copy has ``library_styles`` (the folder
     names, in token order) and ``clip_periods`` (frames per beat per clip, 0 unknown);
-    :func:`load_library_model` adds ``library_path``.
-    ``model`` is left as it was. ConfigError for too many folders, DataError for clips too short."""
+    :func:`models.generate.load_library_model` adds ``library_path``. ``model`` is left as it
+    was. ConfigError for too many folders, DataError for clips too short."""
     from models.networks.tempo import fold_period
-    from models.rig.motion import Motion
-    from models.training.dance_vq import window_travel
+    from models.rig.travel import window_travel
 
     if not isinstance(model, DanceVQ):
         raise ConfigError(f"a library plays through a dance_vq model, got {type(model).__name__}")
-    if not clips:
+    if not poses:
         raise DataError("the library has no clips", source="library")
     c = model.config
     s = c.seg
-    names: list[str] = []
-    for cl in clips:
-        if cl.folder not in names:
-            names.append(cl.folder)
+    names: list[str] = list(dict.fromkeys(folders))
     if len(names) > MAX_STYLES:
         raise ConfigError(f"the library has {len(names)} folders (styles); at most {MAX_STYLES}")
     lib_slots = members * len(names)
@@ -221,19 +204,13 @@ def library_model(model: DanceVQ, clips: list, mix: bool = False, members: int =
     if base + lib_slots > MAX_MEMBERS:
         members = max(1, (MAX_MEMBERS - base) // len(names))
         lib_slots = members * len(names)
-    folders = [names.index(cl.folder) for cl in clips]
-    poses, tracks, periods = [], [], []
-    for i, cl in enumerate(clips):
-        m = cl.motion if cl.motion.fps == 30.0 else None
-        if m is None:
-            raise DataError(f"clip {cl.name} is at {cl.motion.fps} fps, a library holds 30", source="library")
-        p, t = clip_tracks(Motion(root_pos=np.asarray(m.root_pos, np.float64), rotations=m.rotations, fps=m.fps))
-        poses.append(p)
-        tracks.append(t)
+    folder_of = [names.index(f) for f in folders]
+    periods = []
+    for i, p in enumerate(poses):
         given = float(bpm[i]) if bpm is not None and bpm[i] else 0.0
         periods.append(fold_period(1800.0 / given) if given > 0 else kinematic_period(p))
     model.eval()
-    w = _encode(model, poses, folders, WINDOW_STRIDE)
+    w = _encode(model, poses, folder_of, WINDOW_STRIDE)
     d_all = w.dist  # (N, K) distance of every window to every code vector
 
     out = copy.deepcopy(model)
@@ -280,28 +257,3 @@ def library_model(model: DanceVQ, clips: list, mix: bool = False, members: int =
     for attr in [a for a in vars(out) if a.endswith("_cache") or a == "_numpy_predictor"]:
         delattr(out, attr)  # caches of the original's memory (dance_stream)
     return out.eval()
-
-
-def load_library_model(model: DanceVQ, path, mix: bool = False) -> DanceVQ:
-    """:func:`library_model` of the library file ``path`` (:func:`models.data.library.load_library`),
-    with the tempi given at build time (``--bpm``) where there are any."""
-    from models.data.library import load_library
-
-    clips = load_library(path)
-    out = library_model(model, clips, mix=mix, bpm=[getattr(cl, "bpm", 0.0) for cl in clips])
-    out.library_path = Path(path)
-    return out
-
-
-def with_library(loaded, library, mix: bool = False):
-    """``loaded`` (:class:`models.generate.LoadedModel`) with its model's memory replaced by the
-    library file ``library`` (or mixed with it: ``mix``), as ``performer run|generate --library``
-    load it; None: ``loaded`` as it is. ConfigError for ``mix`` without a library or a model that
-    is not dance_vq."""
-    if library is None:
-        if mix:
-            raise ConfigError("--mix plays the checkpoint's dancers together with a library: give --library FILE.npz")
-        return loaded
-    if not isinstance(loaded.model, DanceVQ):
-        raise ConfigError(f"--library needs a dance_vq model; {loaded.path} is a {loaded.name!r} model")
-    return dataclasses.replace(loaded, model=load_library_model(loaded.model, library, mix=mix))

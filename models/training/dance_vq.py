@@ -38,6 +38,7 @@ from models.errors import ConfigError, DataError
 from models.networks.dance_vq import DanceVQ, STYLE_TOKEN
 from models.training.resume import resume_or_start, save_state
 from models.training.runlog import RunLog
+from models.rig.travel import window_travel  # noqa: F401  (a window's travel; the library's too)
 
 LOG_FIELDS = ("step", "stage", "loss_pose", "loss_fk", "loss_vel", "loss_acc", "loss_commit", "perplexity",
               "loss_ce", "acc", "val_pose_l1", "val_fk_m", "val_perplexity", "val_ce", "val_acc", "frames_per_s")
@@ -264,17 +265,6 @@ def clip_periods(model: DanceVQ, clips: list) -> dict[int, float]:
         base = song_period(src.features[:, cc + 1], src.features[:, cc], onset) * (src.tempo if src is c else 1.0)
         out[id(c)] = fold_period(base / c.tempo) if base > 0 else 0.0
     return out
-
-
-@torch.no_grad()
-def window_travel(track: np.ndarray) -> np.ndarray:
-    """(F, 3) float32 travel of one window from its root track (F, 3): x, z (m) and unwrapped
-    heading (rad) per frame: each frame's horizontal displacement from frame 0 turned into
-    frame 0's heading frame (+Z its facing), and its heading change since frame 0
-    (``DanceVQ.member_travel``)."""
-    d = track[:, :2] - track[:1, :2]
-    c, s = np.cos(track[0, 2]), np.sin(track[0, 2])
-    return np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1], track[:, 2] - track[0, 2]], 1).astype(np.float32)
 
 
 @torch.no_grad()

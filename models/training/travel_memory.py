@@ -33,20 +33,10 @@ import torch
 from models.errors import DataError
 from models.networks.dance_vq import DanceVQ
 from models.training.dance_vq import fit_members
+from models.rig.travel import root_track  # noqa: F401  (a library's travel too: models/rig/travel.py)
 
 #: Memory buffers the refit rewrites and this command keeps as the checkpoint has them.
 _KEPT = ("member_poses", "member_count", "member_style", "member_period")
-
-
-def root_track(motion) -> np.ndarray:
-    """(T, 3) float64: the root's x, z (m) and the Hips' unwrapped heading (rad) of a
-    retargeted, not canonicalised :class:`~models.rig.motion.Motion`."""
-    from scipy.spatial.transform import Rotation
-
-    from models.data.canonical import _HIPS, heading
-
-    h = np.unwrap(heading(Rotation.from_quat(motion.rotations[:, _HIPS])))
-    return np.stack([motion.root_pos[:, 0], motion.root_pos[:, 2], h], 1)
 
 
 def motion_clips(cfg, feature_dim: int, data_root: str | Path, progress: bool = False) -> tuple[list, list]:

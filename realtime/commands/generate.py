@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     args.style = args.style or "auto"
     if args.style not in ("auto", "chacha", "rumba", "waltz") and args.library is None:
         raise ConfigError(f"--style {args.style}: choose auto, chacha, rumba or waltz (or a folder of --library)")
-    from models.networks.library_player import with_library
+    from models.generate import with_library
 
     loaded = with_library(load_model(args.checkpoint), args.library, bool(args.mix))
     if stage is None:  # the default: a small stage for the dancing models, in place for the others
