@@ -49,6 +49,8 @@ from models.networks.feet import FeetLock
 from models.networks.stage import SpotStage, Stage, cached_travel
 from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate
 from models.networks.library_player import resolve_style
+from models.networks.member_tables import (CHUNK_FRAMES, MemberTables, code_energy, code_frequency, member_dips,  # noqa: F401
+                                          member_positions, member_speed, member_tables)
 from models.networks.streaming import FEATURE_LIMIT
 from models.networks.tempo import DENSITY_WINDOW, TEMPO_RANGE, TempoFollower, danced_beat, onset_density
 from models.rig.humanoid import BONE_INDEX
@@ -327,42 +329,6 @@ def _unit(p: np.ndarray) -> np.ndarray:
     return p
 
 
-def member_positions(windows: np.ndarray) -> np.ndarray:
-    """(K, M, F, J + E, 3) world positions (m) of every point of exemplar windows (K, M, F, P)
-    by forward kinematics on the default skeleton; empty member slots (zeros) read as the rest pose."""
-    from models.rig.kinematics import fk
-    from models.rig.motion import Motion
-
-    k, m, f, p = windows.shape
-    flat = windows.reshape(-1, p).astype(np.float64)
-    q = flat[:, 3:].reshape(len(flat), -1, 4)
-    ok = np.linalg.norm(q, axis=-1).min(1) > 0.5  # empty member slots are zeros
-    q[~ok] = [0.0, 0.0, 0.0, 1.0]
-    flat[:, 3:] = q.reshape(len(flat), -1)
-    return fk(Motion.from_vector(flat.astype(np.float32), fps=FPS), load_default_skeleton()).reshape(k, m, f, -1, 3)
-
-
-def member_speed(windows: np.ndarray) -> np.ndarray:
-    """(K, M, F) mean joint speed of each exemplar frame, m a frame (:func:`member_positions`).
-    windows: (K, M, F, P) poses."""
-    return np.linalg.norm(np.gradient(member_positions(windows), axis=2), axis=-1).mean(-1)
-
-
-def member_dips(windows: np.ndarray, seg: int) -> np.ndarray:
-    """(K, M, seg) 1.0 where an exemplar's smoothed mean joint speed has a local minimum at
-    frame j of its movement (a kinematic beat, as models.evaluation.beats counts them), else 0.
-
-    windows: (K, M, F >= seg + 2, P) poses; speed: :func:`member_speed`.
-    """
-    from scipy.ndimage import gaussian_filter1d
-
-    k, m, f, p = windows.shape
-    speed = gaussian_filter1d(member_speed(windows).reshape(k * m, f), 2.0, axis=1, mode="nearest")
-    dip = np.zeros_like(speed)
-    dip[:, 1:-1] = (speed[:, 1:-1] < speed[:, :-2]) & (speed[:, 1:-1] <= speed[:, 2:])
-    return dip[:, :seg].reshape(k, m, seg).astype(np.float32)
-
-
 def sign_continuous(windows: np.ndarray) -> np.ndarray:
     """Poses (..., F, P) with each quaternion's sign chosen frame by frame to follow the
     previous frame's (the corpus stores w >= 0 per frame, which flips a bone whose rotation
@@ -374,20 +340,6 @@ def sign_continuous(windows: np.ndarray) -> np.ndarray:
         q[..., t, :, :] *= np.where(dot < 0, -1.0, 1.0).astype(q.dtype)
     out[..., 3:] = q.reshape(*out.shape[:-1], -1)
     return out
-
-
-def _cached_dips(model: DanceVQ, members: np.ndarray, seg: int) -> np.ndarray:
-    """:func:`member_dips` of ``model``'s exemplars, kept on the model: the forward kinematics
-    of every exemplar took 0.4-0.6 s, paid by every new stream (each song :func:`generate`
-    runs, each ``build_pipeline``). Recomputed when ``member_poses`` changes (another tensor,
-    or the same one written in place: its version counter moves)."""
-    t = model.member_poses
-    key = (t.data_ptr(), t._version, tuple(t.shape), seg)
-    cached = getattr(model, "_dips_cache", None)
-    if cached is None or cached[0] != key:
-        cached = (key, member_dips(members[:, :, : seg + 2], seg))
-        model._dips_cache = cached
-    return cached[1]
 
 
 def _weights_key(tensors) -> tuple:
@@ -434,74 +386,56 @@ def _cached_members(model: DanceVQ) -> np.ndarray:
     key = (_weights_key([model.member_poses, model.member_count]), MEMBER_SMOOTH)
     cached = getattr(model, "_members_cache", None)
     if cached is None or cached[0] != key:
-        mem = smooth_members(sign_continuous(model.member_poses.float().numpy()), model.member_count.numpy(),
-                             MEMBER_SMOOTH)
+        model._members_cache = None  # the old copy goes before the new one is built
+        poses, counts = model.member_poses, model.member_count.numpy()
+        mem = np.empty(tuple(poses.shape), np.float32)
+        step = max(1, CHUNK_FRAMES // max(1, poses.shape[1] * poses.shape[2]))  # codes at a time: bounded transients
+        for a in range(0, len(mem), step):
+            mem[a: a + step] = smooth_members(sign_continuous(poses[a: a + step].float().numpy()), counts[a: a + step],
+                                              MEMBER_SMOOTH)
         cached = (key, mem)
         model._members_cache = cached
     return cached[1]
 
 
-def code_energy(members: np.ndarray, counts: np.ndarray, seg: int, speed: np.ndarray | None = None) -> np.ndarray:
-    """How lively each code's movements are: z-scores (K,) float32, over the codes with
-    exemplars, of the log mean joint speed (:func:`member_speed`) of its exemplars' movements
-    (their first seg frames). ``members`` (K, M, >= seg, P), ``counts`` (K,) exemplars per
-    code; ``speed`` (K, M): those mean speeds, if already computed. A code without exemplars
-    gets 0 (the mean)."""
-    k, m = members.shape[:2]
-    z = np.zeros(k, np.float32)
-    has = counts > 0
-    if has.sum() < 2:
-        return z
-    if speed is None:
-        speed = member_speed(members[:, :, :seg]).mean(-1)  # (K, M)
-    mask = np.arange(m)[None, :] < counts[:, None]
-    per_code = np.log(np.maximum((speed * mask).sum(1)[has] / counts[has], 1e-9))
-    z[has] = (per_code - per_code.mean()) / max(per_code.std(), 1e-9)
-    return z
+def _cached_tables(model: DanceVQ, members: np.ndarray) -> MemberTables:
+    """:func:`~models.networks.member_tables.member_tables` of ``model``'s exemplars ``members``
+    (:func:`_cached_members`): their beats, speeds, energy, quickness and contacts from one FK
+    pass, kept on the model like :func:`_cached_members` (the FK of every exemplar took
+    0.4-0.6 s a table, paid by every new stream otherwise). Recomputed when ``member_poses`` or
+    ``member_count`` changes (another tensor, or the same one written in place) or a feet constant does."""
+    key = (_weights_key([model.member_poses, model.member_count]), model.config.seg, feet_part.CONTACT_HEIGHT,
+           feet_part.CONTACT_SPEED, feet_part.FLOOR_PERCENTILE)
+    cached = getattr(model, "_tables_cache", None)
+    if cached is None or cached[0] != key:
+        model._tables_cache = None  # the old tables go before the new ones are built
+        cached = (key, member_tables(members, model.member_count.numpy(), model.config.seg))
+        model._tables_cache = cached
+    return cached[1]
 
 
-def code_frequency(members: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """How quick each code's movements are: z-scores (K,) float32, over the codes with
-    exemplars, of the mean over its exemplars of ln(mean joint acceleration / mean joint speed)
-    (for a sinusoid 2 pi f a frame) over their whole windows, positions relative to the root
-    (the dance, not its travel). ``members`` (K, M, F, P), ``counts`` (K,). A code without
-    exemplars gets 0."""
-    k, m = members.shape[:2]
-    z = np.zeros(k, np.float32)
-    has = counts > 0
-    if has.sum() < 2:
-        return z
-    pos = member_positions(members)
-    pos = pos - pos[..., :1, :]
-    v = np.linalg.norm(np.diff(pos, axis=2), axis=-1).mean((-1, -2))
-    a = np.linalg.norm(np.diff(pos, 2, axis=2), axis=-1).mean((-1, -2))
-    lf = np.log(np.maximum(a, 1e-9) / np.maximum(v, 1e-9))  # (K, M)
-    mask = np.arange(m)[None, :] < counts[:, None]
-    per = (lf * mask).sum(1)[has] / counts[has]
-    z[has] = (per - per.mean()) / max(per.std(), 1e-9)
-    return z
+def _cached_dips(model: DanceVQ, members: np.ndarray, seg: int) -> np.ndarray:
+    """(K, M, seg) :func:`member_dips` of ``model``'s exemplars (:func:`_cached_tables`; ``seg`` the model's)."""
+    return _cached_tables(model, members).dips
 
 
 def _cached_frequency(model: DanceVQ, members: np.ndarray) -> np.ndarray:
-    """:func:`code_frequency` (K,) of ``model``'s exemplars, kept on the model like :func:`_cached_members`."""
-    key = _weights_key([model.member_poses, model.member_count])
-    cached = getattr(model, "_frequency_cache", None)
-    if cached is None or cached[0] != key:
-        cached = (key, code_frequency(members, model.member_count.numpy()))
-        model._frequency_cache = cached
-    return cached[1]
+    """:func:`code_frequency` (K,) of ``model``'s exemplars (:func:`_cached_tables`)."""
+    return _cached_tables(model, members).frequency
 
 
 def _cached_energy(model: DanceVQ, members: np.ndarray, seg: int) -> tuple[np.ndarray, np.ndarray]:
     """(:func:`code_energy` (K,), each exemplar's mean joint speed over its movement (K, M),
-    m/frame) of ``model``'s exemplars, kept on the model like :func:`_cached_members`."""
-    key = (_weights_key([model.member_poses, model.member_count]), seg)
-    cached = getattr(model, "_energy_cache", None)
-    if cached is None or cached[0] != key:
-        speed = member_speed(members[:, :, :seg]).mean(-1)
-        cached = (key, (code_energy(members, model.member_count.numpy(), seg, speed), speed))
-        model._energy_cache = cached
-    return cached[1]
+    m/frame) of ``model``'s exemplars (:func:`_cached_tables`; ``seg`` the model's)."""
+    t = _cached_tables(model, members)
+    return t.energy, t.speed
+
+
+def _cached_contacts(model: DanceVQ, members: np.ndarray) -> tuple[np.ndarray, float]:
+    """(:func:`models.networks.feet.member_contacts` of ``model``'s exemplars ``members`` (K, M, 2 seg, 3);
+    the memory's floor, m) (:func:`_cached_tables`)."""
+    t = _cached_tables(model, members)
+    return t.contacts, t.floor
 
 
 def _cached_bone_cap(model: DanceVQ, members: np.ndarray, counts: np.ndarray) -> float:
@@ -511,22 +445,10 @@ def _cached_bone_cap(model: DanceVQ, members: np.ndarray, counts: np.ndarray) ->
     key = (_weights_key([model.member_poses, model.member_count]), BONE_CAP)
     cached = getattr(model, "_bone_cap_cache", None)
     if cached is None or cached[0] != key:
-        real = np.arange(members.shape[1])[None, :] < counts[:, None]
-        steps = [rotation_jumps_deg(w[:, 3:].reshape(len(w), -1, 4)).max(axis=1) for w in members[real]]
+        steps = [rotation_jumps_deg(w[:, 3:].reshape(len(w), -1, 4)).max(axis=1)
+                 for k, n in enumerate(counts) for w in members[k, :n]]  # no copy of the real windows
         cached = (key, float(np.quantile(np.concatenate(steps), BONE_CAP)) if steps else np.inf)
         model._bone_cap_cache = cached
-    return cached[1]
-
-
-def _cached_contacts(model: DanceVQ, members: np.ndarray) -> tuple[np.ndarray, float]:
-    """(:func:`models.networks.feet.member_contacts` of ``model``'s exemplars ``members`` (K, M, 2 seg, 3);
-    the memory's floor, m), kept on the model like :func:`_cached_members`."""
-    key = (_weights_key([model.member_poses, model.member_count]), feet_part.CONTACT_HEIGHT, feet_part.CONTACT_SPEED,
-           feet_part.FLOOR_PERCENTILE)
-    cached = getattr(model, "_contacts_cache", None)
-    if cached is None or cached[0] != key:
-        cached = (key, feet_part.member_contacts(member_positions(members), model.member_count.numpy()))
-        model._contacts_cache = cached
     return cached[1]
 
 

@@ -121,8 +121,13 @@ def member_contacts(positions: np.ndarray, counts: np.ndarray) -> tuple[np.ndarr
     so one height for the whole memory would find contacts in the low dancers only, and the
     stream, taking turns between them, would float and sink (:data:`GROUND_RATE`). The floor
     returned is the :data:`FLOOR_PERCENTILE` of all the memory's lowest foot points."""
-    k, m, f = positions.shape[:3]
-    low, mid = member_feet(positions)  # (K, M, F, 2), (K, M, F, 2, 3)
+    return feet_contacts(*member_feet(positions), counts)
+
+
+def feet_contacts(low: np.ndarray, mid: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, float]:
+    """:func:`member_contacts` from :func:`member_feet`'s (low (K, M, F, 2), mid (K, M, F, 2, 3)) of the
+    windows' FK points, which ``dance_stream``'s start-up computes in chunks (member_tables.py)."""
+    k, m, f = low.shape[:3]
     real = np.arange(m)[None, :] < np.asarray(counts)[:, None]
     if not real.any():
         return np.zeros((k, m, f, 3), np.float32), 0.0
