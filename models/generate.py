@@ -313,7 +313,22 @@ def load_library_model(model, path: str | Path, mix: bool = False):
     out = library_model(model, [p for p, _ in tracks], [t for _, t in tracks], [c.folder for c in clips], mix=mix,
                         bpm=[c.bpm for c in clips])
     out.library_path = Path(path)
+    del clips, tracks
+    _release_freed()
     return out
+
+
+def _release_freed() -> None:
+    """Hand the heap pages freed by a start-up step back to the system (glibc's ``malloc_trim``;
+    nothing elsewhere). A 30-minute library's build freed ~80 MB of clips, window codes and
+    distances that the allocator kept, which the stream's start-up then stacked its own peak on."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
 
 
 def with_library(loaded: LoadedModel, library: str | Path | None, mix: bool = False) -> LoadedModel:

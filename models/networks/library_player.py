@@ -159,9 +159,11 @@ def _encode(model: DanceVQ, poses: list[np.ndarray], folders: list[int], stride:
     if not zs:
         raise DataError(f"every clip is shorter than {3 * s} frames: nothing to dance", source="library")
     z = torch.cat(zs)
-    # in blocks: the quantizer's own nearest-code search over all windows at once held three
-    # (N, K) matrices (160 MB for a 30-minute library) in the performer's peak memory
-    dist = np.concatenate([torch.cdist(z[a: a + 2048], model.quantizer.embed).numpy() for a in range(0, len(z), 2048)])
+    # in blocks, into one array: the quantizer's own nearest-code search over all windows at once
+    # held three (N, K) matrices (160 MB for a 30-minute library), a list of blocks concatenated two
+    dist = np.empty((len(z), len(model.quantizer.embed)), np.float32)
+    for a in range(0, len(z), 2048):
+        dist[a: a + 2048] = torch.cdist(z[a: a + 2048], model.quantizer.embed).numpy()
     return _Windows(np.concatenate(clip), np.concatenate(start), np.concatenate(folder), dist.argmin(1), dist)
 
 
