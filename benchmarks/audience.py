@@ -24,7 +24,14 @@ turns, so the machine's changing load (other programs) falls on both alike. Repo
     .venv/bin/python benchmarks/audience.py --subscribers 300 --cluster 3 --procs 3   # 3 routed nodes
 
 Everything runs on this machine: the subscribers' and the broker's CPU compete with the
-engine's, which an audience served from other machines would not.
+engine's, which an audience served from other machines would not. ``--performer-cpus 0
+--audience-cpus 1`` stands in for that: the engine's process (and the publisher process it
+starts, as ``performer run --publish`` does) on CPU 0, the broker and every subscriber on CPU
+1 (sched_setaffinity, inherited by every thread and child; the affinities are read back from
+/proc and reported). Other programs on the machine are not pinned and still use both.
+``--unpinned-too`` runs each size unpinned first, then pinned, in the same session.
+
+    .venv/bin/python benchmarks/audience.py --subscribers 100 500 1000 --performer-cpus 0 --audience-cpus 1 --unpinned-too
 """
 
 from __future__ import annotations
@@ -186,6 +193,39 @@ def _peak_rss(pid: int) -> int:
     return 0
 
 
+def parse_cpus(text: str) -> set[int]:
+    """``"0"``, ``"0,1"`` or ``"0-3"`` -> the CPU numbers; ValueError on anything else."""
+    out: set[int] = set()
+    for part in text.split(","):
+        lo, _, hi = part.strip().partition("-")
+        a, b = int(lo), int(hi or lo)
+        if a < 0 or b < a:
+            raise ValueError(text)
+        out.update(range(a, b + 1))
+    return out
+
+
+def _pin_all_threads(cpus: set[int], pid: int | str = "self") -> None:
+    """Pin every thread of process ``pid`` (already running ones: numpy's, torch's) to ``cpus``;
+    threads and children started later inherit it from their parent thread."""
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        try:
+            os.sched_setaffinity(int(tid), cpus)
+        except (ProcessLookupError, OSError):
+            pass  # a thread that ended
+
+
+def _affinity(pid: int) -> list[int]:
+    """The CPUs every thread of ``pid`` may run on (the union over its threads), read back."""
+    cpus: set[int] = set()
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        try:
+            cpus |= os.sched_getaffinity(int(tid))
+        except OSError:
+            pass
+    return sorted(cpus)
+
+
 class _Gate:
     """A Sink in front of the broker route: passes frames only in every other block of ``block``
     frames (the first block off), and remembers the indices it passed. One engine run then holds
@@ -242,16 +282,24 @@ def _play(seconds: float, block: int, broker_url: str) -> tuple[np.ndarray, np.n
     eng.wait(seconds + 120)
     hop = eng.compute_ms.values()
     own = hop - eng.compute_wait_ms.values()
+    cpu = eng.compute_cpu_ms.values()
     stats = gate.stats()
+    stats["publisher_cpus"] = _affinity(pub._proc.pid)
     eng.close()
     rx.close()
     on = np.array([gate.on(i) for i in range(len(hop))])
-    return hop, own, on, gate, stats
+    return hop, own, cpu, on, gate, stats
 
 
-def run_size(n: int, seconds: float, procs: int, cluster: int, block: int) -> dict:
+def run_size(n: int, seconds: float, procs: int, cluster: int, block: int,
+             performer_cpus: set[int] | None = None, audience_cpus: set[int] | None = None) -> dict:
+    """One audience size; with ``performer_cpus`` and ``audience_cpus`` the broker and subscribers
+    are started on the audience's CPUs and the engine (and its publisher child) runs on the performer's."""
     from realtime.nats_server import LocalBroker, free_port
 
+    every_cpu = os.sched_getaffinity(0)
+    if audience_cpus is not None:
+        os.sched_setaffinity(0, audience_cpus)  # this thread: the broker and subscribers inherit it
     folder = Path(tempfile.mkdtemp(prefix=f"audience-{n}-"))
     if cluster > 1:
         cports = [free_port() for _ in range(cluster)]
@@ -280,10 +328,17 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int) -> di
                 raise RuntimeError("subscribers did not connect")
             time.sleep(0.2)
         time.sleep(1.0)
+        if performer_cpus is not None:
+            _pin_all_threads(performer_cpus)  # the engine's threads and publisher child inherit it
+        pinned = {"performer": _affinity(os.getpid()), "broker": sorted({c for b in brokers for c in _affinity(b.proc.pid)}),
+                  "subscribers": sorted({c for p in [*subs, probe] for c in _affinity(p.pid)})}
         c0 = sum(b.cpu_rss()[0] for b in brokers)
         sub_cpu0 = sum(_proc_cpu(p.pid) for p in subs)
         t0 = time.monotonic()
-        hop, own, on, gate, stats = _play(seconds, block, brokers[0].url)
+        load0 = os.getloadavg()[0]
+        hop, own, cpu, on, gate, stats = _play(seconds, block, brokers[0].url)
+        load1 = os.getloadavg()[0]
+        pinned["publisher"] = stats["publisher_cpus"]
         wall = time.monotonic() - t0
         broker_cpu = (sum(b.cpu_rss()[0] for b in brokers) - c0) / wall
         sub_cpu = (sum(_proc_cpu(p.pid) for p in subs) - sub_cpu0) / wall
@@ -293,6 +348,7 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int) -> di
         for p in [*subs, probe]:
             p.wait(120)
     finally:
+        _pin_all_threads(every_cpu)
         (folder / "stop").write_text("1")
         for p in [*subs, *([probe] if probe is not None else [])]:
             if p.poll() is None:
@@ -322,10 +378,10 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int) -> di
                                for x in np.load(f, allow_pickle=True)["latency"]]) * 1e3
     lat_ms = np.concatenate([np.asarray(x) for x in latency]) * 1e3 if latency else np.array([np.nan])
     skip = 2 * block  # the first off and on blocks: the engine's first code steps, the first subscribers' wake-ups
-    hop, own, on = hop[skip:], own[skip:], on[skip:len(hop) + skip]
+    hop, own, cpu, on = hop[skip:], own[skip:], cpu[skip:], on[skip:len(hop) + skip]
     p99 = lambda x: float(np.percentile(x, 99))  # noqa: E731
     return {
-        "subscribers": n, "connected": len(index), "cluster_nodes": len(brokers), "procs": procs,
+        "subscribers": n, "pinned": performer_cpus is not None or audience_cpus is not None, "cpus": pinned, "load_average": [load0, load1], "connected": len(index), "cluster_nodes": len(brokers), "procs": procs,
         "frames_published": int(stats["published"]), "frames_dropped": int(stats["drops"]) + int(stats["drops_down"]),
         "min_share_of_subscribers_per_frame": float(per_frame.min()) if per_frame.size else float("nan"),
         "share_of_subscribers_complete_in_order": complete / max(1, len(index)),
@@ -336,6 +392,9 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int) -> di
         "hop_ratio_p99": p99(hop[on]) / p99(hop[~on]),
         "hop_own_ms_p99_without": p99(own[~on]), "hop_own_ms_p99_with": p99(own[on]),
         "hop_own_ratio_p99": p99(own[on]) / p99(own[~on]),
+        "hop_cpu_ms_p99_without": p99(cpu[~on]), "hop_cpu_ms_p99_with": p99(cpu[on]),
+        "hop_cpu_ratio_p99": p99(cpu[on]) / p99(cpu[~on]),
+        "hop_ms_p50_without": float(np.median(hop[~on])), "hop_ms_p50_with": float(np.median(hop[on])),
         "hop_own_ms_p50_without": float(np.median(own[~on])), "hop_own_ms_p50_with": float(np.median(own[on])),
         "hops": [int((~on).sum()), int(on.sum())],
         "broker_cpu_share": broker_cpu, "broker_peak_rss_mb": [r / 2**20 for r in rss],
@@ -353,6 +412,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--procs", type=int, default=2, help="subscriber processes (default 2)")
     p.add_argument("--cluster", type=int, default=1, metavar="K", help="K routed nats-server nodes (default 1); "
                    "the performer publishes to the first, subscriber process k connects to node k mod K")
+    p.add_argument("--performer-cpus", metavar="CPUS", help="pin the engine's process and its publisher child to "
+                   "these CPUs (e.g. 0, or 0-1, or 0,2); default: not pinned")
+    p.add_argument("--audience-cpus", metavar="CPUS", help="pin the broker node(s) and the subscriber processes to "
+                   "these CPUs (e.g. 1); default: not pinned")
+    p.add_argument("--unpinned-too", action="store_true", help="with the pinning options: run each size unpinned "
+                   "first, then pinned, in the same session (the same machine load for both)")
     p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
     p.add_argument("--subscriber-process", type=int, help=argparse.SUPPRESS)
     p.add_argument("--url", help=argparse.SUPPRESS)
@@ -373,23 +438,43 @@ def main(argv: list[str] | None = None) -> int:
     if not 1 <= args.procs <= 16 or args.cluster < 1 or not 4 <= args.seconds <= 3600 \
             or any(n < 1 for n in args.subscribers):
         p.error("--procs 1..16, --cluster >= 1, --seconds 4..3600, --subscribers >= 1")
+    usable = os.sched_getaffinity(0)
+    pins = []
+    for flag, text in (("--performer-cpus", args.performer_cpus), ("--audience-cpus", args.audience_cpus)):
+        try:
+            cpus = None if text is None else parse_cpus(text)
+        except ValueError:
+            p.error(f"{flag} {text!r}: give CPU numbers such as 0, 0-1 or 0,2")
+        if cpus is not None and not cpus <= usable:
+            p.error(f"{flag} {text!r}: this machine lets this process use CPUs {sorted(usable)}")
+        pins.append(cpus)
+    pinned = pins != [None, None]
+    if args.unpinned_too and not pinned:
+        p.error("--unpinned-too needs --performer-cpus and/or --audience-cpus")
+    modes = ([(None, None)] if not pinned or args.unpinned_too else []) + ([tuple(pins)] if pinned else [])
     results = []
     for n in args.subscribers:
-        r = run_size(n, args.seconds, args.procs, args.cluster, args.block)
-        results.append(r)
-        print(json.dumps(r), flush=True)
-    print("\n| subscribers | nodes | frames | delivered in order (min share per frame / complete subscribers) "
+        for perf, aud in modes:
+            r = run_size(n, args.seconds, args.procs, args.cluster, args.block, perf, aud)
+            results.append(r)
+            print(json.dumps(r), flush=True)
+    print("\n| subscribers | CPUs: performer+publisher / broker / subscribers | load average (start, end) | nodes | frames | delivered in order (min share per frame / complete subscribers) "
           "| publish-to-receive p50 / p99 ms (probe) | hop p99 ms without / with (ratio) | hop own p99 ms without / with "
-          "(ratio) | broker CPU, peak RSS | subscribers' CPU |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "(ratio) | hop CPU p99 ms without / with (ratio) | broker CPU, peak RSS | subscribers' CPU |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    cpus = lambda c: ",".join(map(str, c))  # noqa: E731
     for r in results:
-        print(f"| {r['subscribers']} | {r['cluster_nodes']} | {r['frames_published']} "
+        c = r["cpus"]
+        print(f"| {r['subscribers']} | {cpus(c['performer'])}+{cpus(c['publisher'])} / {cpus(c['broker'])} / "
+              f"{cpus(c['subscribers'])}{' (pinned)' if r['pinned'] else ''} | {r['load_average'][0]:.1f}, "
+              f"{r['load_average'][1]:.1f} | {r['cluster_nodes']} | {r['frames_published']} "
               f"(+{r['frames_dropped']} dropped) | {100 * r['min_share_of_subscribers_per_frame']:.2f} % / "
               f"{100 * r['share_of_subscribers_complete_in_order']:.2f} % | {r['latency_ms_p50']:.1f} / "
               f"{r['latency_ms_p99']:.1f} ({r['probe_latency_ms_p50']:.1f} / {r['probe_latency_ms_p99']:.1f}) | "
               f"{r['hop_ms_p99_without']:.2f} / {r['hop_ms_p99_with']:.2f} "
               f"({r['hop_ratio_p99']:.3f}) | {r['hop_own_ms_p99_without']:.2f} / {r['hop_own_ms_p99_with']:.2f} "
-              f"({r['hop_own_ratio_p99']:.3f}) | {100 * r['broker_cpu_share']:.0f} % of a core, "
+              f"({r['hop_own_ratio_p99']:.3f}) | {r['hop_cpu_ms_p99_without']:.2f} / {r['hop_cpu_ms_p99_with']:.2f} "
+              f"({r['hop_cpu_ratio_p99']:.3f}) | {100 * r['broker_cpu_share']:.0f} % of a core, "
               f"{max(r['broker_peak_rss_mb']):.0f} MB | {100 * r['subscriber_procs_cpu_share']:.0f} % |")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
