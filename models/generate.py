@@ -300,18 +300,19 @@ def generate(
     return Generation(poses, len(audio) / SAMPLE_RATE, timings)
 
 
-def load_library_model(model, path: str | Path, mix: bool = False):
+def load_library_model(model, path: str | Path, mix: bool = False, chooser: str = "codes"):
     """A copy of the dance_vq ``model`` dancing the motion library file ``path``
     (:func:`models.data.library.load_library`; ``mix``: with the model's own exemplars;
     :func:`models.networks.library_player.library_model`), with the tempi given at build time
-    (``--bpm``) where there are any; it keeps the file's path as ``library_path``."""
+    (``--bpm``) where there are any; it keeps the file's path as ``library_path``. ``chooser``:
+    "codes" (the predictor) or "match" (music descriptors, docs/library.md; a comparison)."""
     from models.data.library import clip_tracks, load_library
     from models.networks.library_player import library_model
 
     clips = load_library(path)
     tracks = [clip_tracks(c.motion) for c in clips]
     out = library_model(model, [p for p, _ in tracks], [t for _, t in tracks], [c.folder for c in clips], mix=mix,
-                        bpm=[c.bpm for c in clips])
+                        bpm=[c.bpm for c in clips], chooser=chooser)
     out.library_path = Path(path)
     del clips, tracks
     _release_freed()

@@ -151,6 +151,9 @@ def parse_args(argv):
     p.add_argument("--seconds", type=float, default=45.0, help="excerpt length, s (default 45)")
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1], help="listening stretch-set seeds (default 0 1)")
     p.add_argument("--sets", default="own,listening,style", help="comma-separated: own, listening, style (default all)")
+    p.add_argument("--chooser", choices=("codes", "match"), default="codes",
+                   help="what picks the library's movements: codes (the default's predictor, shipped) or match "
+                        "(music descriptors -> nearest windows, issue 40's second design; docs/library.md)")
     p.add_argument("--cache", type=Path, default=REPO / ".cache" / "library_play", help="DWM frames cache")
     p.add_argument("--out", type=Path, default=REPO / "runs" / "library_play", help="report folder")
     p.add_argument("--save-checkpoint", type=Path, metavar="OUT.pt",
@@ -189,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         lm = load_model(None)
         clips = load_library(a.library)
-        lib = load_library_model(lm.model, a.library)
+        lib = load_library_model(lm.model, a.library, chooser=a.chooser)
         music = L.music_files(a.data / "music")
     except (PerformerError, OSError) as e:
         print(f"library_play.py: {e}", file=sys.stderr)
@@ -211,7 +214,7 @@ def main(argv: list[str] | None = None) -> int:
                for f in lib.library_styles}
     near_user = Nearest(user)
     cache = L.AudioCache(a.cache / "audio")
-    report: dict = {"library": str(a.library), "clips": [c.name for c in clips], "folders": list(lib.library_styles),
+    report: dict = {"library": str(a.library), "chooser": a.chooser, "clips": [c.name for c in clips], "folders": list(lib.library_styles),
                     "clip_bpm": [round(1800.0 / p, 1) if p else 0.0 for p in lib.clip_periods], "songs": {}}
     print(f"library {a.library}: {len(clips)} clips, folders {', '.join(lib.library_styles)}, tempi "
           f"{report['clip_bpm']} bpm; {lib.config.members} exemplars a code")

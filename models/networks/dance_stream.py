@@ -502,6 +502,7 @@ class DanceStream:
         self.model = model.eval()
         c = model.config
         self._predictor = _cached_predictor(model)  # the torch predictor's logits, in NumPy (dance_numpy)
+        self._chooser = getattr(model, "code_chooser", None)  # (hist, period) -> logits (K,), or the predictor's
         self.seg, self.pose_dim = c.seg, c.pose_dim
         self.feature_dim = c.input_dim  # columns push() takes: the predictor's, + the gate's steadiness column
         self._fd = c.feature_dim  # the predictor's columns, the first of each row
@@ -754,6 +755,8 @@ class DanceStream:
                 auto = self._prefix_auto if self._prefix_auto is not None else Prefix(pred, list(self._tokens), 0)
                 base = pred.logits_after(auto, token)
                 logits = base + STYLE_GUIDANCE * (logits - base)
+            if self._chooser is not None:  # library_player chooser="match": the music's descriptors choose
+                logits = self._chooser(self._hist, self._tempo.period)
             if self.style and STYLE_PRIOR != 0.0:  # codes the requested style's dancers use
                 logits = logits + STYLE_PRIOR * self._style_prior[:, self.style]
             bias = self._energy_bias  # read once: the control thread may swap it

@@ -167,6 +167,15 @@ def _encode(model: DanceVQ, poses: list[np.ndarray], folders: list[int], stride:
     return _Windows(np.concatenate(clip), np.concatenate(start), np.concatenate(folder), dist.argmin(1), dist)
 
 
+def _match_memory(w: _Windows, poses: list[np.ndarray], seg: int) -> np.ndarray:
+    """``chooser="match"``: the windows' codes and code distances replaced, in place, by clusters of
+    their motion descriptors (models/networks/motion_match.py); returns the centres (K, 3)."""
+    from models.networks.motion_match import match_windows
+
+    w.code, w.dist, centres = match_windows(poses, w.start, w.clip, seg, w.dist.shape[1])
+    return centres
+
+
 def _pick(order: np.ndarray, w: _Windows, n: int, seg: int) -> list[int]:
     """Up to ``n`` windows from ``order`` (best first), none within ``seg`` frames of a kept one of the same clip."""
     kept: list[int] = []
@@ -180,7 +189,8 @@ def _pick(order: np.ndarray, w: _Windows, n: int, seg: int) -> list[int]:
 
 @torch.no_grad()
 def library_model(model: DanceVQ, poses: list[np.ndarray], tracks: list[np.ndarray], folders: list[str],
-                  mix: bool = False, members: int = LIBRARY_MEMBERS, bpm: list[float] | None = None) -> DanceVQ:
+                  mix: bool = False, members: int = LIBRARY_MEMBERS, bpm: list[float] | None = None,
+                  chooser: str = "codes") -> DanceVQ:
     """A copy of ``model`` whose choreographic memory is a library's clips (see the module
     docstring): per clip its poses (T, P) in place facing +Z with w >= 0 quaternions and its
     root track (T, 3) (:func:`models.data.library.clip_tracks`), the name of its folder, and
@@ -188,7 +198,9 @@ def library_model(model: DanceVQ, poses: list[np.ndarray], tracks: list[np.ndarr
     ``mix``: the default's exemplars stay too. The copy has ``library_styles`` (the folder
     names, in token order) and ``clip_periods`` (frames per beat per clip, 0 unknown);
     :func:`models.generate.load_library_model` adds ``library_path``. ``model`` is left as it
-    was. ConfigError for too many folders, DataError for clips too short."""
+    was. ``chooser``: "codes" (the default's predictor picks codes) or "match" (issue 40's second
+    design, :func:`_match_memory`: the music's descriptors pick among clusters of the windows).
+    ConfigError for too many folders or an unknown chooser, DataError for clips too short."""
     from models.networks.tempo import fold_period
     from models.rig.travel import window_travel
 
@@ -211,8 +223,11 @@ def library_model(model: DanceVQ, poses: list[np.ndarray], tracks: list[np.ndarr
     for i, p in enumerate(poses):
         given = float(bpm[i]) if bpm is not None and bpm[i] else 0.0
         periods.append(fold_period(1800.0 / given) if given > 0 else kinematic_period(p))
+    if chooser not in ("codes", "match"):
+        raise ConfigError(f"unknown chooser {chooser!r}; choose codes or match")
     model.eval()
     w = _encode(model, poses, folder_of, WINDOW_STRIDE)
+    centres = _match_memory(w, poses, s) if chooser == "match" else None
     d_all = w.dist  # (N, K) distance of every window to every code vector
 
     out = copy.deepcopy(model)
@@ -256,6 +271,10 @@ def library_model(model: DanceVQ, poses: list[np.ndarray], tracks: list[np.ndarr
     out.library_styles = tuple(names)
     out.default_styles = bool(mix)
     out.clip_periods = tuple(periods)
+    if centres is not None:
+        from models.networks.motion_match import MatchChooser, load_regression
+
+        out.code_chooser = MatchChooser(load_regression(), centres)  # read by DanceStream every code step
     for attr in [a for a in vars(out) if a.endswith("_cache") or a == "_numpy_predictor"]:
         delattr(out, attr)  # caches of the original's memory (dance_stream)
     return out.eval()
