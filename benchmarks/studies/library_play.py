@@ -2,7 +2,8 @@
 does it listen, does ``--style`` pick the folder? The shipped default beside it, same run.
 
 The library (``performer library build``, docs/library.md) plays through the default's
-predictor (models/networks/library_player.py). On every recording of ``--music`` (an excerpt
+predictor (models/networks/library_player.py), or with ``--chooser match`` through issue 40's
+second design (models/networks/motion_match.py: music descriptors pick windows by descriptor). On every recording of ``--music`` (an excerpt
 from ``--start`` s of ``--seconds`` s) the library performer and the default dance (seed 0,
 in place); from 3 s on, every frame it dances (idle weight 0) is put in the body's own frame
 (root at the origin, the heading of the line between the upper legs removed) and compared with
@@ -14,6 +15,8 @@ reporting the share of frames nearer the user's than the DWM's and the median RM
 distance (over the 30 points) to the nearest user frame; the default's baseline: its share
 nearer the library's clips, and its median distance to the nearest DWM frame. Then:
 
+* continuation: the share of code steps (dancing) whose exemplar continues the playing one (same
+  clip, about 8 frames on): how often the player can play the user's dance on as recorded;
 * seams: the handover seam ratio (benchmarks/studies/seams.py's measure for dance_vq: angular
   acceleration within 1 frame of frame ``8k + 2`` over the rest), per recording;
 * listening (models/evaluation/listening.py, as benchmarks/listening.py for the default): the
@@ -101,9 +104,30 @@ def dwm_frames(root: Path, cache: Path, skip: set[str]) -> np.ndarray:
     return np.concatenate(out)
 
 
-def perform(model, feats: np.ndarray, style: str | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def member_windows(model, poses: list[np.ndarray]) -> np.ndarray:
+    """(K, M, 2) int64: the (clip, start frame) of every exemplar window of a library model, found by
+    its first two frames among ``poses`` (the clips as library_model got them); (-1, -1) for none."""
+    import torch
+
+    from models.networks.library_player import WINDOW_STRIDE
+
+    key = lambda a: torch.from_numpy(np.ascontiguousarray(a, np.float32)).half().numpy().tobytes()  # noqa: E731
+    where = {key(p[a: a + 2]): (c, a) for c, p in enumerate(poses) for a in range(0, len(p) - 1, WINDOW_STRIDE)}
+    mp, n = model.member_poses, model.member_count.numpy()
+    out = np.full(mp.shape[:2] + (2,), -1, np.int64)
+    for k in range(mp.shape[0]):
+        for j in range(int(n[k])):
+            out[k, j] = where.get(mp[k, j, :2].numpy().tobytes(), (-1, -1))
+    return out
+
+
+def perform(model, feats: np.ndarray, style: str | None = None,
+            windows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """(poses (T, P), dancing (T,) bool: idle weight 0 and past :data:`SETTLE`, the style token of
-    the exemplar playing (T,): ``member_style``, library folder i = 4 + i) of one stream, seed 0, in place."""
+    the exemplar playing (T,): ``member_style``, library folder i = 4 + i, and the share of code
+    steps whose exemplar is the playing one's own continuation: the same clip, starting within
+    ``seg / 2`` frames of ``seg`` frames on; ``windows`` from :func:`member_windows`; NaN without)
+    of one stream, seed 0, in place."""
     from models.networks.dance_stream import DanceStream
 
     s = DanceStream(model, seed=0, style=style)
@@ -111,11 +135,19 @@ def perform(model, feats: np.ndarray, style: str | None = None) -> tuple[np.ndar
     dance = np.zeros(len(feats), bool)
     token = np.zeros(len(feats), np.int64)
     styles = model.member_style.numpy()
+    steps, cont, prev, seg = 0, 0, None, model.config.seg
     for t in range(len(feats)):
+        n = len(s.codes_drawn)
         poses[t] = s.push(feats[t: t + 1])[0]
         dance[t] = s.idle_weight == 0.0 and t >= SETTLE
         token[t] = styles[s.playing_member] if s.playing_member is not None else -1
-    return poses, dance, token
+        if windows is not None and len(s.codes_drawn) != n and s.playing_member is not None:
+            w = windows[s.playing_member]
+            if prev is not None and dance[t]:
+                steps += 1
+                cont += int(w[0] >= 0 and w[0] == prev[0] and abs(w[1] - prev[1] - seg) <= seg // 2)
+            prev = w
+    return poses, dance, token, (cont / steps if steps else float("nan"))
 
 
 def handover_seam(model, poses: np.ndarray) -> float:
@@ -222,6 +254,7 @@ def main(argv: list[str] | None = None) -> int:
         skip = {c.name for c in clips}
         near_dwm = Nearest(dwm_frames(a.data / "dwm", a.cache, skip))
         report["dwm_left_out"] = sorted(skip & {d.name for d in (a.data / "dwm").iterdir()})
+        windows = member_windows(lib, [clip_tracks(c.motion)[0] for c in clips])
         tot = {"lib": [], "lib_dwm": [], "def_user": [], "def_dwm": [], "lib_tok": []}
         print(f"{'recording':<38} {'lib: nearer user':>16} {'median cm':>9} {'seam':>5} | {'default: nearer user':>20} "
               f"{'to DWM cm':>9} {'seam':>5}" + "".join(f" {'style ' + f:>14}" for f in lib.library_styles))
@@ -232,7 +265,7 @@ def main(argv: list[str] | None = None) -> int:
             row: dict = {}
             if "own" in sets:
                 for key, model in (("lib", lib), ("default", lm.model)):
-                    poses, dance, token = perform(model, feats)
+                    poses, dance, token, cont = perform(model, feats, windows=windows if key == "lib" else None)
                     pts = body_frame(poses[dance])
                     du, dd = near_user(pts), near_dwm(pts)
                     by = {f: float((du < dd)[token[dance] == STYLE_BASE + i].mean())
@@ -240,14 +273,14 @@ def main(argv: list[str] | None = None) -> int:
                     row[key] = {"frames": int(dance.sum()), "nearer_user": float((du < dd).mean()),
                                 "nearer_user_by_folder": by if key == "lib" else {},
                                 "median_user_cm": float(np.median(du) * 100), "median_dwm_cm": float(np.median(dd) * 100),
-                                "seam": handover_seam(model, poses)}
+                                "seam": handover_seam(model, poses), "continues": cont}
                     tot["lib" if key == "lib" else "def_user"].append(du)
                     tot["lib_dwm" if key == "lib" else "def_dwm"].append(dd)
                     if key == "lib":
                         tot["lib_tok"].append(token[dance])
             if "style" in sets and len(folders) > 1:
                 for i, (f, own) in enumerate(folders.items()):
-                    poses, dance, token = perform(lib, feats, style=f)
+                    poses, dance, token, _ = perform(lib, feats, style=f)
                     pts = body_frame(poses[dance])
                     others = np.min([Nearest(x)(pts) for g, x in folders.items() if g != f], axis=0)
                     row.setdefault("style", {})[f] = float((token[dance] == STYLE_BASE + i).mean())
@@ -270,6 +303,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"library frames nearer the user's clips, by the folder of the exemplar playing: "
                   + ", ".join(f"{f} {v:.3f}" for f, v in report["nearer_user_by_folder"].items()))
             report["seam"] = max(r["lib"]["seam"] for r in report["songs"].values())
+            report["continues"] = float(np.nanmean([r["lib"]["continues"] for r in report["songs"].values()]))
+            print(f"code steps whose exemplar continues the playing window (same clip, {lib.config.seg} +- "
+                  f"{lib.config.seg // 2} frames on), "
+                  f"mean of recordings: {report['continues']:.3f}")
             report["default"] = {"nearer_user": float((bu < bd).mean()), "median_dwm_cm": float(np.median(bd) * 100),
                                  "seam": max(r["default"]["seam"] for r in report["songs"].values())}
         if "style" in sets and len(folders) > 1:
