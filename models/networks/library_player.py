@@ -50,7 +50,8 @@ STYLE_BASE: int = 4
 MAX_STYLES: int = 16
 #: Most exemplars per code in all (mixed in or not; more folders share it, at least one each): the
 #: motion matching's cost per code step and a stream's start-up memory grow with it (a 30-minute
-#: library in 4 folders, 32 a code: peak 1.3 GB, per-hop own p99 3.3 ms; docs/library.md).
+#: library in 4 folders, 32 a code: peak 1.3 GB, per-hop own p99 3.3 ms, measured before the stream's tables came
+#: from one chunked FK pass; 16 a code now: 528 MB; docs/library.md).
 MAX_MEMBERS: int = 16
 #: Lags (frames) the kinematic tempo searches (:func:`kinematic_period`): 225 down to 25 bpm.
 KIN_LAGS: tuple[int, int] = (8, 72)
