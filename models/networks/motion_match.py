@@ -160,7 +160,12 @@ def fit(dwm: Path, out: Path = ASSET, cache: Path | None = None) -> dict:
     m = lm.model
     seg = m.config.seg
     mean, std = m.feat_mean.numpy(), m.feat_std.numpy()
-    train, _ = split_names(sorted(p.name for p in Path(dwm).iterdir() if p.name.startswith("DANCE_")))
+    names = sorted(p.name for p in Path(dwm).iterdir() if p.name.startswith("DANCE_"))
+    if not names:
+        from models.errors import DataError
+
+        raise DataError(f"{dwm}: no DANCE_* folders (the DWM dances)")
+    train, _ = split_names(names)
     clips = build_corpus(dwm, train, lm.features, cache_dir=cache, progress=False)
     xs, ys = [], []
     for c in clips:
@@ -211,7 +216,13 @@ def main(argv: list[str] | None = None) -> int:
     if not a.dwm.is_dir():
         print(f"motion_match: {a.dwm}: not a folder", file=sys.stderr)
         return 2
-    d = fit(a.dwm, a.out, a.cache)
+    from models.errors import PerformerError
+
+    try:
+        d = fit(a.dwm, a.out, a.cache)
+    except (PerformerError, OSError, ValueError) as e:
+        print(f"motion_match: {e}", file=sys.stderr)
+        return 2
     print(f"wrote {a.out}: {d['rows']} rows of {len(d['dances'])} dances; R^2 (unstretched) "
           + ", ".join(f"{n} {v:.2f}" for n, v in zip(MOTION_NAMES, d["r2_unstretched"])))
     return 0
