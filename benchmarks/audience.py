@@ -30,6 +30,9 @@ starts, as ``performer run --publish`` does) on CPU 0, the broker and every subs
 1 (sched_setaffinity, inherited by every thread and child; the affinities are read back from
 /proc and reported). Other programs on the machine are not pinned and still use both.
 ``--unpinned-too`` runs each size unpinned first, then pinned, in the same session.
+``--publisher-cpus`` moves the publisher process off the engine's CPUs. Each frame's hand-over
+(``route.send``: encode, one ``os.write`` to the publisher's pipe) is timed, wall and the
+worker's CPU time, ms: their gap is the worker waiting while the publisher it woke runs.
 
     .venv/bin/python benchmarks/audience.py --subscribers 100 500 1000 --performer-cpus 0 --audience-cpus 1 --unpinned-too
 """
@@ -235,6 +238,7 @@ class _Gate:
     def __init__(self, route, block: int) -> None:
         self.route, self.block, self.name = route, block, route.name
         self.passed: list[int] = []
+        self.send_ms: list[tuple[float, float]] = []  # per frame passed: route.send's wall and CPU time, ms
 
     def on(self, index: int) -> bool:
         return (index // self.block) % 2 == 1
@@ -242,7 +246,9 @@ class _Gate:
     def send(self, frame) -> None:
         if self.on(frame.index):
             self.passed.append(frame.index)
+            t, c = time.perf_counter(), time.thread_time()
             self.route.send(frame)
+            self.send_ms.append(((time.perf_counter() - t) * 1e3, (time.thread_time() - c) * 1e3))
 
     def stats(self) -> dict:
         return self.route.stats()
@@ -251,7 +257,7 @@ class _Gate:
         self.route.close()
 
 
-def _play(seconds: float, block: int, broker_url: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, _Gate, dict]:
+def _play(seconds: float, block: int, broker_url: str, publisher_cpus: set[int] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, _Gate, dict]:
     """One engine run of ``seconds`` of the clip (looped) in real time, VMC to a local socket and the
     broker route behind a :class:`_Gate`. Returns per frame the hop compute (ms), its own part (less
     the run-queue wait, as ``performer bench latency`` reports it) and whether publishing was on;
@@ -274,6 +280,8 @@ def _play(seconds: float, block: int, broker_url: str) -> tuple[np.ndarray, np.n
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
     pub = BrokerProcess(broker_url, credentials=Credentials(user=PUBLISHER[0], password=PUBLISHER[1]))
+    if publisher_cpus is not None:
+        _pin_all_threads(publisher_cpus, pub._proc.pid)  # its threads are all started by now
     gate = _Gate(pub.route("main", SUBJECT), block)
     eng = Engine(FileSource(audio, sr, realtime=True), pipe.extractor_factory, pipe.model,
                  [OscSink("127.0.0.1", rx.getsockname()[1], "vmc"), gate],
@@ -292,7 +300,8 @@ def _play(seconds: float, block: int, broker_url: str) -> tuple[np.ndarray, np.n
 
 
 def run_size(n: int, seconds: float, procs: int, cluster: int, block: int,
-             performer_cpus: set[int] | None = None, audience_cpus: set[int] | None = None) -> dict:
+             performer_cpus: set[int] | None = None, audience_cpus: set[int] | None = None,
+             publisher_cpus: set[int] | None = None) -> dict:
     """One audience size; with ``performer_cpus`` and ``audience_cpus`` the broker and subscribers
     are started on the audience's CPUs and the engine (and its publisher child) runs on the performer's."""
     from realtime.nats_server import LocalBroker, free_port
@@ -336,7 +345,7 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int,
         sub_cpu0 = sum(_proc_cpu(p.pid) for p in subs)
         t0 = time.monotonic()
         load0 = os.getloadavg()[0]
-        hop, own, cpu, on, gate, stats = _play(seconds, block, brokers[0].url)
+        hop, own, cpu, on, gate, stats = _play(seconds, block, brokers[0].url, publisher_cpus)
         load1 = os.getloadavg()[0]
         pinned["publisher"] = stats["publisher_cpus"]
         wall = time.monotonic() - t0
@@ -380,8 +389,10 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int,
     skip = 2 * block  # the first off and on blocks: the engine's first code steps, the first subscribers' wake-ups
     hop, own, cpu, on = hop[skip:], own[skip:], cpu[skip:], on[skip:len(hop) + skip]
     p99 = lambda x: float(np.percentile(x, 99))  # noqa: E731
+    send = np.array(gate.send_ms[block:] or gate.send_ms or [(np.nan, np.nan)], np.float64)  # less the first on block
     return {
-        "subscribers": n, "pinned": performer_cpus is not None or audience_cpus is not None, "cpus": pinned, "load_average": [load0, load1], "connected": len(index), "cluster_nodes": len(brokers), "procs": procs,
+        "subscribers": n, "pinned": not (performer_cpus is None and audience_cpus is None and publisher_cpus is None),
+        "cpus": pinned, "load_average": [load0, load1], "connected": len(index), "cluster_nodes": len(brokers), "procs": procs,
         "frames_published": int(stats["published"]), "frames_dropped": int(stats["drops"]) + int(stats["drops_down"]),
         "min_share_of_subscribers_per_frame": float(per_frame.min()) if per_frame.size else float("nan"),
         "share_of_subscribers_complete_in_order": complete / max(1, len(index)),
@@ -392,6 +403,8 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int,
         "hop_ratio_p99": p99(hop[on]) / p99(hop[~on]),
         "hop_own_ms_p99_without": p99(own[~on]), "hop_own_ms_p99_with": p99(own[on]),
         "hop_own_ratio_p99": p99(own[on]) / p99(own[~on]),
+        "send_ms_p50": float(np.median(send[:, 0])), "send_ms_p99": p99(send[:, 0]),
+        "send_cpu_ms_p50": float(np.median(send[:, 1])), "send_cpu_ms_p99": p99(send[:, 1]),
         "hop_cpu_ms_p99_without": p99(cpu[~on]), "hop_cpu_ms_p99_with": p99(cpu[on]),
         "hop_cpu_ratio_p99": p99(cpu[on]) / p99(cpu[~on]),
         "hop_ms_p50_without": float(np.median(hop[~on])), "hop_ms_p50_with": float(np.median(hop[on])),
@@ -416,6 +429,8 @@ def main(argv: list[str] | None = None) -> int:
                    "these CPUs (e.g. 0, or 0-1, or 0,2); default: not pinned")
     p.add_argument("--audience-cpus", metavar="CPUS", help="pin the broker node(s) and the subscriber processes to "
                    "these CPUs (e.g. 1); default: not pinned")
+    p.add_argument("--publisher-cpus", metavar="CPUS", help="pin the publisher process apart from the engine "
+                   "(default: with the engine, as performer run starts it)")
     p.add_argument("--unpinned-too", action="store_true", help="with the pinning options: run each size unpinned "
                    "first, then pinned, in the same session (the same machine load for both)")
     p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
@@ -440,7 +455,8 @@ def main(argv: list[str] | None = None) -> int:
         p.error("--procs 1..16, --cluster >= 1, --seconds 4..3600, --subscribers >= 1")
     usable = os.sched_getaffinity(0)
     pins = []
-    for flag, text in (("--performer-cpus", args.performer_cpus), ("--audience-cpus", args.audience_cpus)):
+    for flag, text in (("--performer-cpus", args.performer_cpus), ("--audience-cpus", args.audience_cpus),
+                       ("--publisher-cpus", args.publisher_cpus)):
         try:
             cpus = None if text is None else parse_cpus(text)
         except ValueError:
@@ -448,20 +464,20 @@ def main(argv: list[str] | None = None) -> int:
         if cpus is not None and not cpus <= usable:
             p.error(f"{flag} {text!r}: this machine lets this process use CPUs {sorted(usable)}")
         pins.append(cpus)
-    pinned = pins != [None, None]
+    pinned = pins != [None, None, None]
     if args.unpinned_too and not pinned:
         p.error("--unpinned-too needs --performer-cpus and/or --audience-cpus")
-    modes = ([(None, None)] if not pinned or args.unpinned_too else []) + ([tuple(pins)] if pinned else [])
+    modes = ([(None, None, None)] if not pinned or args.unpinned_too else []) + ([tuple(pins)] if pinned else [])
     results = []
     for n in args.subscribers:
-        for perf, aud in modes:
-            r = run_size(n, args.seconds, args.procs, args.cluster, args.block, perf, aud)
+        for perf, aud, pub in modes:
+            r = run_size(n, args.seconds, args.procs, args.cluster, args.block, perf, aud, pub)
             results.append(r)
             print(json.dumps(r), flush=True)
     print("\n| subscribers | CPUs: performer+publisher / broker / subscribers | load average (start, end) | nodes | frames | delivered in order (min share per frame / complete subscribers) "
           "| publish-to-receive p50 / p99 ms (probe) | hop p99 ms without / with (ratio) | hop own p99 ms without / with "
-          "(ratio) | hop CPU p99 ms without / with (ratio) | broker CPU, peak RSS | subscribers' CPU |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "(ratio) | hop CPU p99 ms without / with (ratio) | send() wall / CPU p50, p99 ms | broker CPU, peak RSS | subscribers' CPU |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     cpus = lambda c: ",".join(map(str, c))  # noqa: E731
     for r in results:
         c = r["cpus"]
@@ -474,7 +490,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{r['hop_ms_p99_without']:.2f} / {r['hop_ms_p99_with']:.2f} "
               f"({r['hop_ratio_p99']:.3f}) | {r['hop_own_ms_p99_without']:.2f} / {r['hop_own_ms_p99_with']:.2f} "
               f"({r['hop_own_ratio_p99']:.3f}) | {r['hop_cpu_ms_p99_without']:.2f} / {r['hop_cpu_ms_p99_with']:.2f} "
-              f"({r['hop_cpu_ratio_p99']:.3f}) | {100 * r['broker_cpu_share']:.0f} % of a core, "
+              f"({r['hop_cpu_ratio_p99']:.3f}) | {r['send_ms_p50']:.3f} / {r['send_cpu_ms_p50']:.3f}, "
+              f"{r['send_ms_p99']:.3f} / {r['send_cpu_ms_p99']:.3f} | {100 * r['broker_cpu_share']:.0f} % of a core, "
               f"{max(r['broker_peak_rss_mb']):.0f} MB | {100 * r['subscriber_procs_cpu_share']:.0f} % |")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1))
