@@ -1,0 +1,60 @@
+"""The engine's worker hands a frame to the publisher process without waking it: a wake-up on
+the worker's CPU ran the publisher inside the worker's ``os.write`` (docs/audience.md)."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from models.rig.motion import POSE_DIM
+from realtime.frame import PoseFrame
+from realtime.nats_server import free_port
+from realtime.publish_process import BrokerProcess
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="needs Linux (/proc, sched_setaffinity)")
+
+
+def _preemptions() -> int:
+    """This thread's involuntary context switches so far (/proc)."""
+    for line in open("/proc/thread-self/status"):
+        if line.startswith("nonvoluntary_ctxt_switches:"):
+            return int(line.split()[1])
+    return 0
+
+
+def test_sending_a_frame_does_not_run_the_publisher_on_the_workers_cpu() -> None:
+    """The worker and the publisher process share one CPU (a performer pinned to a core); the
+    worker sends 200 frames, each between two stretches of its own work. Counted: sends
+    during which the worker was preempted. A publisher that the write wakes runs at once and
+    preempts nearly every send; one that polls the pipe preempts none (others' programs on
+    the machine may take a few)."""
+    cpu = min(os.sched_getaffinity(0))
+    every = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, {cpu})
+    # no broker at the port: the child still reads every frame from the pipe
+    pub = BrokerProcess(f"nats://127.0.0.1:{free_port()}", connect_wait=0.1, offsets=np.zeros((21, 3)))
+    try:
+        for tid in os.listdir(f"/proc/{pub._proc.pid}/task"):
+            os.sched_setaffinity(int(tid), {cpu})
+        route = pub.route("main", "performer.main")
+        pose = np.zeros(POSE_DIM, np.float32)
+        preempted = 0
+        for i in range(200):
+            t = time.thread_time()
+            while time.thread_time() - t < 0.0005:  # the worker's own work before the send
+                pass
+            before = _preemptions()
+            route.send(PoseFrame(index=i, audio_sample=0, audio_time=0.0, wall_time=0.0, pose=pose))
+            preempted += _preemptions() > before
+            time.sleep(0.005)
+        time.sleep(0.3)
+        assert route.frames == 200
+    finally:
+        pub.close()
+        os.sched_setaffinity(0, every)
+    print(f"\nsends preempted by the publisher: {preempted} of 200")
+    assert preempted < 40, f"{preempted} of 200 sends were preempted"
