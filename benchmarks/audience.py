@@ -450,9 +450,9 @@ def main(argv: list[str] | None = None) -> int:
     if find_nats_server() is None:
         print("audience: nats-server is not installed (apt-get install nats-server; make setup)", file=sys.stderr)
         return 2
-    if not 1 <= args.procs <= 16 or args.cluster < 1 or not 4 <= args.seconds <= 3600 \
+    if not 1 <= args.procs <= 16 or args.cluster < 1 or not 10 <= args.seconds <= 3600 \
             or any(n < 1 for n in args.subscribers):
-        p.error("--procs 1..16, --cluster >= 1, --seconds 4..3600, --subscribers >= 1")
+        p.error("--procs 1..16, --cluster >= 1, --seconds 10..3600 (the first two 2-s blocks warm up), --subscribers >= 1")
     usable = os.sched_getaffinity(0)
     pins = []
     for flag, text in (("--performer-cpus", args.performer_cpus), ("--audience-cpus", args.audience_cpus),
