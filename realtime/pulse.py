@@ -1,8 +1,10 @@
 """A private PulseAudio server with a null sink: a real, clocked live input for tests and measurements.
 
 ``PulseServer()`` starts ``pulseaudio`` as the current user (``-n``: no default config), its
-socket in a fresh ``XDG_RUNTIME_DIR``, with one null sink (``perfsink``, 44.1 kHz stereo) whose
-monitor is the default source. :attr:`PulseServer.env` is the environment a client needs: a
+socket in a fresh ``XDG_RUNTIME_DIR``, with one null sink (``perfsink``, 44.1 kHz stereo float32:
+the monitor carries the played samples as they are, not rounded to 16 bits and clipped at full
+scale as the default s16 sink does, so a live run hears the file's samples) whose monitor is the
+default source. :attr:`PulseServer.env` is the environment a client needs: a
 ``performer run --input-device pulse`` started with it captures the monitor through PortAudio
 (ALSA's ``pulse`` plugin, Debian's libasound2-plugins), and :meth:`PulseServer.play` plays audio
 into the sink in real time through ``pacat``. Nothing outside that runtime directory sees the
@@ -41,7 +43,7 @@ class PulseServer:
         self.log = self.dir / "pulseaudio.log"
         self.proc = subprocess.Popen(
             ["pulseaudio", "-n", "--daemon=no", "--exit-idle-time=-1", "--use-pid-file=no", "--disallow-exit",
-             f"--load=module-null-sink sink_name={SINK} rate={RATE} channels=2",
+             f"--load=module-null-sink sink_name={SINK} format=float32le rate={RATE} channels=2",
              "--load=module-native-protocol-unix", "--log-target=stderr"],
             env=self.env, stdout=subprocess.DEVNULL, stderr=open(self.log, "w"))
         deadline = time.monotonic() + timeout
