@@ -110,11 +110,14 @@ def test_performer_dances_to_the_live_song_and_idles_when_it_stops(live):
     assert started - t0 < 2.0  # the music light within 2 s of the song's start
     dancing = [s["performers"][0] for s in desk.between(t0 + 3.0, t1)]
     assert all(p["music"] and p["idle_weight"] == 0 for p in dancing)
-    tempo = np.median([p["tempo_bpm"] for p in dancing[len(dancing) // 2:]])
-    print(f"tempo {tempo:.1f} bpm")
-    # the song's tempo or half of it: the follower's octave choice varies from run to run on the live
-    # input (126.2 and 63.2 bpm seen; docs/show.md), the file replay's is 126.4
-    assert min(abs(tempo / SONG_BPM - 1), abs(2 * tempo / SONG_BPM - 1)) < 0.05
+    tempi = np.array([s["performers"][0]["tempo_bpm"] for s in desk.between(t1 - 2.0, t1)])
+    print(f"tempo {np.median(tempi):.1f} bpm in the song's last 2 s")
+    # the song's tempo or half of it, each status of the song's last 2 s: the follower starts this song
+    # at half time and moves to its tempo 7-14 s in, from the file as from the live input
+    # (benchmarks/studies/live_input.py, docs/latency.md), so before its end the desk may show either
+    # or a reading between them
+    near = np.minimum(np.abs(tempi / SONG_BPM - 1), np.abs(2 * tempi / SONG_BPM - 1)) < 0.05
+    assert len(tempi) > 3 and near.all(), tempi
     after = [s["performers"][0] for s in desk.between(t1 + 4.5, t1 + 6.0)]
     assert after and all(not p["music"] and p["idle_weight"] == 1 for p in after), after  # idle 2.9 s after silence
     assert during[-1]["fps"] > 25
