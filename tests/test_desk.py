@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from test_run_cli import clip, free_port, tiny_checkpoint  # noqa: F401 - fixtures
-from test_web_client import CHROMIUM, CHROMIUM_ARGS, WEB
+from test_web_client import chromium_context
 from _proc import default_sigint
 from _ws_reader import JsonReader
 
@@ -70,20 +70,9 @@ class Poses(JsonReader):
 
 @pytest.fixture(scope="module")
 def browser(tmp_path_factory):
-    if not CHROMIUM.is_file():
-        pytest.skip(f"{CHROMIUM} not installed (apt-get install chromium; 'make test' does it)")
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        pytest.skip("the playwright Python package is not installed (pip install -e '.[dev]')")
-    if not (WEB / "dist" / "desk.html").is_file():
-        pytest.skip("clients/web/dist/desk.html is not built ('make web')")
-    with sync_playwright() as pw:
-        ctx = pw.chromium.launch_persistent_context(
-            str(tmp_path_factory.mktemp("chromium-desk")), executable_path=str(CHROMIUM), headless=True,
-            args=CHROMIUM_ARGS, viewport={"width": 1280, "height": 800})
+    """The desk's browser: a laptop-sized 1280x800 window."""
+    with chromium_context(tmp_path_factory.mktemp("chromium-desk"), {"width": 1280, "height": 800}, "desk.html") as ctx:
         yield ctx
-        ctx.close()
 
 
 @pytest.fixture(scope="module")

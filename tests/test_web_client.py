@@ -45,24 +45,33 @@ NODE = shutil.which("node")
 # -- browser and stream fixtures -------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def browser(tmp_path_factory):
-    """A headless Debian chromium with a fresh profile, driven by playwright."""
+@contextlib.contextmanager
+def chromium_context(profile: Path, viewport: dict, needs: str = "index.html") -> Iterator:
+    """A headless Debian chromium with a fresh profile at `profile`, driven by playwright.
+
+    Skips the calling test when chromium, playwright or clients/web/dist/`needs` is missing."""
     if not CHROMIUM.is_file():
         pytest.skip(f"{CHROMIUM} not installed (apt-get install chromium; 'make test' does it)")
     try:
         from playwright.sync_api import sync_playwright
     except ImportError:
         pytest.skip("the playwright Python package is not installed (pip install -e '.[dev]')")
-    if not (WEB / "dist" / "index.html").is_file():
-        pytest.skip("clients/web/dist is not built ('make web')")
+    if not (WEB / "dist" / needs).is_file():
+        pytest.skip(f"clients/web/dist/{needs} is not built ('make web')")
     with sync_playwright() as pw:
         ctx = pw.chromium.launch_persistent_context(
-            str(tmp_path_factory.mktemp("chromium-profile")), executable_path=str(CHROMIUM), headless=True,
-            args=CHROMIUM_ARGS, viewport={"width": 800, "height": 500},
-        )
+            str(profile), executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS, viewport=viewport)
+        try:
+            yield ctx
+        finally:
+            ctx.close()
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    """The viewer's browser: 800x500."""
+    with chromium_context(tmp_path_factory.mktemp("chromium-profile"), {"width": 800, "height": 500}) as ctx:
         yield ctx
-        ctx.close()
 
 
 class Page:
