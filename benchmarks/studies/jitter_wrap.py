@@ -23,7 +23,9 @@ on each of ``--stages`` (0 = in place) and the dancers in place, per run:
   more, then the share of the interior energy they hold; ``edge``: the same for the frames
   within ``stage.MARGIN`` (at most 0.4 of the half side) of the stage's edge.
 
-``--worst N`` then lists each run's N 1-s windows (``--ends`` clear of the song's ends) with the
+``--travelling`` compares with the dancers travelling instead (their own root path and heading,
+retargeted from the mocap: ``foot_skating.travelling_poses``; the root's x, z put in place as for
+the performer, their turns kept). ``--worst N`` then lists each run's N 1-s windows (``--ends`` clear of the song's ends) with the
 most band energy: song, seconds, share of the run's interior energy, and the point that holds most
 of it. ``--set feet.NAME=VALUE`` (``foot_skating.py``'s) runs with a constant changed, e.g.
 ``feet.KNEE_WRAP_FORWARD=0`` (the knee IK as before); ``--no-feet`` without the feet step::
@@ -113,7 +115,7 @@ def summary(pos: dict[str, np.ndarray], cut: int) -> dict:
 
 
 def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], ends_s: float, feet: bool,
-        worst: int, cache: str) -> None:
+        worst: int, cache: str, travelling: bool = False) -> None:
     """Print the table (see the module docstring)."""
     import torch
 
@@ -123,16 +125,17 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
     from models.networks import dance_stream
     from models.rig.skeleton import POINT_INDEX
 
-    from foot_skating import mirrored
+    from foot_skating import mirrored, travelling_poses
 
     lm = load_model(checkpoint)
     opts = EvalOptions(cache_dir=cache, progress=False)
     clips = load_clips(data_root, validation_names(data_root, None, opts), lm.features, opts)
     cut = int(round(ends_s * 30))
-    real = {c.name: in_place(positions(c.poses)) for c in clips}
+    real = {c.name: in_place(positions(travelling_poses(data_root, c.name, c.num_frames, c.first_frame)
+                                       if travelling else c.poses)) for c in clips}
     rs = summary(real, cut)
     step = np.mean([np.linalg.norm(p[-1] - p[0], axis=1).mean() for p in real.values()])
-    print(f"dancers in place: jitter RMS {np.sqrt(rs['all'] / rs['n']) * 100:.3f} cm, {rs['ends'] / rs['all']:.1%} of it "
+    print(f"dancers {'travelling' if travelling else 'in place'}: jitter RMS {np.sqrt(rs['all'] / rs['n']) * 100:.3f} cm, {rs['ends'] / rs['all']:.1%} of it "
           f"within {ends_s:g} s of the ends; interior RMS {np.sqrt(rs['inner'] / rs['n_inner']) * 100:.3f} cm; "
           f"wrap step {step * 100:.1f} cm")
     for name, e in rs["frames"].items():
@@ -188,6 +191,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--ends", type=float, default=0.5, metavar="S",
                    help="seconds at each end of a song counted as the wrap's (default 0.5)")
     p.add_argument("--no-feet", action="store_true", help="the performer with its feet step switched off")
+    p.add_argument("--travelling", action="store_true",
+                   help="compare with the dancers travelling (their own path and turns) instead of in place")
     p.add_argument("--worst", type=int, default=0, metavar="N", help="list each run's N 1-s windows of most jitter")
     a = p.parse_args(argv)
     if a.ends <= 0 or a.ends > 10:
@@ -199,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(1)
     apply_sets(p, a.set)
     try:
-        run(a.data, a.checkpoint, a.seeds, a.stages, a.ends, not a.no_feet, a.worst, a.cache)
+        run(a.data, a.checkpoint, a.seeds, a.stages, a.ends, not a.no_feet, a.worst, a.cache, a.travelling)
     except (PerformerError, OSError) as e:
         print(f"jitter_wrap.py: {e}", file=sys.stderr)
         return 2
