@@ -118,6 +118,40 @@ def test_the_knee_straightens_smoothly_as_a_held_foot_leaves_the_legs_reach(monk
     assert np.abs(np.diff(knees(), axis=0)).max() > 3.0
 
 
+def test_a_held_foot_the_dance_kicks_up_folds_the_knee_smoothly_and_never_snaps_it_straight(monkeypatch):
+    """Both thighs swung forwards 0 -> 120 degrees a degree at a time (knees straight, a kick)
+    while each foot is held over where it stood: the IK folds the knees as the ankles rise
+    towards the hips, at most KNEE_MAX_DEG (150), never changing by more than 5 degrees a step.
+    Read in [-180, 180) (KNEE_WRAP_FORWARD off, as before) the fold just past 170 wrapped round
+    and the leg snapped straight (0.5 degrees) and back: DANCE_W_28's jitter on 3x2, seed 3."""
+    import models.networks.feet as feet_mod
+
+    rest = np.zeros(3 + 4 * NUM_BONES, np.float32)
+    rest[1], rest[6::4] = 0.95, 1.0
+    stand = midpoints(positions(rest[None]))[0]
+
+    def knees() -> np.ndarray:
+        out = []
+        for a in np.linspace(0.0, 120.0, 121):
+            pose = rest.copy()
+            for side in ("Left", "Right"):
+                c = 3 + 4 * BONE_INDEX[f"{side}UpperLeg"]
+                pose[c: c + 4] = Rotation.from_euler("x", -a, degrees=True).as_quat()
+            feet = FeetLock(floor=-10.0)
+            feet.planted[:] = 1
+            feet.weight[:] = 1.0
+            feet.plant[:] = stand
+            out.append(feet.step(pose, 1.0, 1.0))
+        return knee_flexion_deg(np.array(out))  # (121, 2)
+
+    k = knees()
+    assert k.max() > feet_mod.KNEE_MAX_DEG - 1.0 and k.max() <= feet_mod.KNEE_MAX_DEG + 1e-3  # folded, capped
+    assert np.abs(np.diff(k, axis=0)).max() < 5.0
+    monkeypatch.setattr(feet_mod, "KNEE_WRAP_FORWARD", False)
+    snapped = knees()
+    assert snapped.min() < 1.0 and np.abs(np.diff(snapped, axis=0)).max() > 90.0  # the control: straight for a while
+
+
 def test_no_foot_goes_under_the_floor():
     poses = random_poses(200, seed=4)
     low = lambda x: np.minimum(*[a[..., 1] for a in foot_points(positions(x))])  # noqa: E731

@@ -74,7 +74,8 @@ def test_a_new_stage_set_live_recuts_the_spots_and_each_walks_into_its_own_witho
     cx, cz, w, d = ensemble_spots("3x2", 4)[3]
     late = then[-150:]
     assert (np.abs(late[:, 0] - cx) <= w / 2 + 1e-6).all() and (np.abs(late[:, 1] - cz) <= d / 2 + 1e-6).all()
-    assert s.stage.state() == {"stage": [3.0, 2.0], "facing": "free", "spot": [cx, cz, w, d]}
+    assert s.stage.state() == {"stage": [3.0, 2.0], "facing": "free", "spot": [cx, cz, w, d],
+                               "spots": [list(sp) for sp in ensemble_spots("3x2", 4)]}  # the viewer draws them all
     with pytest.raises(ConfigError, match="no room"):
         s.set_stage("0.6x0.6")  # 4 on 0.6x0.6: refused, nothing changed
     assert s.stage.whole == (3.0, 2.0)

@@ -203,6 +203,52 @@ def engine(tmp_path, clip, tiny_checkpoint) -> Iterator[str]:  # noqa: F811 - fi
         yield url
 
 
+def spot_pixels(png: bytes) -> int:
+    """Pixels of a screenshot drawn in the viewer's own-spot colour (clients/web/src/stage.js SPOT_COLOR)."""
+    from io import BytesIO
+
+    from PIL import Image
+
+    rgb = np.asarray(Image.open(BytesIO(png)).convert("RGB"), np.int16)
+    return int((np.abs(rgb - np.array([0x4C, 0xC9, 0xF0])).max(axis=2) <= 24).sum())
+
+
+def test_an_ensemble_viewer_draws_every_spot_and_follows_its_performer_inside_its_own(
+        synthetic_stream, open_page, tmp_path):
+    """An ensemble performer's viewer (the real state its SpotStage sends: 4 performers on a 3x2
+    stage, this one the last, front right) draws the whole stage, its own spot brighter and the
+    three others', and its camera follows the performer inside its spot. The spot is seen in the
+    picture itself: its colour covers many pixels, and almost none once the state has no spot."""
+    from models.networks.stage import SpotStage, ensemble_spots
+
+    state = SpotStage(8, "3x2", "free", (3, 4)).state()
+    cx, cz, w, d = state["spot"]
+    stream = synthetic_stream(lambda i: pose_with({}, root=(cx + 0.3, 0.95, cz + 0.2)))
+    stream.sink.set_state(state)
+    page = open_page(f"http://127.0.0.1:{stream.sink.port}/")
+    page.wait_for(lambda s: s["spot"] is not None and abs(s["target"][0] - (cx + 0.3)) < 0.05
+                  and abs(s["target"][2] - (cz + 0.2)) < 0.05)
+    drawn = page.page.evaluate("window.performer.spotOutlines()")
+    corners = lambda x, z, sw, sd: [[x - sw / 2, z - sd / 2], [x + sw / 2, z - sd / 2],  # noqa: E731
+                                    [x + sw / 2, z + sd / 2], [x - sw / 2, z + sd / 2]]
+    assert np.allclose(drawn["spot"], corners(cx, cz, w, d), atol=1e-6)
+    others = [corners(*sp) for sp in ensemble_spots("3x2", 4)[:3]]
+    assert len(drawn["others"]) == 3 and np.allclose(drawn["others"], others, atol=1e-6)
+    assert page.page.evaluate("window.performer.stageOutline()") == [[-1.5, -1.0], [1.5, -1.0], [1.5, 1.0], [-1.5, 1.0]]
+    page.page.set_viewport_size({"width": 1280, "height": 720})  # the HUD covers less of the stage
+    time.sleep(0.5)  # a picture after the last camera step
+    shots = REPO / "docs" / "img" if os.environ.get("PERFORMER_DOC_IMAGES") else tmp_path
+    png = page.page.screenshot(path=str(shots / "stage_ensemble_viewer.png"))
+    lit = spot_pixels(png)
+    stream.sink.set_state({"stage": [3.0, 2.0], "facing": "free"})  # the control: no ensemble, no spot
+    page.wait_for(lambda s: s["spot"] is None)
+    assert page.page.evaluate("window.performer.spotOutlines()") == {"spot": None, "others": []}
+    time.sleep(0.3)
+    unlit = spot_pixels(page.page.screenshot())
+    assert lit > 200 and unlit < lit / 10, (lit, unlit)
+    assert not page.errors, page.errors
+
+
 # -- the page against the live engine --------------------------------------------------------
 
 

@@ -168,37 +168,12 @@ def plot_foot(data_root: str, checkpoint: str, dance: str, start_s: float, stage
     fig.savefig(path, dpi=90)
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\nExit status")[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--checkpoint", default="models/assets/default.pt", metavar="CKPT",
-                   help="the checkpoint (default models/assets/default.pt)")
-    p.add_argument("--data", required=True, metavar="DIR", help="the DWM dataset directory (holds DANCE_* dirs)")
-    p.add_argument("--dances", nargs="*", metavar="NAME", help="validation dances to use (default: all six)")
-    p.add_argument("--seed", type=int, default=0, help="the stream's seed (default 0)")
-    p.add_argument("--travel", action="store_true", help="also the dancers with their travel and heading")
-    p.add_argument("--no-feet", action="store_true", help="the performer with its feet step switched off")
-    p.add_argument("--stage", default=None, metavar="WxD", help="the performer travels on this stage (default: in place)")
-    p.add_argument("--in-place", default=None, choices=("off", "floor", "hold"),
-                   help="what the feet step does in place (dance_stream.FEET_IN_PLACE; default: the shipped one)")
-    p.add_argument("--facing", default=None, help="with --stage: free or audience (default: the stream's)")
-    p.add_argument("--cache", default=".cache/corpus", metavar="DIR", help="corpus cache (default .cache/corpus)")
-    p.add_argument("--set", action="append", default=[], metavar="PART.NAME=VALUE",
-                   help="set a constant of models/networks/feet.py or stage.py for this run, e.g. "
-                        "feet.SOFT_REACH=0 or feet.RELEASE_FRAMES=10 (repeatable)")
-    p.add_argument("--plot", default=None, metavar="PNG", help="draw one foot instead of the tables (see above)")
-    p.add_argument("--plot-dance", default="DANCE_W_5", metavar="NAME", help="--plot: the dance (default DANCE_W_5)")
-    p.add_argument("--plot-start", type=float, default=40.0, metavar="S", help="--plot: first second (default 40)")
-    a = p.parse_args(argv)
-    import torch
+def apply_sets(p: argparse.ArgumentParser, items: list[str]) -> None:
+    """``--set feet.NAME=VALUE`` / ``stage.NAME=VALUE``: a constant of models/networks/feet.py or
+    stage.py for this run (a script's own process); ``p.error`` on a bad one."""
+    from models.networks import feet, stage
 
-    from models.errors import PerformerError
-    from models.evaluation.foot_skating import pooled
-
-    torch.set_num_threads(1)
-    for item in a.set:  # a script: the modules' settings for this one run
-        from models.networks import feet, stage
-
+    for item in items:
         name, _, value = item.partition("=")
         part, _, const = name.partition(".")
         mod = {"feet": feet, "stage": stage}.get(part)
@@ -209,6 +184,44 @@ def main(argv: list[str] | None = None) -> int:
             setattr(mod, const, type(old)(float(value)) if not isinstance(old, bool) else value.lower() in ("1", "true"))
         except ValueError:
             p.error(f"--set {name}: not a number: {value!r}")
+
+
+def study_parser(doc: str) -> argparse.ArgumentParser:
+    """A study's parser (description: ``doc`` up to "Exit status") with ``--checkpoint``,
+    ``--data``, ``--cache`` and ``--set`` (:func:`apply_sets`)."""
+    p = argparse.ArgumentParser(description=doc.split("\nExit status")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--checkpoint", default="models/assets/default.pt", metavar="CKPT",
+                   help="the checkpoint (default models/assets/default.pt)")
+    p.add_argument("--data", required=True, metavar="DIR", help="the DWM dataset directory (holds DANCE_* dirs)")
+    p.add_argument("--cache", default=".cache/corpus", metavar="DIR", help="corpus cache (default .cache/corpus)")
+    p.add_argument("--set", action="append", default=[], metavar="PART.NAME=VALUE",
+                   help="set a constant of models/networks/feet.py or stage.py for this run, e.g. "
+                        "feet.SOFT_REACH=0 or feet.RELEASE_FRAMES=10 (repeatable)")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = study_parser(__doc__)
+    p.add_argument("--dances", nargs="*", metavar="NAME", help="validation dances to use (default: all six)")
+    p.add_argument("--seed", type=int, default=0, help="the stream's seed (default 0)")
+    p.add_argument("--travel", action="store_true", help="also the dancers with their travel and heading")
+    p.add_argument("--no-feet", action="store_true", help="the performer with its feet step switched off")
+    p.add_argument("--stage", default=None, metavar="WxD", help="the performer travels on this stage (default: in place)")
+    p.add_argument("--in-place", default=None, choices=("off", "floor", "hold"),
+                   help="what the feet step does in place (dance_stream.FEET_IN_PLACE; default: the shipped one)")
+    p.add_argument("--facing", default=None, help="with --stage: free or audience (default: the stream's)")
+    p.add_argument("--plot", default=None, metavar="PNG", help="draw one foot instead of the tables (see above)")
+    p.add_argument("--plot-dance", default="DANCE_W_5", metavar="NAME", help="--plot: the dance (default DANCE_W_5)")
+    p.add_argument("--plot-start", type=float, default=40.0, metavar="S", help="--plot: first second (default 40)")
+    a = p.parse_args(argv)
+    import torch
+
+    from models.errors import PerformerError
+    from models.evaluation.foot_skating import pooled
+
+    torch.set_num_threads(1)
+    apply_sets(p, a.set)
     if a.in_place is not None:  # a script: the module's setting for this one run
         from models.networks import dance_stream
 

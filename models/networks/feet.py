@@ -40,7 +40,8 @@ the heel or toe under the floor (:data:`FLOOR_PERCENTILE` of the memory's lowest
 points) is raised onto it. Two-bone IK then bends the knee about the thigh's own hinge
 axis (its local X, as the rig bends knees) to the hip-target distance, always forwards
 and at least :data:`KNEE_MIN_DEG` (never past straight: a dance's hyper-extended knee is
-bent the other way, its ankle where it was), swings the thigh onto the target, and turns
+bent the other way, its ankle where it was), at most :data:`KNEE_MAX_DEG` (a target nearer
+the hip than that reaches is left short), swings the thigh onto the target, and turns
 the foot back to its world orientation. A leg with nothing to do (no weight, above the
 floor, knee bent forwards) is left bit for bit as it was.
 """
@@ -54,6 +55,17 @@ from numba import njit
 
 from models.rig.humanoid import BONE_INDEX
 from models.rig.skeleton import END_SITES, POINT_INDEX, load_default_skeleton
+
+#: The knee's new flexion is read in [-90, 270) degrees, then capped at :data:`KNEE_MAX_DEG`.
+#: Read in [-180, 180) (False, as before), a fold just past 180 wrapped round to "past straight"
+#: and the leg snapped straight for a frame: a released foot the dance kicks away fast while the
+#: hold keeps it over its plant folds the knee (DANCE_W_28 at 50 s, seed 3 on 3x2: 42 -> 168
+#: degrees, then the toe 71 cm away and back in two frames). Switch for measuring.
+KNEE_WRAP_FORWARD: bool = True
+
+#: The most the IK bends a knee (degrees): a little past the dancers' own most (129 on the
+#: validation dances), short of a leg folded flat.
+KNEE_MAX_DEG: float = 150.0
 
 #: Exemplar frames whose foot's lowest point (heel or toe) is at most this high above the
 #: memory's floor (m) are contacts (the issue's metric counts 5 cm).
@@ -252,7 +264,8 @@ def _leg_target(pose, f, bones, offs, planted, plant, weight, contact, leash, pu
 
 
 @njit(cache=True, nogil=True)
-def _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target):  # pragma: no cover - compiled
+def _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, knee_max,
+            wrap_forward):  # pragma: no cover - compiled
     """Leg f of ``pose`` bent and swung so its ankle reaches ``target[f]`` (a leg of weight 0: its
     own ankle), raised onto the floor, the knee bent forwards by at least ``knee_min``; the foot
     keeps its world orientation. Left bit for bit as it is when there is nothing to do."""
@@ -286,7 +299,11 @@ def _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target):  # p
             dist = start + soft * (1.0 - math.exp(-(dist - start) / soft))
     c = (0.5 * (dist * dist - l1sq - l2sq) - c0) / max(r, 1e-12)
     alpha = math.acos(min(1.0, max(-1.0, c)))
-    phi1 = (phi0 + psi + alpha + math.pi) % (2.0 * math.pi) - math.pi  # the flexion bent forwards, in [-pi, pi)
+    if wrap_forward:  # the flexion bent forwards, in [-pi/2, 3pi/2), at most knee_max
+        phi1 = (phi0 + psi + alpha + 0.5 * math.pi) % (2.0 * math.pi) - 0.5 * math.pi
+        phi1 = min(phi1, knee_max)
+    else:  # before: in [-pi, pi), so a fold just past pi wrapped to -pi and the leg snapped straight
+        phi1 = (phi0 + psi + alpha + math.pi) % (2.0 * math.pi) - math.pi
     delta = max(phi1, knee_min) - phi0
     h = 0.5 * delta
     rx = (math.sin(h), 0.0, 0.0, math.cos(h))
@@ -326,7 +343,8 @@ def _lowest(pose, f, bones, offs):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def feet_kernel(pose, bones, offs, ang_rest, planted, plant, weight, ground, target, contact, floor, leash, pull,
-                release, knee_min, ground_rate, plant_rate, soft):  # pragma: no cover - compiled
+                release, knee_min, ground_rate, plant_rate, soft, knee_max=math.pi,
+                wrap_forward=True):  # pragma: no cover - compiled
     """Both legs of ``pose`` (P,) float32, in place; the state arrays updated (see :class:`FeetLock`)."""
     if ground_rate > 0.0:  # the body lowered or raised by the exemplar's lift (GROUND_RATE < 1: low-passed twice)
         ground[1] += ground_rate * (contact[2] - ground[1])
@@ -335,7 +353,7 @@ def feet_kernel(pose, bones, offs, ang_rest, planted, plant, weight, ground, tar
     for f in range(2):
         _leg_target(pose, f, bones, offs, planted, plant, weight, contact, leash, pull, release, plant_rate, target)
     for f in range(2):
-        _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target)
+        _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, knee_max, wrap_forward)
 
 
 class FeetLock:
@@ -381,7 +399,7 @@ class FeetLock:
         self._contact[0], self._contact[1], self._contact[2] = left, right, lift
         feet_kernel(pose, self._bones, self._offs, self._ang_rest, self.planted, self.plant, self.weight, self.ground,
                     self._target, self._contact, self.floor, LEASH, LEASH_PULL, self._release, self._knee_min, GROUND_RATE,
-                    self._plant, SOFT_REACH)
+                    self._plant, SOFT_REACH, math.radians(KNEE_MAX_DEG), KNEE_WRAP_FORWARD)
         return pose
 
     def lift_of(self, pose: np.ndarray) -> float:

@@ -454,7 +454,8 @@ class SpotStage(Stage):
         pose[2] += self.cz
 
     def state(self) -> dict:
-        """What a viewer draws: the whole stage, the facing and this performer's spot
-        ([centre x, centre z, width, depth], m)."""
+        """What a viewer draws: the whole stage, the facing, this performer's spot and every
+        performer's (``spots``, in performer order), each [centre x, centre z, width, depth] m."""
         return {"stage": [float(self.whole[0]), float(self.whole[1])], "facing": str(self.facing),
-                "spot": [float(self.cx), float(self.cz), float(self.width), float(self.depth)]}
+                "spot": [float(self.cx), float(self.cz), float(self.width), float(self.depth)],
+                "spots": [[float(v) for v in s] for s in ensemble_spots(self.whole, self.count)]}

@@ -6,7 +6,9 @@
 // format=binary|json, vrm=URL; or, for an audience through a NATS broker (broker.js,
 // docs/audience.md), broker=ws://HOST:PORT&subject=performer.NAME&user=...&pass=... The
 // HUD's "source" says which. The stage (docs/stage.md) is drawn on the floor when the
-// server says it, and the camera follows the performer across it (the 'follow' box).
+// server says it, and the camera follows the performer across it (the 'follow' box); in an
+// ensemble every performer's spot is drawn too, this one's brighter, and the camera, which
+// frames the whole stage, follows its performer within its spot.
 //
 // For tests and tinkering the page exposes window.performerStats (updated with
 // every frame) and window.performer (boneQuaternion, jointPositions, loadVrm).
@@ -38,7 +40,7 @@ let vrmName = '';
 let latest = null; // the newest frame not yet drawn
 const trails = createTrails(world.scene);
 const outline = new StageOutline(THREE, world.scene);
-let stageState = null; // {width, depth, facing} from the server's state messages
+let stageState = null; // {width, depth, facing, spot, spots} from the server's state messages (stage.js)
 
 function publishStats() {
   window.performerStats = {
@@ -53,6 +55,7 @@ function publishStats() {
     source,
     stage: stageState ? [stageState.width, stageState.depth] : null,
     facing: stageState?.facing ?? null,
+    spot: stageState?.spot ? [stageState.spot.x, stageState.spot.z, stageState.spot.width, stageState.spot.depth] : null,
     target: world.controls.target.toArray(),
   };
 }
@@ -238,7 +241,8 @@ const _hips = new THREE.Vector3();
 function follow(avatar) {
   if (!document.getElementById('follow').checked || !avatar.worldPosition('Hips', _hips)) return;
   const { camera, controls } = world;
-  const [dx, dz] = followStep([controls.target.x, controls.target.z], _hips.x, _hips.z, 0.08, stageState);
+  const bound = stageState?.spot?.width > 0 ? stageState.spot : stageState; // an ensemble's: its own spot
+  const [dx, dz] = followStep([controls.target.x, controls.target.z], _hips.x, _hips.z, 0.08, bound);
   controls.target.x += dx;
   controls.target.z += dz;
   camera.position.x += dx;
@@ -307,9 +311,12 @@ window.performer = {
   loadVrm: (url) => openVrm(url, nameOf(url)),
   /** The stage rectangle's corners [[x, z], ...] as drawn on the floor, or null when none is shown. */
   stageOutline() {
-    if (!outline.line.visible) return null;
-    const a = outline.line.geometry.attributes.position.array;
-    return [0, 1, 2, 3].map((k) => [a[3 * k], a[3 * k + 2]]);
+    return outline.drawn().stage;
+  },
+  /** In an ensemble: {spot: this performer's spot's corners (or null), others: the other spots'}. */
+  spotOutlines() {
+    const { spot, others } = outline.drawn();
+    return { spot, others };
   },
 };
 

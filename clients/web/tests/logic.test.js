@@ -94,8 +94,16 @@ test('stats: fps over a 1 s window, delay, drops and joint speed', () => {
 
 test('state messages carry the stage; bad ones are refused with the reason', async () => {
   const { parseState } = await import('../src/stage.js');
-  assert.deepEqual(parseState({ type: 'state', stage: [3, 2], facing: 'audience' }), { width: 3, depth: 2, facing: 'audience' });
-  assert.deepEqual(parseState({ type: 'state', stage: [0, 0] }), { width: 0, depth: 0, facing: 'free' });
+  assert.deepEqual(parseState({ type: 'state', stage: [3, 2], facing: 'audience' }),
+    { width: 3, depth: 2, facing: 'audience', spot: null, spots: [] });
+  assert.deepEqual(parseState({ type: 'state', stage: [0, 0] }), { width: 0, depth: 0, facing: 'free', spot: null, spots: [] });
+  // an ensemble performer's: its own spot and every performer's
+  const two = parseState({ type: 'state', stage: [3, 2], facing: 'free', spot: [0.9, 0, 1.2, 2],
+                           spots: [[-0.9, 0, 1.2, 2], [0.9, 0, 1.2, 2]] });
+  assert.deepEqual(two.spot, { x: 0.9, z: 0, width: 1.2, depth: 2 });
+  assert.deepEqual(two.spots.map((r) => r.x), [-0.9, 0.9]);
+  assert.throws(() => parseState({ type: 'state', stage: [3, 2], spot: [0, 0, 1] }), /spot must be/);
+  assert.throws(() => parseState({ type: 'state', stage: [3, 2], spots: [[0, 0, -1, 1]] }), /spots\[0\] must be/);
   assert.throws(() => parseState({ type: 'hello' }), /expected a state message/);
   assert.throws(() => parseState({ type: 'state', stage: [3] }), /stage must be/);
   assert.throws(() => parseState({ type: 'state', stage: [-1, 2] }), /stage must be/);
@@ -110,6 +118,12 @@ test('the follow camera drifts after the performer and stays near its stage', as
   const [ex, ez] = followStep([0, 0], 10, 10, 1.0, { width: 3, depth: 2 });
   close(ex, 2.0);
   close(ez, 1.5);
+  // in an ensemble: no further than its own spot plus 0.5 m (the spot at x = 0.9, 1.2 x 2 m)
+  const [sx, sz] = followStep([0, 0], -10, 0, 1.0, { x: 0.9, z: 0, width: 1.2, depth: 2 });
+  close(sx, 0.9 - 0.6 - 0.5);
+  close(sz, 0);
+  const { corners } = await import('../src/stage.js');
+  assert.deepEqual(corners({ x: 1, z: -1, width: 2, depth: 4 }), [[0, -3], [2, -3], [2, 1], [0, 1]]);
   assert.ok(fitDistance(6, 5) > fitDistance(1, 1));
   assert.ok(fitDistance(1, 1) >= 3.0);
 });
