@@ -138,6 +138,29 @@ def test_a_voice_over_a_beat_is_danced_through_thanks_to_the_voice_over_rule() -
 
 
 @needs_shared
+def test_a_voice_over_piano_is_danced_through_thanks_to_the_pause_rule() -> None:
+    """Issue 43's worst case before the pause rule: pistachio (ragtime piano) with the shared
+    readers over it at -6 dB. The piano heard in the voice's pauses keeps it music: idle at most
+    2 % of the frames after the first 3 s (0.0 %); with the pause rule off
+    (``music_gate.MusicGate.pause_rule``; the voice network's part on) 6.3 %."""
+    from models.features.spectral import extract_features
+    from models.generate import load_model
+    from script_loader import load_script
+
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    lm = load_model(None)
+    song = _recording("pistachio_ragtime_lenaorsa.ogg", 80.0)
+    feats = extract_features(ig.with_speech(song, _speech(), -6.0, len(song) // 735), lm.features)
+    on = DanceStream(lm.model, seed=7)
+    if on._idle.presence is None or lm.model.config.gate_col < 0:
+        pytest.skip(f"{lm.path} has no presence detector with the steadiness column: no pause rule")
+    assert (on.listen(feats)[90:] > 0).mean() <= 0.02
+    off = DanceStream(lm.model, seed=7)
+    off._idle.presence.pause_rule = False
+    assert (off.listen(feats)[90:] > 0).mean() > 0.04
+
+
+@needs_shared
 def test_a_recording_with_two_second_silences_cut_in_is_danced_through() -> None:
     """Issue 43's breaks on a real recording: 2 s of silence every 10 s, idle at most 2 % of its
     frames after the first 3 s (1.0 %; before the hold: 21 %)."""
