@@ -253,11 +253,25 @@ def pause_steadiness(ring_e, ring_s, state, e, s):  # pragma: no cover - compile
     m = min(int(state[1]) + 1, n)
     state[1] = m
     k = 1 + (m - 1) // 4
-    order = np.argsort(ring_e[:m])
+    taken = 0  # bit j: slot j counted (PAUSE_FRAMES <= 63); no allocation, k passes over m slots
     acc = 0.0
-    for j in range(k):
-        acc += ring_s[order[j]]
+    for _ in range(k):
+        best = -1
+        for j in range(m):
+            if not (taken >> j) & 1 and (best < 0 or ring_e[j] < ring_e[best]):
+                best = j
+        taken |= 1 << best
+        acc += ring_s[best]
     return acc / k
+
+
+@njit(cache=True, nogil=True)
+def sound_cues(ring, ring_at, pause_e, pause_s, pause_at, e, s, out):  # pragma: no cover - compiled
+    """One sounding frame's cues in one compiled call (log energy ``e`` dB, steadiness ``s``; NaN:
+    no steadiness column): ``out[0]`` the :func:`floor_range` of ``ring``, ``out[1]`` the
+    :func:`pause_steadiness` of ``pause_e``, ``pause_s`` (-inf without the column)."""
+    out[0] = floor_range(ring, ring_at, e)
+    out[1] = pause_steadiness(pause_e, pause_s, pause_at, e, s) if s == s else -np.inf
 
 
 class MusicGate:
@@ -298,6 +312,7 @@ class MusicGate:
         self._pause_at = np.zeros(2)  # next slot, slots filled
         self._ring = np.full(FLOOR_FRAMES, np.nan)  # the last sounding frames' log energy (dB)
         self._ring_at = np.zeros(1)
+        self._cues = np.zeros(2)  # sound_cues' output
         self.energy_min = float(energy_min)
         self._a_music = math.exp(-1.0 / tau_music)
         self._a_idle = math.exp(-1.0 / TAU_IDLE)
@@ -331,10 +346,9 @@ class MusicGate:
         z = presence_logit(self.stats, *(self._stop if dancing else self._start))
         a = self._a_logit if dancing else 0.0  # idle: the music's return is heard at once
         self.logit = a * self.logit + (1.0 - a) * z
-        self.floor_db = floor_range(self._ring, self._ring_at, float(row[ENERGY_COL]))
-        if self._scol >= 0:
-            self.pause_steady = pause_steadiness(self._pause_e, self._pause_s, self._pause_at,
-                                                 float(row[ENERGY_COL]), float(row[self._scol]))
+        sound_cues(self._ring, self._ring_at, self._pause_e, self._pause_s, self._pause_at, float(row[ENERGY_COL]),
+                   float(row[self._scol]) if self._scol >= 0 else math.nan, self._cues)
+        self.floor_db, self.pause_steady = float(self._cues[0]), float(self._cues[1])
         if not dancing:
             return self.logit > MARGIN_START
         if self.logit > -MARGIN_STOP:
