@@ -259,6 +259,49 @@ def test_a_voice_over_the_music_is_music_while_the_music_keeps_a_floor() -> None
     assert not any(hears(rows, never))  # the voice network hears no music: a crowd, noise
 
 
+def test_the_music_heard_in_the_voices_pauses_is_music() -> None:
+    """The pause rule: a stop network that never hears music, no voice network. A dancing
+    performer's sound whose quietest frames (every fourth, 12 dB down: a voice's pauses) hold
+    their harmonics (steadiness 0.5: the music under the voice) stays music; the same pauses
+    without them (steadiness 0: a voice alone, its room) do not, nor with the pause rule or
+    the voice-over rule switched off, nor without a steadiness column."""
+    d, scol = 64, 63
+    rng = np.random.default_rng(0)
+    music, never = constant_network(10.0), constant_network(-10.0)
+    rows = np.repeat(rng.normal(size=d).astype(np.float32)[None], 40, 0)
+    rows[:, mg.ENERGY_COL] = -20.0
+    rows[3::4, mg.ENERGY_COL] = -32.0  # the pauses, still above the silence threshold
+    rows[:, scol] = 0.0  # the voice: its harmonics glide
+    rows[3::4, scol] = 0.5  # the music in its pauses holds them
+    alone = rows.copy()
+    alone[3::4, scol] = 0.0
+
+    def hears(x: np.ndarray, steadiness_col: int = scol, **rule: bool) -> list[bool]:  # dancing throughout
+        g = mg.MusicGate(np.zeros(d), np.ones(d), music, -60.0, clarity_col=60, steadiness_col=steadiness_col,
+                         stop_params=never, **rule)
+        return [g.step(r, True) for r in x]
+
+    assert all(hears(rows)[8:])  # from the second pause on
+    assert not any(hears(alone))
+    assert not any(hears(rows, pause_rule=False)) and not any(hears(rows, voice_rule=False))
+    assert not any(hears(rows, steadiness_col=-1))
+
+
+def test_pause_steadiness_is_the_quietest_quarters_mean() -> None:
+    """:func:`music_gate.pause_steadiness` over a ring of PAUSE_FRAMES: the mean steadiness of the
+    ``1 + (m - 1) // 4`` quietest of the ``m`` frames pushed so far (the last PAUSE_FRAMES)."""
+    n = mg.PAUSE_FRAMES
+    e, s, at = np.zeros(n), np.zeros(n), np.zeros(2)
+    rng = np.random.default_rng(2)
+    pushed = []
+    for _ in range(3 * n):
+        pushed.append((float(rng.normal()), float(rng.normal())))
+        got = mg.pause_steadiness(e, s, at, *pushed[-1])
+        last = sorted(pushed[-n:])
+        k = 1 + (len(last) - 1) // 4
+        assert got == pytest.approx(np.mean([v for _, v in last[:k]]))
+
+
 def test_the_stop_network_gives_the_beat_statistics_no_weight() -> None:
     """``fit_network(drop=BEAT_STATS)``: their columns of W1 are zero and the logit does not move
     when they do, though the labels in the fit follow one of them."""

@@ -35,9 +35,18 @@ features as the engine computes them):
   (``--reader-at``: another share) into each ``--music`` recording, each ``--speech`` recording at its RMS level, the next
   recording; settle, held and back as between songs (speech alone: idle within 2 s).
 
+* **espeak-ng voices over and after training songs** (``--parts espeak``, not in the default;
+  the material the voice-over rule's constants were chosen on, not the judging readers): 60 s of
+  each of :data:`ESPEAK_SONGS` training songs (a third in) with an espeak-ng host
+  (``models.training.music_gate.speech``: reverberation, a noise bed) over it at 0 and -6 dB,
+  idle as for the mixes; and each song's 20 s, 10 s of a host at its level, the next song:
+  settle, held and back as between songs, two hosts per song.
+
 ``--parts`` picks the parts (default ``recordings,mixes,gaps``). ``--floor-db`` and
 ``--voice-margin`` set the voice-over rule's ``music_gate.FLOOR_DB`` and ``VOICE_MARGIN`` (``inf``:
-that cue always holds; ``--floor-db 0``: the rule off), to measure its parts alone.
+that cue always holds; ``--floor-db 0``: the voice network's part off), ``--pause-steady`` its pause
+rule's ``PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off), to measure its
+parts alone.
 
 It also prints the gate's own cost per frame (median and 99th percentile, microseconds).
 
@@ -71,6 +80,9 @@ MIX_DB: tuple[float, ...] = (0.0, -6.0)
 #: Lengths (s) of the silences cut into each recording, one every :data:`BREAK_EVERY_S`.
 BREAKS_S: tuple[float, ...] = (1.0, 2.0)
 BREAK_EVERY_S: float = 10.0
+#: Training songs (drawn with :data:`ESPEAK_SEED`) under and before the espeak-ng hosts of ``--parts espeak``.
+ESPEAK_SONGS: int = 8
+ESPEAK_SEED: int = 4343
 #: Most seconds to fully idle per kind of gap (issue 43): silence 3, speech 2, the rest 2.5.
 SETTLE_TARGET_S: dict[str, float] = {"silence": 3.0, "speech": 2.0}
 SETTLE_TARGET_OTHER_S: float = 2.5
@@ -163,6 +175,36 @@ def run_gap(lm, a: np.ndarray, gap: np.ndarray, b: np.ndarray, seed: int) -> dic
             "idle_w": w.tolist(), "gap_frames": [g0, g1]}
 
 
+def espeak_rows(lm, data: Path, seed: int) -> tuple[list[dict], list[dict]]:
+    """``--parts espeak``: (mix rows: ``song``, idle with a host over it at each of :data:`MIX_DB`;
+    host rows: ``song``, ``settle_s``, ``held``, ``back_s``) on :data:`ESPEAK_SONGS` training songs."""
+    from models.training import music_gate as mg
+
+    rng = np.random.default_rng(ESPEAK_SEED)
+    names = mg.training_songs(data)
+    pick = [names[i] for i in rng.choice(len(names), ESPEAK_SONGS, replace=False)]
+    songs = mg.song_audio(data, pick)
+    pool = [mg.utterance(rng) for _ in range(30)]
+    cut = lambda x: x[: len(x) // HOP * HOP]  # noqa: E731
+    mixes, hosts = [], []
+    for name, song in zip(pick, songs):
+        a = cut(song[len(song) // 3: len(song) // 3 + 60 * SR])
+        talk = mg.speech(70.0, rng, pool)
+        row = {"song": name}
+        for db in MIX_DB:
+            row[f"host {db:g} dB"] = idle_sounding(lm, with_speech(a, talk, db, len(a) // HOP), len(a) // HOP, seed)
+        mixes.append(row)
+    for i, (name, song) in enumerate(zip(pick, songs)):
+        a = cut(song[len(song) // 3: len(song) // 3 + 20 * SR])
+        b = songs[(i + 1) % len(songs)]
+        b = cut(b[len(b) // 2: len(b) // 2 + 20 * SR])
+        for _ in range(2):
+            t = mg.speech(10.0, rng, pool)
+            r = run_gap(lm, a, t * 10 ** ((rms_dbfs(a) - rms_dbfs(t)) / 20), b, seed)
+            hosts.append({"song": name, **{k: r[k] for k in ("settle_s", "held", "back_s")}})
+    return mixes, hosts
+
+
 def settle_target(gap: str) -> float:
     """Most seconds to fully idle on gap ``gap`` (its label): :data:`SETTLE_TARGET_S`."""
     return SETTLE_TARGET_S.get(gap.split()[0], SETTLE_TARGET_OTHER_S)
@@ -180,16 +222,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--plot", type=Path, help="write a PNG of the idle weight over the between-songs programmes")
     p.add_argument("--json", type=Path, help="write the results as JSON")
     p.add_argument("--parts", default="recordings,mixes,gaps",
-                   help="comma-separated parts to run: recordings, mixes (voices and breaks), gaps (default all)")
+                   help="comma-separated parts to run: recordings, mixes (voices and breaks), gaps, readers (after each "
+                        "recording), espeak (espeak-ng hosts over and after training songs) (default recordings,mixes,gaps)")
     p.add_argument("--reader-at", type=float, default=1 / 3,
                    help="--parts readers: where the 20 s of each recording start, a share of its length (default 1/3)")
     p.add_argument("--floor-db", type=float, help="the voice-over rule's FLOOR_DB (models/networks/music_gate.py; "
                    "inf: the voice network alone, 0: the rule off)")
     p.add_argument("--voice-margin", type=float, help="the voice-over rule's VOICE_MARGIN (inf: the floor alone)")
+    p.add_argument("--pause-steady", type=float, help="the voice-over rule's PAUSE_STEADY (inf: the pause rule off)")
     args = p.parse_args(argv)
     parts = set(args.parts.split(","))
-    if parts - {"recordings", "mixes", "gaps", "readers"}:
-        p.error(f"--parts: unknown part(s) {sorted(parts - {'recordings', 'mixes', 'gaps', 'readers'})}")
+    known = {"recordings", "mixes", "gaps", "readers", "espeak"}
+    if parts - known:
+        p.error(f"--parts: unknown part(s) {sorted(parts - known)}")
 
     from models.errors import PerformerError
     from models.features.audio_io import load_audio
@@ -203,6 +248,8 @@ def main(argv: list[str] | None = None) -> int:
         gate.FLOOR_DB = args.floor_db
     if args.voice_margin is not None:
         gate.VOICE_MARGIN = args.voice_margin
+    if args.pause_steady is not None:
+        gate.PAUSE_STEADY = args.pause_steady
     try:
         lm = load_model(args.checkpoint)
         if not getattr(lm.model, "takes_style", False):
@@ -284,6 +331,20 @@ def main(argv: list[str] | None = None) -> int:
             print(f"| {rr[0]['recording']} | " + " | ".join(f2(r["settle_s"]) for r in rr)
                   + f" | {min((r['held'] or 0.0) for r in rr):.2f} | {max((r['back_s'] or 99.0) for r in rr):.2f} |")
 
+    es_mix, es_hosts = espeak_rows(lm, args.data, args.seed) if "espeak" in parts else ([], [])
+    if es_mix:
+        cols = [k for k in es_mix[0] if k != "song"]
+        print(f"\n| training song, an espeak-ng host over it (idle ≤ 0.02) | {' | '.join(cols)} | host after it: settle (s ≤ 2) | held | back (s) |")
+        print("| --- |" + " ---: |" * (len(cols) + 3))
+        f2 = lambda v: "never" if v is None else f"{v:.2f}"  # noqa: E731
+        for r in es_mix:
+            hh = [h for h in es_hosts if h["song"] == r["song"]]
+            print(f"| {r['song']} | " + " | ".join(f"{r[c]:.3f}" for c in cols) + " | " + " / ".join(f2(h["settle_s"]) for h in hh)
+                  + f" | {min((h['held'] or 0.0) for h in hh):.2f} | {max((h['back_s'] or 99.0) for h in hh):.2f} |")
+        print(f"| worst | " + " | ".join(f"{max(r[c] for r in es_mix):.3f}" for c in cols)
+              + f" | {max((h['settle_s'] or 99.0) for h in es_hosts):.2f} | {min((h['held'] or 0.0) for h in es_hosts):.2f} | "
+              f"{max((h['back_s'] or 99.0) for h in es_hosts):.2f} |")
+
     rng = np.random.default_rng(1000 + args.seed)
     pool = [mg.utterance(rng) for _ in range(24)] if mg.espeak_available() else []
     cases = [(lab, gap_audio(kind, args.gap_s, lvl, rng, pool)) for lab, kind, lvl in GAPS
@@ -303,7 +364,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{settle_target(r['gap']):g} | {f(r['held'])} | "
               f"{f(r['back_s'])} | {r['max_step_deg']:.1f} | {f(r['idle_step_deg'])} | {r['dance_step_p99_deg']:.1f} |")
     if args.json:
-        args.json.write_text(json.dumps({"mixes": mix_rows, "readers": reader_rows, "gate_us_median": float(np.median(cost_us)),
+        args.json.write_text(json.dumps({"mixes": mix_rows, "readers": reader_rows, "espeak": es_mix, "espeak_hosts": es_hosts, "gate_us_median": float(np.median(cost_us)),
                                          "gate_us_p99": float(np.percentile(cost_us, 99)), "recordings": rec_rows, "gaps": [{k: v for k, v in r.items() if k != "idle_w"}
                                                                              for r in gap_rows]}, indent=1))
     if args.plot:

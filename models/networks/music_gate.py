@@ -53,6 +53,14 @@ the voice: the log energy's range over the last :data:`FLOOR_FRAMES` sounding fr
 :data:`FLOOR_DB` (a voice alone falls 20-30 dB between its words, over music only to the
 music's level; a crowd or noise has no pauses, but there the voice network hears no music).
 ``voice_rule=False`` switches it off.
+
+**The music heard in the voice's pauses** (the pause rule, part of the voice-over rule; with
+the steadiness column only). Between a voice's words the music under it is heard alone, and
+music holds its notes; a voice alone pauses into room noise or its own reverberation. A
+dancing performer's frame the stop network hears as no music also counts as music when the
+steadiness column's mean over the quietest quarter of the last :data:`PAUSE_FRAMES` sounding
+frames (:func:`pause_steadiness`) is above :data:`PAUSE_STEADY`. ``pause_rule=False`` (or
+``voice_rule=False``) switches it off.
 """
 
 from __future__ import annotations
@@ -102,6 +110,12 @@ START_FRAMES: int = 3
 VOICE_MARGIN: float = 1.0
 FLOOR_FRAMES: int = 30
 FLOOR_DB: float = 18.0
+#: The pause rule (module docstring): the steadiness column's mean over the quietest quarter of
+#: the last PAUSE_FRAMES sounding frames (0.67 s) above PAUSE_STEADY hears the music under a
+#: voice. Chosen on espeak-ng voices over and after training songs (idle_gate.py --parts espeak;
+#: docs/history.md, issue 43).
+PAUSE_FRAMES: int = 20
+PAUSE_STEADY: float = 0.25
 #: Feature columns read: MFCC 1-2, log energy, MFCC 1-12 differences, energy difference, onset
 #: (and the beat columns: the model's ``clarity_col`` and its neighbours).
 MFCC_COLS: tuple[int, ...] = (1, 2)
@@ -225,6 +239,41 @@ def floor_range(ring, state, e):  # pragma: no cover - compiled
     return hi - lo
 
 
+@njit(cache=True, nogil=True)
+def pause_steadiness(ring_e, ring_s, state, e, s):  # pragma: no cover - compiled
+    """Push log energy ``e`` (dB) and steadiness ``s`` into ``ring_e``, ``ring_s`` (PAUSE_FRAMES,)
+    float64 at ``state[0]`` (the next slot; ``state[1]``: slots filled, both advanced in place) and
+    return the mean steadiness of the quietest quarter of the filled slots (``1 + (m - 1) // 4`` of
+    ``m``): what sounds in a voice's pauses."""
+    n = ring_e.shape[0]
+    i = int(state[0])
+    ring_e[i] = e
+    ring_s[i] = s
+    state[0] = (i + 1) % n
+    m = min(int(state[1]) + 1, n)
+    state[1] = m
+    k = 1 + (m - 1) // 4
+    taken = 0  # bit j: slot j counted (PAUSE_FRAMES <= 63); no allocation, k passes over m slots
+    acc = 0.0
+    for _ in range(k):
+        best = -1
+        for j in range(m):
+            if not (taken >> j) & 1 and (best < 0 or ring_e[j] < ring_e[best]):
+                best = j
+        taken |= 1 << best
+        acc += ring_s[best]
+    return acc / k
+
+
+@njit(cache=True, nogil=True)
+def sound_cues(ring, ring_at, pause_e, pause_s, pause_at, e, s, out):  # pragma: no cover - compiled
+    """One sounding frame's cues in one compiled call (log energy ``e`` dB, steadiness ``s``; NaN:
+    no steadiness column): ``out[0]`` the :func:`floor_range` of ``ring``, ``out[1]`` the
+    :func:`pause_steadiness` of ``pause_e``, ``pause_s`` (-inf without the column)."""
+    out[0] = floor_range(ring, ring_at, e)
+    out[1] = pause_steadiness(pause_e, pause_s, pause_at, e, s) if s == s else -np.inf
+
+
 class MusicGate:
     """Frame-by-frame music presence: :meth:`step` takes one feature row (D,) and the
     performer's current state (dancing or not) and says whether this frame sounds like
@@ -238,13 +287,14 @@ class MusicGate:
     network that judges while dancing (the model's ``presence_stop``; None or all zeros:
     ``params`` in both states); voice_params: the packed voice network (the model's
     ``presence_voice``; None or all zeros: no voice-over rule); voice_rule: False switches the
-    voice-over rule off (module docstring).
+    voice-over rule off, the pause rule with it; pause_rule: False switches the pause rule off
+    (module docstring; without a steadiness column there is none).
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
                  clarity_col: int, steadiness_col: int = -1, tau_music: float = TAU_MUSIC,
                  stop_params: np.ndarray | None = None, voice_params: np.ndarray | None = None,
-                 voice_rule: bool = True) -> None:
+                 voice_rule: bool = True, pause_rule: bool = True) -> None:
         self._ccol = int(clarity_col)
         self._scol = int(steadiness_col)
         self._mfcc_mean = np.asarray(feat_mean, np.float64)[list(MFCC_COLS)]
@@ -256,8 +306,13 @@ class MusicGate:
         self.has_voice = voice_params is not None and bool(np.any(np.asarray(voice_params) != 0))
         self._voice = self._network(voice_params) if self.has_voice else self._start
         self.voice_rule = bool(voice_rule)
+        self.pause_rule = bool(pause_rule)
+        self._pause_e = np.zeros(PAUSE_FRAMES)  # the last sounding frames' log energy (dB) and steadiness
+        self._pause_s = np.zeros(PAUSE_FRAMES)
+        self._pause_at = np.zeros(2)  # next slot, slots filled
         self._ring = np.full(FLOOR_FRAMES, np.nan)  # the last sounding frames' log energy (dB)
         self._ring_at = np.zeros(1)
+        self._cues = np.zeros(2)  # sound_cues' output
         self.energy_min = float(energy_min)
         self._a_music = math.exp(-1.0 / tau_music)
         self._a_idle = math.exp(-1.0 / TAU_IDLE)
@@ -278,6 +333,9 @@ class MusicGate:
         self._ring_at[0] = 0.0
         self.floor_db = 0.0  # the log energy's range over the last FLOOR_FRAMES sounding frames
         self.voice_frames = 0  # frames the voice-over rule kept as music
+        self._pause_at[:] = 0.0
+        self.pause_steady = -math.inf  # the steadiness in the voice's pauses (-inf: no steadiness column)
+        self.pause_frames = 0  # frames the pause rule kept as music
 
     def step(self, row: np.ndarray, dancing: bool) -> bool:
         """True when frame ``row`` (D,) sounds like music to a performer that is ``dancing``."""
@@ -288,10 +346,15 @@ class MusicGate:
         z = presence_logit(self.stats, *(self._stop if dancing else self._start))
         a = self._a_logit if dancing else 0.0  # idle: the music's return is heard at once
         self.logit = a * self.logit + (1.0 - a) * z
-        self.floor_db = floor_range(self._ring, self._ring_at, float(row[ENERGY_COL]))
+        sound_cues(self._ring, self._ring_at, self._pause_e, self._pause_s, self._pause_at, float(row[ENERGY_COL]),
+                   float(row[self._scol]) if self._scol >= 0 else math.nan, self._cues)
+        self.floor_db, self.pause_steady = float(self._cues[0]), float(self._cues[1])
         if not dancing:
             return self.logit > MARGIN_START
         if self.logit > -MARGIN_STOP:
+            return True
+        if self.voice_rule and self.pause_rule and self.pause_steady > PAUSE_STEADY:
+            self.pause_frames += 1  # the music heard in the voice's pauses: still music
             return True
         if self.voice_rule and self.has_voice and self.floor_db < FLOOR_DB \
                 and presence_logit(self.stats, *self._voice) > -VOICE_MARGIN:
