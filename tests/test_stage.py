@@ -320,3 +320,90 @@ def test_near_an_edge_a_movement_that_heads_inwards_is_chosen(monkeypatch):
     assert share() >= 0.7
     monkeypatch.setattr(stage_mod, "INWARDS", False)
     assert share() < 0.65
+
+
+def _reference_step(st: Stage, pose: np.ndarray, read: float, idle: float) -> None:
+    """Stage.step as it was written before the real-time path inlined it (issue 39's ensemble
+    budget): the same arithmetic through the helper methods, kept here as the reference."""
+    v = st._at(read)
+    p = st._prev if st._prev is not None else v
+    st._prev, st._read = v, read
+    leaving = not st.active
+    if leaving and st.x == 0.0 and st.z == 0.0 and st.heading == 0.0:
+        return
+    c, s = math.cos(p[2]), math.sin(p[2])
+    dx, dz = v[0] - p[0], v[1] - p[1]
+    keep = 0.0 if leaving else 1.0 - idle
+    lx, lz, turn = (c * dx - s * dz) * keep, (s * dx + c * dz) * keep, (v[2] - p[2]) * keep
+    turn = min(max(turn, -stage_mod.MAX_TURN / FPS), stage_mod.MAX_TURN / FPS)
+    if st._homing:
+        lx = lz = 0.0
+    h = st.heading
+    ch, sh = math.cos(h), math.sin(h)
+    wx, wz = lx * ch + lz * sh, -lx * sh + lz * ch
+    fast = math.hypot(wx, wz) * FPS / MAX_SPEED
+    if fast > 1.0:
+        wx, wz = wx / fast, wz / fast
+    wx, wz = st._home_step(wx, wz)
+    if not leaving:
+        wx, wz, steer = st._bound(wx, wz)
+        if st._near() is not None:
+            st.counts["edge_frames"] += 1
+            st.counts["steered_frames"] += steer != 0.0
+        turn += steer
+    if st.facing == "audience" or leaving:
+        turn = st._face_audience(turn)
+    st.x += wx
+    st.z += wz
+    st.heading = h + turn
+    if leaving and math.hypot(st.x, st.z) < 1e-3 and abs(stage_mod._wrap(st.heading)) < 1e-3:
+        st.x = st.z = st.heading = 0.0
+        st._homing = False
+    pose[0], pose[2] = st.x, st.z
+    half = 0.5 * st.heading
+    c, s = math.cos(half), math.sin(half)
+    qx, qy, qz, qw = float(pose[3]), float(pose[4]), float(pose[5]), float(pose[6])
+    pose[3], pose[4], pose[5], pose[6] = c * qx + s * qz, c * qy + s * qw, c * qz - s * qx, c * qw - s * qy
+
+
+def test_the_inlined_step_is_bit_for_bit_the_reference_arithmetic():
+    """Stage.step inlines _at, _near, _bound and _home_step for the real-time path: on fast
+    travel with spins on a small stage (edges, bends), facing audience, idle fades, home() and
+    a stage set to 0 and back live, every frame's pose, place and counts equal the reference's."""
+    rng = np.random.default_rng(3)
+    seg = 8
+    lean, ref = Stage(seg, "1.5x1"), Stage(seg, "1.5x1")
+    pose = np.zeros(4 * 22 + 3, np.float32)
+    pose[3:] = rng.normal(size=4 * 22).astype(np.float32)
+    read, edge = float(seg), 0
+    for t in range(2400):
+        if t % seg == 0:  # a handover: a random travel of 2 seg rows (up to 3 m/s, 2 turns a second)
+            travel = np.cumsum(rng.normal(0.0, [0.05, 0.05, 0.15], (2 * seg, 3)), axis=0)
+            travel -= travel[0]
+            at = read - seg
+            for st in (lean, ref):
+                st.handover(at, travel if t % (5 * seg) else None, t == 0)
+            read -= at
+        if t == 500:
+            for st in (lean, ref):
+                st.set_facing("audience")
+        if t in (900, 1700):
+            for st in (lean, ref):
+                st.home()
+        if t == 1200:
+            for st in (lean, ref):
+                st.set_stage(0)
+        if t == 1400:
+            for st in (lean, ref):
+                st.set_stage("1x1")
+        read += float(rng.uniform(0.6, 1.8))
+        idle = float(rng.uniform(0.0, 1.0)) if 300 < t < 360 else 0.0
+        a, b = pose.copy(), pose.copy()
+        lean.step(a, read, idle)
+        _reference_step(ref, b, read, idle)
+        assert np.array_equal(a, b), t
+        assert (lean.x, lean.z, lean.heading, lean._home_w, lean._homing) == \
+            (ref.x, ref.z, ref.heading, ref._home_w, ref._homing), t
+        edge += lean.active and lean._near() is not None
+    assert lean.counts == ref.counts
+    assert lean.counts["steered_frames"] > 100 and edge > 500  # the bend was exercised
