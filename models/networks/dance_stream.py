@@ -791,8 +791,7 @@ class DanceStream:
             own = [(c, j) for c, j in pairs if self._member_style[c, j] == self.style]
             pairs = own or pairs
         if self._travels:  # near an edge: exemplars whose own travel heads inwards (stage.INWARDS)
-            cj = np.array(pairs)  # (n, 2): code, member
-            keep = self._stage.inwards(self._travel[cj[:, 0], cj[:, 1], self.seg, :2])
+            keep = self._stage.inwards(np.array([self._travel[c, j, self.seg, :2] for c, j in pairs]))
             pairs = pairs if keep is None else [p for p, k in zip(pairs, keep) if k]
         if len(codes) == 1 and len(pairs) == int(self._counts[codes[0]]):  # all of one code's: a slice, no gathering
             c, n = codes[0], len(pairs)

@@ -171,7 +171,6 @@ class Stage:
         x = np.clip(k / np.maximum([[CARRY_ROWS, CARRY_ROWS, CARRY_TURN_ROWS]], 1e-9), 0.0, 1.0)
         fade = 1.0 - x * x * (3.0 - 2.0 * x)  # (2 seg, 3): x, z, heading
         self._carry = np.concatenate([np.zeros((1, 3)), np.cumsum(fade, axis=0)[:-1]])
-        self._rows = np.arange(self.seg, dtype=np.float64)  # a handover's rows 0 .. seg-1
         self.reset()
 
     # -- settings (a control thread may call them: they only store values) ---------------
@@ -227,11 +226,9 @@ class Stage:
         if first:
             tr[:s] = 0.0
             base = (0.0, 0.0, 0.0)
-        else:  # tr[i] = self._at(at + i) for i < seg, in one pass (the same arithmetic; every row read is >= i)
-            x = at + self._rows
-            i = np.clip(np.floor(x).astype(np.int64), 0, len(tr) - 2)
-            a = tr[i]
-            tr[:s] = a + (x - i)[:, None] * (tr[i + 1] - a)
+        else:
+            for i in range(s):
+                tr[i] = self._at(at + i)
             base = self._at(at + s)
             self._read -= at  # the last read, in the new rows
         c, sn = math.cos(base[2]), math.sin(base[2])
@@ -265,26 +262,12 @@ class Stage:
         """Advance one frame and place ``pose`` (P,) on the stage, in place: ``read`` the
         fractional row the player read this frame's pose at, ``idle`` the idle fade (0
         dancing .. 1 idle: the travel scaled by ``1 - idle``). Stage 0: ``pose`` untouched
-        (set live while away from the centre: first a walk back to it, turning to face +Z).
-
-        The real-time path: every performer runs this on every frame, so the common case
-        (dancing inside the stage, away from the edges) is written out in plain float
-        arithmetic with the track read, the edge test and the bound inlined, each computed
-        once (the methods they mirror, ``_at``, ``_near``, ``_bound``, ``_home_step``, do the
-        same arithmetic in the same order: the result is bit for bit theirs,
-        tests/test_stage.py). 10 µs a frame before, about 4 now (benchmarks/studies/ensemble_hop.py)."""
-        tr = self._track  # v = self._at(read), inlined
-        i = min(max(int(math.floor(read)), 0), len(tr) - 2)
-        f = read - i
-        a0, a1, a2 = tr[i].tolist()
-        b0, b1, b2 = tr[i + 1].tolist()
-        v = (a0 + f * (b0 - a0), a1 + f * (b1 - a1), a2 + f * (b2 - a2))
+        (set live while away from the centre: first a walk back to it, turning to face +Z)."""
+        v = self._at(read)
         p = self._prev if self._prev is not None else v
         self._prev, self._read = v, read
-        w, d = self.width, self.depth
-        leaving = not (w > 0.0 and d > 0.0)
-        x, z, h = self.x, self.z, self.heading
-        if leaving and x == 0.0 and z == 0.0 and h == 0.0:
+        leaving = not self.active
+        if leaving and self.x == 0.0 and self.z == 0.0 and self.heading == 0.0:
             return
         # this frame's step in the movement's own frame at the last read: forward z, sideways x, turn
         c, s = math.cos(p[2]), math.sin(p[2])
@@ -294,45 +277,25 @@ class Stage:
         turn = min(max(turn, -MAX_TURN / FPS), MAX_TURN / FPS)  # no faster than MAX_TURN
         if self._homing:  # walk back to the centre instead of travelling
             lx = lz = 0.0
+        h = self.heading
         ch, sh = math.cos(h), math.sin(h)
         wx, wz = lx * ch + lz * sh, -lx * sh + lz * ch  # Ry(heading): the step on the stage
         fast = math.hypot(wx, wz) * FPS / MAX_SPEED
         if fast > 1.0:  # no faster than MAX_SPEED
             wx, wz = wx / fast, wz / fast
-        hx, hz = 0.5 * w, 0.5 * d
-        if self._homing or not (-hx <= x <= hx and -hz <= z <= hz):
-            wx, wz = self._home_step(wx, wz)
-        else:  # inside the stage, not homing: _home_step adds nothing
-            self._home_w = 0.0
-        if not leaving:  # _near() and _bound(), inlined: the step's part towards a near edge shrunk, a path heading out bent
-            mx, mz = min(MARGIN, MARGIN_FRACTION * hx), min(MARGIN, MARGIN_FRACTION * hz)
-            nx = min(max(1.0 - (x + hx) / mx, 0.0), 1.0) - min(max(1.0 - (hx - x) / mx, 0.0), 1.0)
-            nz = min(max(1.0 - (z + hz) / mz, 0.0), 1.0) - min(max(1.0 - (hz - z) / mz, 0.0), 1.0)
-            steer = 0.0
-            if nx != 0.0 or nz != 0.0:
-                speed = math.hypot(wx, wz)
-                if speed > 0.0:
-                    out = -(wx * nx + wz * nz) / speed  # > 0: heading out, up to |n|
-                    if out > 0.0:
-                        side = 1.0 if wz * nx - wx * nz >= 0.0 else -1.0
-                        steer = side * min(1.0, out) * STEER_RATE / FPS
+        wx, wz = self._home_step(wx, wz)
+        if not leaving:
+            wx, wz, steer = self._bound(wx, wz)
+            if self._near() is not None:
                 self.counts["edge_frames"] += 1
                 self.counts["steered_frames"] += steer != 0.0
-            if wx > 0.0:
-                wx *= min(max((hx - x) / mx, 0.0), 1.0)
-            elif wx < 0.0:
-                wx *= min(max((x + hx) / mx, 0.0), 1.0)
-            if wz > 0.0:
-                wz *= min(max((hz - z) / mz, 0.0), 1.0)
-            elif wz < 0.0:
-                wz *= min(max((z + hz) / mz, 0.0), 1.0)
             turn += steer
-        if leaving or self.facing == "audience":
+        if self.facing == "audience" or leaving:
             turn = self._face_audience(turn)
-        self.x = x = x + wx
-        self.z = z = z + wz
-        self.heading = h = h + turn
-        if leaving and math.hypot(x, z) < 1e-3 and abs(_wrap(h)) < 1e-3:
+        self.x += wx
+        self.z += wz
+        self.heading = h + turn
+        if leaving and math.hypot(self.x, self.z) < 1e-3 and abs(_wrap(self.heading)) < 1e-3:
             self.x = self.z = self.heading = 0.0  # back at the centre (under a millimetre): in place from here
             self._homing = False
         pose[0], pose[2] = self.x, self.z
