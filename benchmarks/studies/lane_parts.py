@@ -2,8 +2,9 @@
 
 Four performers of the shipped default on their own spots of the 3x2 stage (as
 ``performer bench ensemble`` and ``performer run --performer`` place them; code steps
-staggered 0, 2, 4, 6), fed the bundled clip's features one frame at a time, unpaced, in
-one thread. Each part is timed per call (``time.perf_counter_ns`` around the method: about
+staggered 0, 2, 4, 6; ``--stage 0``: all in place, the stage's part off), fed the bundled
+clip's features one frame at a time, unpaced, in one thread; the thread's CPU time of each
+frame's pushes (all lanes) is printed first. Each part is timed per call (``time.perf_counter_ns`` around the method: about
 0.3 µs added to each); printed: calls, median and p99 µs, and µs per frame summed over the
 four lanes (``--lanes``). Then ``Stage.step`` and ``Stage.handover`` alone on a synthetic
 track (no other work between calls: their cost with warm caches).
@@ -32,7 +33,9 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--tree", default=None, help="checkout whose code is measured (default: this script's)")
     p.add_argument("--frames", type=int, default=900, help="feature frames (30 fps) pushed to each lane (default 900)")
-    p.add_argument("--lanes", type=int, default=4, help="performers, each on its spot of the 3x2 stage (default 4)")
+    p.add_argument("--lanes", type=int, default=4, help="performers, each on its spot of the stage (default 4)")
+    p.add_argument("--stage", default="3x2", metavar="WxD",
+                   help="the whole stage the spots are cut from (default 3x2; 0: every performer in place)")
     args = p.parse_args(argv)
     if args.frames < 100 or args.lanes < 1:
         p.error("--frames must be >= 100 and --lanes >= 1")
@@ -46,6 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     import models.networks.dance_stream as ds
     import models.networks.feet as feet
     import models.networks.stage as stage
+    from models.errors import PerformerError
     from models.features.audio_io import bundled_clip_path, load_audio
     from realtime.engine import stagger_lead
     from realtime.pipeline import build_pipeline
@@ -70,7 +74,11 @@ def main(argv: list[str] | None = None) -> int:
                         (stage.Stage, "handover"), (stage.Stage, "inwards"), (feet.FeetLock, "step")):
         wrap(owner, name)
     loaded: dict = {}
-    pipes = [build_pipeline(None, seed=k, loaded=loaded, spot=(k, args.lanes)) for k in range(args.lanes)]
+    try:
+        pipes = [build_pipeline(None, seed=k, loaded=loaded, spot=(k, args.lanes), stage=args.stage)
+                 for k in range(args.lanes)]
+    except PerformerError as exc:
+        p.error(f"--stage: {exc}")
     audio, sr = load_audio(bundled_clip_path(), 44100, mono=False)
     ext = pipes[0].extractor_factory(sr)
     feats = np.concatenate([f for i in range(0, len(audio) - 512, 512) if len(f := ext.push(audio[i:i + 512]))])
@@ -81,10 +89,15 @@ def main(argv: list[str] | None = None) -> int:
         if lead is not None:
             m.push(lead)
     times.clear()
+    lanes_cpu = np.zeros(len(feats))  # the thread's CPU time of each frame's pushes, all lanes (ms)
     for t in range(len(feats)):
+        c0 = time.thread_time_ns()
         for m in models:
             m.push(feats[t:t + 1])
-    print(f"code: {tree}; {args.lanes} performers on their 3x2 spots, {len(feats)} frames each, unpaced")
+        lanes_cpu[t] = (time.thread_time_ns() - c0) / 1e6
+    print(f"code: {tree}; {args.lanes} performers on their spots of the stage {args.stage}, {len(feats)} frames "
+          f"each, unpaced; all lanes' pushes a frame, thread CPU ms: p50 {np.median(lanes_cpu):.3f}, "
+          f"p99 {np.percentile(lanes_cpu, 99):.3f}")
     print("| part | calls | p50 µs | p99 µs | µs a frame, all lanes |")
     print("|---|---:|---:|---:|---:|")
     for label, v in sorted(times.items(), key=lambda kv: -sum(kv[1])):
