@@ -91,7 +91,8 @@ class BrokerProcess(OwnerBase):
 
     Args as :class:`realtime.publish.BrokerPublisher` (``url``, ``credentials``, ``tls_ca``,
     ``offsets`` for the hello, ``connect_wait``); ``cpus``: the CPUs the child runs on (None: as
-    this process); ``batch``: the child under ``SCHED_BATCH`` (False only to measure without).
+    this process; a warning if the kernel refuses them, unless ``cpus_quiet``: auto's guess);
+    ``batch``: the child under ``SCHED_BATCH`` (False only to measure without).
     :attr:`cpus` is where it runs, read back. A broker that refuses the login or whose
     certificate is not trusted is a NetworkError here; one that is not there yet is retried in
     the background.
@@ -99,7 +100,7 @@ class BrokerProcess(OwnerBase):
 
     def __init__(self, url: str, *, credentials: Credentials | None = None, tls_ca: str | Path | None = None,
                  offsets: np.ndarray | None = None, connect_wait: float = 2.0, cpus: set[int] | None = None,
-                 batch: bool = True) -> None:
+                 batch: bool = True, cpus_quiet: bool = False) -> None:
         check_broker_url(url)
         self.url, self.display = url, url.split("@")[-1]
         if tls_ca is not None and not Path(tls_ca).is_file():
@@ -112,7 +113,7 @@ class BrokerProcess(OwnerBase):
         self._lost = False
         self.final: dict = {}
         self.cpus: list[int] = []
-        self._pin_warned = False
+        self._pin_warned = cpus_quiet
         fd, path = tempfile.mkstemp(prefix="performer-publish-")
         os.write(fd, b"\0" * _COUNTS.size)
         self._counts = mmap.mmap(fd, _COUNTS.size)
@@ -300,8 +301,9 @@ def open_routes(cfg, names: list[str]) -> list[ProcessRoute]:
     if getattr(cfg, "publish", None) is None:
         return []
     prefix = check_subject(cfg.publish_subject)
+    spec = getattr(cfg, "publish_cpus", sched.AUTO)
     owner = BrokerProcess(cfg.publish, credentials=load_credentials(cfg.publish_credentials), tls_ca=cfg.publish_tls_ca,
-                          cpus=sched.publisher_cpus(getattr(cfg, "publish_cpus", None)))
+                          cpus=sched.publisher_cpus(spec), cpus_quiet=spec == sched.AUTO)
     try:
         return [owner.route(name, f"{prefix}.{name}") for name in names]
     except BaseException:

@@ -68,7 +68,9 @@ def check_publish_cpus(text: str) -> str:
 def publisher_cpus(spec: str | None) -> set[int] | None:
     """Where the publisher process runs: the CPUs of ``spec`` (``parse_cpus``), or for ``auto``
     (None) the machine's CPUs this process is not pinned to when it is pinned to some (a
-    performer on CPU 0 of 2: CPU 1); None: wherever the performer may run (not pinned)."""
+    performer on CPU 0 of 2: CPU 1); None: wherever the performer may run (not pinned). Auto
+    counts the machine's CPUs (``os.cpu_count``): in a container limited to some of them the
+    kernel keeps those it allows, or refuses all and the child stays with the performer."""
     if spec is not None and spec != AUTO:
         return parse_cpus(spec)
     try:
