@@ -424,6 +424,8 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int,
         "hop_ms_p50_without": float(np.median(hop[~on])), "hop_ms_p50_with": float(np.median(hop[on])),
         "hop_own_ms_p50_without": float(np.median(own[~on])), "hop_own_ms_p50_with": float(np.median(own[on])),
         "hops": [int((~on).sum()), int(on.sum())],
+        # what own time leaves out: the hop's run-queue wait (other processes, the publisher beside it included)
+        "hop_wait_ms_mean_without": float(np.mean(hop[~on] - own[~on])), "hop_wait_ms_mean_with": float(np.mean(hop[on] - own[on])),
         "own_ms": {"off": own[~on].round(4).tolist(), "on": own[on].round(4).tolist()},  # per hop, for --runs
         "broker_cpu_share": broker_cpu, "broker_peak_rss_mb": [r / 2**20 for r in rss],
         "subscriber_procs_cpu_share": sub_cpu, "errors": [str(e) for e in errors[:5]],
@@ -440,11 +442,13 @@ def _mode(r: dict) -> str:
 def _print_runs(results: list[dict]) -> None:
     """Per size and mode over its runs: the own-time p99 ratio (with / without publishing) as the
     median and range of the runs, and pooled (every run's hops together); the same for the two
-    halves of the unpublished blocks (the noise floor); send() wall p50 / p99 (median of runs)."""
+    halves of the unpublished blocks (the noise floor); send() wall p50 / p99 and the hop's mean
+    run-queue wait (what own time leaves out), medians of the runs."""
     p99 = lambda x: float(np.percentile(x, 99))  # noqa: E731
     print("\n| subscribers | mode | runs | own p99 ratio: median [min, max] of runs | pooled own p99 ms without / with "
-          "(ratio) | off/off ratio: median [min, max] (noise floor) | send() wall p50 / p99 ms | load average |")
-    print("|---|---|---|---|---|---|---|---|")
+          "(ratio) | off/off ratio: median [min, max] (noise floor) | send() wall p50 / p99 ms | run-queue wait per hop, "
+          "mean ms without / with | load average |")
+    print("|---|---|---|---|---|---|---|---|---|")
     groups: dict[tuple[int, str], list[dict]] = {}
     for r in results:
         groups.setdefault((r["subscribers"], _mode(r)), []).append(r)
@@ -457,7 +461,9 @@ def _print_runs(results: list[dict]) -> None:
         print(f"| {n} | {mode} | {len(rs)} | {np.median(ratio):.3f} [{min(ratio):.3f}, {max(ratio):.3f}] | "
               f"{p99(off):.2f} / {p99(on):.2f} ({p99(on) / p99(off):.3f}) | {np.median(noise):.3f} "
               f"[{min(noise):.3f}, {max(noise):.3f}] | {np.median([r['send_ms_p50'] for r in rs]):.3f} / "
-              f"{np.median([r['send_ms_p99'] for r in rs]):.3f} | {min(loads):.1f}-{max(loads):.1f} |")
+              f"{np.median([r['send_ms_p99'] for r in rs]):.3f} | "
+              f"{np.median([r.get('hop_wait_ms_mean_without', np.nan) for r in rs]):.3f} / "
+              f"{np.median([r.get('hop_wait_ms_mean_with', np.nan) for r in rs]):.3f} | {min(loads):.1f}-{max(loads):.1f} |")
 
 
 def main(argv: list[str] | None = None) -> int:
