@@ -29,12 +29,18 @@ engine's, which an audience served from other machines would not. ``--performer-
 starts, as ``performer run --publish`` does) on CPU 0, the broker and every subscriber on CPU
 1 (sched_setaffinity, inherited by every thread and child; the affinities are read back from
 /proc and reported). Other programs on the machine are not pinned and still use both.
-``--unpinned-too`` runs each size unpinned first, then pinned, in the same session.
-``--publisher-cpus`` moves the publisher process off the engine's CPUs. Each frame's hand-over
+``--unpinned-too`` runs each size unpinned first, then pinned, in the same session. The
+publisher process goes where ``performer run`` puts it (publish_cpus = auto: off the engine's
+CPUs when those are pinned; SCHED_BATCH); ``--publisher-cpus`` and ``--publisher-normal`` place
+it otherwise, ``--beside-too`` adds a mode with it beside the engine as a normal process (as
+before). ``--runs K`` repeats each size, the modes in turns, and sums the runs up: one run's
+p99 over 840 hops moves by tens of percent on a shared machine. Each frame's hand-over
 (``route.send``: encode, one ``os.write`` to the publisher's pipe) is timed, wall and the
 worker's CPU time, ms: their gap is the worker waiting while the publisher it woke runs.
 
     .venv/bin/python benchmarks/audience.py --subscribers 100 500 1000 --performer-cpus 0 --audience-cpus 1 --unpinned-too
+    .venv/bin/python benchmarks/audience.py --subscribers 500 1000 100 --performer-cpus 0 --audience-cpus 1 \
+        --beside-too --runs 3
 """
 
 from __future__ import annotations
@@ -56,6 +62,8 @@ if str(REPO) not in sys.path:  # run as a script from anywhere
     sys.path.insert(0, str(REPO))
 
 import numpy as np  # noqa: E402
+
+from realtime.sched import parse_cpus  # noqa: E402
 
 SUBJECT = "performer.main"
 
@@ -196,18 +204,6 @@ def _peak_rss(pid: int) -> int:
     return 0
 
 
-def parse_cpus(text: str) -> set[int]:
-    """``"0"``, ``"0,1"`` or ``"0-3"`` -> the CPU numbers; ValueError on anything else."""
-    out: set[int] = set()
-    for part in text.split(","):
-        lo, _, hi = part.strip().partition("-")
-        a, b = int(lo), int(hi or lo)
-        if a < 0 or b < a:
-            raise ValueError(text)
-        out.update(range(a, b + 1))
-    return out
-
-
 def _pin_all_threads(cpus: set[int], pid: int | str = "self") -> None:
     """Pin every thread of process ``pid`` (already running ones: numpy's, torch's) to ``cpus``;
     threads and children started later inherit it from their parent thread."""
@@ -227,6 +223,14 @@ def _affinity(pid: int) -> list[int]:
         except OSError:
             pass
     return sorted(cpus)
+
+
+def _policy(pid: int) -> str:
+    """The scheduling policy of every thread of ``pid``: "batch", "normal" or "mixed"."""
+    from realtime.sched import is_batch
+
+    kinds = {is_batch(int(tid)) for tid in os.listdir(f"/proc/{pid}/task")}
+    return "mixed" if len(kinds) > 1 else "batch" if kinds == {True} else "normal"
 
 
 class _Gate:
@@ -257,11 +261,13 @@ class _Gate:
         self.route.close()
 
 
-def _play(seconds: float, block: int, broker_url: str, publisher_cpus: set[int] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, _Gate, dict]:
+def _play(seconds: float, block: int, broker_url: str, publisher_cpus: set[int] | None = None,
+          batch: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, _Gate, dict]:
     """One engine run of ``seconds`` of the clip (looped) in real time, VMC to a local socket and the
     broker route behind a :class:`_Gate`. Returns per frame the hop compute (ms), its own part (less
     the run-queue wait, as ``performer bench latency`` reports it) and whether publishing was on;
-    the gate; the publisher's stats."""
+    the gate; the publisher's stats. The publisher process runs on ``publisher_cpus`` (None: as
+    ``performer run`` places it, publish_cpus = "auto"), under SCHED_BATCH unless ``batch`` is False."""
     import socket
 
     from models.features.audio_io import bundled_clip_path, load_audio
@@ -272,6 +278,7 @@ def _play(seconds: float, block: int, broker_url: str, publisher_cpus: set[int] 
     from realtime.pipeline import build_pipeline
     from realtime.publish import Credentials
     from realtime.publish_process import BrokerProcess
+    from realtime.sched import publisher_cpus as auto_cpus
 
     pipe = build_pipeline(None)
     audio, sr = load_audio(bundled_clip_path(), 44100, mono=False)
@@ -279,9 +286,9 @@ def _play(seconds: float, block: int, broker_url: str, publisher_cpus: set[int] 
     audio = np.concatenate([audio] * (n // len(audio) + 1))[:n]
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
-    pub = BrokerProcess(broker_url, credentials=Credentials(user=PUBLISHER[0], password=PUBLISHER[1]))
-    if publisher_cpus is not None:
-        _pin_all_threads(publisher_cpus, pub._proc.pid)  # its threads are all started by now
+    pub = BrokerProcess(broker_url, credentials=Credentials(user=PUBLISHER[0], password=PUBLISHER[1]),
+                        cpus=auto_cpus(None) if publisher_cpus is None else publisher_cpus, batch=batch,
+                        cpus_quiet=publisher_cpus is None)
     gate = _Gate(pub.route("main", SUBJECT), block)
     eng = Engine(FileSource(audio, sr, realtime=True), pipe.extractor_factory, pipe.model,
                  [OscSink("127.0.0.1", rx.getsockname()[1], "vmc"), gate],
@@ -293,6 +300,7 @@ def _play(seconds: float, block: int, broker_url: str, publisher_cpus: set[int] 
     cpu = eng.compute_cpu_ms.values()
     stats = gate.stats()
     stats["publisher_cpus"] = _affinity(pub._proc.pid)
+    stats["publisher_batch"] = _policy(pub._proc.pid)
     eng.close()
     rx.close()
     on = np.array([gate.on(i) for i in range(len(hop))])
@@ -301,7 +309,7 @@ def _play(seconds: float, block: int, broker_url: str, publisher_cpus: set[int] 
 
 def run_size(n: int, seconds: float, procs: int, cluster: int, block: int,
              performer_cpus: set[int] | None = None, audience_cpus: set[int] | None = None,
-             publisher_cpus: set[int] | None = None) -> dict:
+             publisher_cpus: set[int] | None = None, batch: bool = True) -> dict:
     """One audience size; with ``performer_cpus`` and ``audience_cpus`` the broker and subscribers
     are started on the audience's CPUs and the engine (and its publisher child) runs on the performer's."""
     from realtime.nats_server import LocalBroker, free_port
@@ -345,9 +353,10 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int,
         sub_cpu0 = sum(_proc_cpu(p.pid) for p in subs)
         t0 = time.monotonic()
         load0 = os.getloadavg()[0]
-        hop, own, cpu, on, gate, stats = _play(seconds, block, brokers[0].url, publisher_cpus)
+        hop, own, cpu, on, gate, stats = _play(seconds, block, brokers[0].url, publisher_cpus, batch)
         load1 = os.getloadavg()[0]
         pinned["publisher"] = stats["publisher_cpus"]
+        pinned["publisher_policy"] = stats["publisher_batch"]
         wall = time.monotonic() - t0
         broker_cpu = (sum(b.cpu_rss()[0] for b in brokers) - c0) / wall
         sub_cpu = (sum(_proc_cpu(p.pid) for p in subs) - sub_cpu0) / wall
@@ -389,6 +398,9 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int,
     skip = 2 * block  # the first off and on blocks: the engine's first code steps, the first subscribers' wake-ups
     hop, own, cpu, on = hop[skip:], own[skip:], cpu[skip:], on[skip:len(hop) + skip]
     p99 = lambda x: float(np.percentile(x, 99))  # noqa: E731
+    # the noise floor: the off blocks in two halves (blocks 0, 4, 8, ... against 2, 6, 10, ...), neither published
+    off_a = ~on & ((np.arange(skip, skip + len(on)) // (2 * block)) % 2 == 0)
+    off_b = ~on & ~off_a
     send = np.array(gate.send_ms[block:] or gate.send_ms or [(np.nan, np.nan)], np.float64)  # less the first on block
     return {
         "subscribers": n, "pinned": not (performer_cpus is None and audience_cpus is None and publisher_cpus is None),
@@ -403,6 +415,8 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int,
         "hop_ratio_p99": p99(hop[on]) / p99(hop[~on]),
         "hop_own_ms_p99_without": p99(own[~on]), "hop_own_ms_p99_with": p99(own[on]),
         "hop_own_ratio_p99": p99(own[on]) / p99(own[~on]),
+        "hop_own_ratio_p99_off_off": p99(own[off_b]) / p99(own[off_a]),
+        "hop_ratio_p99_off_off": p99(hop[off_b]) / p99(hop[off_a]),
         "send_ms_p50": float(np.median(send[:, 0])), "send_ms_p99": p99(send[:, 0]),
         "send_cpu_ms_p50": float(np.median(send[:, 1])), "send_cpu_ms_p99": p99(send[:, 1]),
         "hop_cpu_ms_p99_without": p99(cpu[~on]), "hop_cpu_ms_p99_with": p99(cpu[on]),
@@ -410,9 +424,46 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int,
         "hop_ms_p50_without": float(np.median(hop[~on])), "hop_ms_p50_with": float(np.median(hop[on])),
         "hop_own_ms_p50_without": float(np.median(own[~on])), "hop_own_ms_p50_with": float(np.median(own[on])),
         "hops": [int((~on).sum()), int(on.sum())],
+        # what own time leaves out: the hop's run-queue wait (other processes, the publisher beside it included)
+        "hop_wait_ms_mean_without": float(np.mean(hop[~on] - own[~on])), "hop_wait_ms_mean_with": float(np.mean(hop[on] - own[on])),
+        "own_ms": {"off": own[~on].round(4).tolist(), "on": own[on].round(4).tolist()},  # per hop, for --runs
         "broker_cpu_share": broker_cpu, "broker_peak_rss_mb": [r / 2**20 for r in rss],
         "subscriber_procs_cpu_share": sub_cpu, "errors": [str(e) for e in errors[:5]],
     }
+
+
+def _mode(r: dict) -> str:
+    c = r["cpus"]
+    if not r["pinned"]:
+        return "unpinned"
+    return f"pinned, publisher on {','.join(map(str, c['publisher']))} ({c.get('publisher_policy', '?')})"
+
+
+def _print_runs(results: list[dict]) -> None:
+    """Per size and mode over its runs: the own-time p99 ratio (with / without publishing) as the
+    median and range of the runs, and pooled (every run's hops together); the same for the two
+    halves of the unpublished blocks (the noise floor); send() wall p50 / p99 and the hop's mean
+    run-queue wait (what own time leaves out), medians of the runs."""
+    p99 = lambda x: float(np.percentile(x, 99))  # noqa: E731
+    print("\n| subscribers | mode | runs | own p99 ratio: median [min, max] of runs | pooled own p99 ms without / with "
+          "(ratio) | off/off ratio: median [min, max] (noise floor) | send() wall p50 / p99 ms | run-queue wait per hop, "
+          "mean ms without / with | load average |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    groups: dict[tuple[int, str], list[dict]] = {}
+    for r in results:
+        groups.setdefault((r["subscribers"], _mode(r)), []).append(r)
+    for (n, mode), rs in groups.items():
+        ratio = [r["hop_own_ratio_p99"] for r in rs]
+        noise = [r["hop_own_ratio_p99_off_off"] for r in rs]
+        off = np.concatenate([r["own_ms"]["off"] for r in rs])
+        on = np.concatenate([r["own_ms"]["on"] for r in rs])
+        loads = [x for r in rs for x in r["load_average"]]
+        print(f"| {n} | {mode} | {len(rs)} | {np.median(ratio):.3f} [{min(ratio):.3f}, {max(ratio):.3f}] | "
+              f"{p99(off):.2f} / {p99(on):.2f} ({p99(on) / p99(off):.3f}) | {np.median(noise):.3f} "
+              f"[{min(noise):.3f}, {max(noise):.3f}] | {np.median([r['send_ms_p50'] for r in rs]):.3f} / "
+              f"{np.median([r['send_ms_p99'] for r in rs]):.3f} | "
+              f"{np.median([r.get('hop_wait_ms_mean_without', np.nan) for r in rs]):.3f} / "
+              f"{np.median([r.get('hop_wait_ms_mean_with', np.nan) for r in rs]):.3f} | {min(loads):.1f}-{max(loads):.1f} |")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -429,8 +480,18 @@ def main(argv: list[str] | None = None) -> int:
                    "these CPUs (e.g. 0, or 0-1, or 0,2); default: not pinned")
     p.add_argument("--audience-cpus", metavar="CPUS", help="pin the broker node(s) and the subscriber processes to "
                    "these CPUs (e.g. 1); default: not pinned")
-    p.add_argument("--publisher-cpus", metavar="CPUS", help="pin the publisher process apart from the engine "
-                   "(default: with the engine, as performer run starts it)")
+    p.add_argument("--publisher-cpus", metavar="CPUS", help="the publisher process's CPUs (default: as performer "
+                   "run places it, publish_cpus = auto: the CPUs the engine is not pinned to; 0 with "
+                   "--performer-cpus 0: beside the engine)")
+    p.add_argument("--publisher-normal", action="store_true", help="the publisher process under SCHED_OTHER, not "
+                   "SCHED_BATCH (as before; to measure what SCHED_BATCH does)")
+    p.add_argument("--beside-too", action="store_true", help="with --performer-cpus: also run each size with the "
+                   "publisher beside the engine under SCHED_OTHER (as performer run placed it before publish_cpus "
+                   "and SCHED_BATCH), in turns with the other modes")
+    p.add_argument("--runs", type=int, default=1, metavar="K", help="repeat each size K times, the modes in turns "
+                   "within each repeat; a second table gives per mode the median and range of the runs' own-time "
+                   "p99 ratios, the ratio over every run's hops pooled, and the same for two halves of the "
+                   "unpublished blocks (the noise floor: no difference but chance) (default 1)")
     p.add_argument("--unpinned-too", action="store_true", help="with the pinning options: run each size unpinned "
                    "first, then pinned, in the same session (the same machine load for both)")
     p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
@@ -451,8 +512,9 @@ def main(argv: list[str] | None = None) -> int:
         print("audience: nats-server is not installed (apt-get install nats-server; make setup)", file=sys.stderr)
         return 2
     if not 1 <= args.procs <= 16 or args.cluster < 1 or not 10 <= args.seconds <= 3600 \
-            or any(n < 1 for n in args.subscribers):
-        p.error("--procs 1..16, --cluster >= 1, --seconds 10..3600 (the first two 2-s blocks warm up), --subscribers >= 1")
+            or any(n < 1 for n in args.subscribers) or not 1 <= args.runs <= 100:
+        p.error("--procs 1..16, --cluster >= 1, --seconds 10..3600 (the first two 2-s blocks warm up), --subscribers >= 1, "
+                "--runs 1..100")
     usable = os.sched_getaffinity(0)
     pins = []
     for flag, text in (("--performer-cpus", args.performer_cpus), ("--audience-cpus", args.audience_cpus),
@@ -467,13 +529,19 @@ def main(argv: list[str] | None = None) -> int:
     pinned = pins != [None, None, None]
     if args.unpinned_too and not pinned:
         p.error("--unpinned-too needs --performer-cpus and/or --audience-cpus")
-    modes = ([(None, None, None)] if not pinned or args.unpinned_too else []) + ([tuple(pins)] if pinned else [])
+    if args.beside_too and pins[0] is None:
+        p.error("--beside-too needs --performer-cpus (the publisher goes beside the engine on those CPUs)")
+    batch = not args.publisher_normal
+    modes = ([(None, None, None, batch)] if not pinned or args.unpinned_too else []) + \
+        ([(*pins, batch)] if pinned else []) + ([(pins[0], pins[1], pins[0], False)] if args.beside_too else [])
     results = []
     for n in args.subscribers:
-        for perf, aud, pub in modes:
-            r = run_size(n, args.seconds, args.procs, args.cluster, args.block, perf, aud, pub)
-            results.append(r)
-            print(json.dumps(r), flush=True)
+        for k in range(args.runs):
+            for perf, aud, pub, bat in modes:
+                r = run_size(n, args.seconds, args.procs, args.cluster, args.block, perf, aud, pub, batch=bat)
+                r["run"] = k
+                results.append(r)
+                print(json.dumps({key: v for key, v in r.items() if key != "own_ms"}), flush=True)
     print("\n| subscribers | CPUs: performer+publisher / broker / subscribers | load average (start, end) | nodes | frames | delivered in order (min share per frame / complete subscribers) "
           "| publish-to-receive p50 / p99 ms (probe) | hop p99 ms without / with (ratio) | hop own p99 ms without / with "
           "(ratio) | hop CPU p99 ms without / with (ratio) | send() wall / CPU p50, p99 ms | broker CPU, peak RSS | subscribers' CPU |")
@@ -481,7 +549,7 @@ def main(argv: list[str] | None = None) -> int:
     cpus = lambda c: ",".join(map(str, c))  # noqa: E731
     for r in results:
         c = r["cpus"]
-        print(f"| {r['subscribers']} | {cpus(c['performer'])}+{cpus(c['publisher'])} / {cpus(c['broker'])} / "
+        print(f"| {r['subscribers']} | {cpus(c['performer'])}+{cpus(c['publisher'])} ({c['publisher_policy']}) / {cpus(c['broker'])} / "
               f"{cpus(c['subscribers'])}{' (pinned)' if r['pinned'] else ''} | {r['load_average'][0]:.1f}, "
               f"{r['load_average'][1]:.1f} | {r['cluster_nodes']} | {r['frames_published']} "
               f"(+{r['frames_dropped']} dropped) | {100 * r['min_share_of_subscribers_per_frame']:.2f} % / "
@@ -493,8 +561,10 @@ def main(argv: list[str] | None = None) -> int:
               f"({r['hop_cpu_ratio_p99']:.3f}) | {r['send_ms_p50']:.3f} / {r['send_cpu_ms_p50']:.3f}, "
               f"{r['send_ms_p99']:.3f} / {r['send_cpu_ms_p99']:.3f} | {100 * r['broker_cpu_share']:.0f} % of a core, "
               f"{max(r['broker_peak_rss_mb']):.0f} MB | {100 * r['subscriber_procs_cpu_share']:.0f} % |")
+    if args.runs > 1:
+        _print_runs(results)
     if args.json:
-        Path(args.json).write_text(json.dumps(results, indent=1))
+        Path(args.json).write_text(json.dumps(results))
     return 0
 
 

@@ -199,6 +199,7 @@ class RunConfig:
     publish_subject: str = "performer"
     publish_credentials: Path | None = None
     publish_tls_ca: Path | None = None
+    publish_cpus: str = "auto"
     control_osc: str | None = None
     control_allow: list[str] = field(default_factory=list)
     performer: list[PerformerConfig] = field(default_factory=list)
@@ -255,6 +256,9 @@ class RunConfig:
 
             check_broker_url(self.publish)
             check_subject(self.publish_subject)
+        from realtime.sched import check_publish_cpus
+
+        self.publish_cpus = check_publish_cpus(self.publish_cpus)  # the publisher process's CPUs
         if self.control_allow and self.control_osc is None:
             raise ConfigError("--control-allow limits the OSC control input: it needs --control-osc [HOST:]PORT")
         self.control_endpoint()
@@ -368,6 +372,7 @@ _TYPES: dict[str, tuple[type, ...]] = {
     "ws_viewers_open": (bool,), "ws_max_clients": (int,), "ws_origin": (list, str),
     "control_osc": (str, int), "control_allow": (list, str), "performer": (list,),
     "publish": (str,), "publish_subject": (str,), "publish_credentials": (str,), "publish_tls_ca": (str,),
+    "publish_cpus": (str, int),
 }
 assert set(_TYPES) == set(_FIELDS)
 

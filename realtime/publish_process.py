@@ -17,6 +17,10 @@ frame, counted as ``drops``. Records: ``<IBB`` (payload length, kind, route id) 
 payload: kind 0 a binary frame, 1 a route (JSON: performer, subject, hello), 2 a state message.
 The child's counters come back through a small shared file (:data:`COUNTERS`, int64 each);
 credentials reach it in its environment, never its command line.
+
+Where the child runs (:mod:`realtime.sched`): under ``SCHED_BATCH`` (its wake-ups never preempt
+the worker mid-hop), and on the CPUs ``cpus`` names; ``performer run`` gives it the CPUs the
+performer is not pinned to (``publish_cpus = "auto"``), so a performer pinned to a core keeps it.
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ import numpy as np
 
 from models.errors import ConfigError, NetworkError
 from realtime.frame import PoseFrame
+from realtime import sched
 from realtime.publish import (PASSWORD_ENV, TOKEN_ENV, USER_ENV, BrokerPublisher, Credentials, OwnerBase,
                               RouteBase, check_broker_url, check_subject, load_credentials)
 from realtime.wire import encode_frame, hello_message, rest_offsets
@@ -85,13 +90,17 @@ class BrokerProcess(OwnerBase):
     """The parent's side: starts the publisher process, routes performers to it, reads its counters.
 
     Args as :class:`realtime.publish.BrokerPublisher` (``url``, ``credentials``, ``tls_ca``,
-    ``offsets`` for the hello, ``connect_wait``). A broker that refuses the login or whose
+    ``offsets`` for the hello, ``connect_wait``); ``cpus``: the CPUs the child runs on (None: as
+    this process; a warning if the kernel refuses them, unless ``cpus_quiet``: auto's guess);
+    ``batch``: the child under ``SCHED_BATCH`` (False only to measure without).
+    :attr:`cpus` is where it runs, read back. A broker that refuses the login or whose
     certificate is not trusted is a NetworkError here; one that is not there yet is retried in
     the background.
     """
 
     def __init__(self, url: str, *, credentials: Credentials | None = None, tls_ca: str | Path | None = None,
-                 offsets: np.ndarray | None = None, connect_wait: float = 2.0) -> None:
+                 offsets: np.ndarray | None = None, connect_wait: float = 2.0, cpus: set[int] | None = None,
+                 batch: bool = True, cpus_quiet: bool = False) -> None:
         check_broker_url(url)
         self.url, self.display = url, url.split("@")[-1]
         if tls_ca is not None and not Path(tls_ca).is_file():
@@ -103,6 +112,8 @@ class BrokerProcess(OwnerBase):
         self.pipe_drops = 0
         self._lost = False
         self.final: dict = {}
+        self.cpus: list[int] = []
+        self._pin_warned = cpus_quiet
         fd, path = tempfile.mkstemp(prefix="performer-publish-")
         os.write(fd, b"\0" * _COUNTS.size)
         self._counts = mmap.mmap(fd, _COUNTS.size)
@@ -118,6 +129,7 @@ class BrokerProcess(OwnerBase):
         self._proc = subprocess.Popen(args, pass_fds=(r,), env=env, stdout=subprocess.PIPE, stdin=subprocess.DEVNULL,
                                       cwd=Path(__file__).resolve().parents[1])
         os.close(r)
+        self._place(cpus, batch)  # before the child's imports start threads (they inherit it)
         ready, _, _ = select.select([self._proc.stdout], [], [], connect_wait + 30)  # the child's imports, then connect
         line = self._proc.stdout.readline().decode(errors="replace").strip() if ready else ""
         if not line.startswith("ok"):
@@ -126,9 +138,23 @@ class BrokerProcess(OwnerBase):
             self._cleanup()
             why = line.removeprefix("fatal: ") or "the publisher process did not start"
             raise NetworkError(f"broker {self.display} refused the publisher: {why}" if line else why)
+        self._place(cpus, batch)  # every thread it has now, in case one started first
         if line != "ok connected":
             log.warning("broker %s not reachable yet; publishing starts when it is", self.display)
         fcntl.fcntl(self._w, fcntl.F_SETFL, fcntl.fcntl(self._w, fcntl.F_GETFL) | os.O_NONBLOCK)
+
+    def _place(self, cpus: set[int] | None, batch: bool) -> None:
+        pid = self._proc.pid
+        if batch:
+            sched.batch_process(pid)
+        if cpus is not None and not sched.pin(pid, cpus) and not self._pin_warned:
+            self._pin_warned = True
+            log.warning("cannot run the publisher process on CPUs %s; it runs where the performer does",
+                        ",".join(map(str, sorted(cpus))))
+        try:
+            self.cpus = sorted(os.sched_getaffinity(pid))
+        except (AttributeError, OSError):
+            self.cpus = []
 
     def route(self, performer: str, subject: str) -> ProcessRoute:
         """Add a performer publishing on ``subject``.frames / .meta."""
@@ -270,12 +296,14 @@ def _child(url: str, fd: int, counts_path: str, connect_wait: float, tls_ca: str
 
 def open_routes(cfg, names: list[str]) -> list[ProcessRoute]:
     """One route per performer name on one publisher process for ``performer run``'s config
-    (``publish``, ``publish_subject``, ``publish_credentials``, ``publish_tls_ca``); [] when
-    ``publish`` is unset."""
+    (``publish``, ``publish_subject``, ``publish_credentials``, ``publish_tls_ca``,
+    ``publish_cpus``); [] when ``publish`` is unset."""
     if getattr(cfg, "publish", None) is None:
         return []
     prefix = check_subject(cfg.publish_subject)
-    owner = BrokerProcess(cfg.publish, credentials=load_credentials(cfg.publish_credentials), tls_ca=cfg.publish_tls_ca)
+    spec = getattr(cfg, "publish_cpus", sched.AUTO)
+    owner = BrokerProcess(cfg.publish, credentials=load_credentials(cfg.publish_credentials), tls_ca=cfg.publish_tls_ca,
+                          cpus=sched.publisher_cpus(spec), cpus_quiet=spec == sched.AUTO)
     try:
         return [owner.route(name, f"{prefix}.{name}") for name in names]
     except BaseException:

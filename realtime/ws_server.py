@@ -9,7 +9,8 @@ loop in its own daemon thread; :meth:`WebSocketSink.send`, called on the engine
 thread, encodes the frame (:mod:`realtime.wire`), appends it to an outbox the loop
 empties, waking the loop with ``call_soon_threadsafe`` only when it is not already due
 to run (an ensemble's performers hand over a frame each per hop: one wake-up serves
-them all), and returns at once. On the loop, a frame goes straight into
+them all), and returns at once. The loop's thread runs under ``SCHED_BATCH``
+(:mod:`realtime.sched`), so that wake-up never preempts the worker. On the loop, a frame goes straight into
 a client's socket buffer while that buffer is under ``write_limit`` and nothing is
 queued for the client; otherwise into the client's bounded queue, which drops its
 OLDEST frame when full, so a slow or stalled client only loses its own frames. The protocol (query string, client messages, close codes) is in
@@ -46,6 +47,7 @@ from websockets.http11 import Request, Response
 from models.errors import ConfigError, NetworkError, PerformerError
 from models.errors import short_repr as _short
 from models.timebase import FPS
+from realtime import sched
 from realtime.engine import CONTROL_ACTIONS as ENGINE_CONTROL_ACTIONS
 from realtime.frame import PoseFrame
 from realtime.wire import decode_frame, encode_frame, frame_json, hello_message, rest_offsets
@@ -501,6 +503,10 @@ class WebSocketSink:
     # ---- server thread ---------------------------------------------------------------
 
     def _run(self, port: int) -> None:
+        # SCHED_BATCH: the engine's hand-off (call_soon_threadsafe) wakes this thread, and the
+        # kernel ran it at once on the worker's CPU, preempting the worker mid-hop (146 of 200
+        # hand-offs, tests/test_ws_wakeup.py); a batch thread waits for the CPU to free up
+        sched.batch()
         asyncio.set_event_loop(self._loop)
         try:
             self._loop.run_until_complete(self._main(port))

@@ -126,6 +126,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     o.add_argument("--publish-credentials", metavar="FILE",
                    help="TOML file with the broker login: token = \"...\", or user and password")
     o.add_argument("--publish-tls-ca", metavar="FILE", help="CA file that signed the broker's TLS certificate")
+    o.add_argument("--publish-cpus", metavar="CPUS",
+                   help="CPUs for the publisher process, e.g. 1 or 2-3 (default auto: the CPUs the performer is "
+                        "not pinned to, when it is pinned with taskset; else anywhere). It always runs under "
+                        "SCHED_BATCH, so it never preempts the audio worker (docs/audience.md)")
     o.add_argument("--record", metavar="FILE", help="write what was streamed to FILE.npz and FILE.bvh when the run stops")
     c = p.add_argument_group("show control")
     c.add_argument("--control-osc", metavar="[HOST:]PORT",
