@@ -535,8 +535,8 @@ class DanceStream:
                          if TEMPO_FREQ != 0.0 else self._code_energy)
         # a library (library_player): codes drawn a step, the bend that draws the next, the tempo's tilt by exemplar
         self._draws, self._guard, self._member_tilt = member_choice(model, speed, real, DRAWS)
-        where = np.argwhere(real)  # (n, 2) every exemplar's (code, slot); its first pose's bones (n, J, 4)
-        self._first = (self._members[real][:, 0, 3:].reshape(len(where), -1, 4), where) if self._guard > 0.0 else None
+        where = np.argwhere(real)  # (n, 2) every exemplar's (code, slot); its first pose's quaternions (n, 4 J)
+        self._first = (self._members[:, :, 0, 3:][real], where) if self._guard > 0.0 else None
         self._fk_parents = np.array(POINT_PARENT_INDEX, np.int64)  # joint_speed's skeleton (SPEED_MATCH)
         self._fk_offsets = load_default_skeleton().point_offsets().astype(np.float64)
         # how much a repeat of each code is penalised (REPEAT_PENALTY): calm codes repeat freely
@@ -827,10 +827,18 @@ class DanceStream:
         return [(c, j) for c in codes for j in range(int(self._counts[c]))]
 
     def _nearest(self, pose: np.ndarray) -> list[tuple[int, int]]:
-        """(code, exemplar) of the :data:`~models.networks.library_player.NEAREST` exemplars of any code whose
-        first pose is nearest ``pose`` (P,) (mean over the bones of sqrt(1 - |q . q'|))."""
-        first, where = self._first
-        d = np.sqrt(np.maximum(1.0 - np.abs(np.einsum("njc,jc->nj", first, pose[3:].reshape(-1, 4))), 0.0)).mean(1)
+        """(code, exemplar) of the :data:`~models.networks.library_player.NEAREST` exemplars of any code (of the
+        requested style's) whose first pose is nearest ``pose`` (P,) (mean over the bones of sqrt(1 - |q . q'|))."""
+        first, where = self._first  # (n, 4 J), (n, 2)
+        q = pose[3:].reshape(-1, 4)
+        block = np.zeros((q.size, len(q)), np.float32)  # each bone's quaternion in its own column: one matmul
+        block[np.arange(q.size), np.repeat(np.arange(len(q)), 4)] = q.ravel()
+        with single_thread_blas():
+            dot = first @ block  # (n, J)
+        d = np.sqrt(np.maximum(1.0 - np.abs(dot), 0.0)).mean(1)
+        if self.style and STYLE_MEMBERS:  # a requested style: its own exemplars, where it has any
+            own = self._member_style[where[:, 0], where[:, 1]] == self.style
+            d = np.where(own, d, np.inf) if own.any() else d
         k = min(NEAREST, len(d))
         return [(int(where[n, 0]), int(where[n, 1])) for n in np.argpartition(d, k - 1)[:k]]
 

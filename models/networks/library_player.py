@@ -25,7 +25,8 @@ How its stream chooses (:func:`member_choice`, read by DanceStream; the attribut
 would all bend the motion past :data:`HANDOVER_GUARD`, the next drawn code's join the matching (up
 to :data:`LIBRARY_DRAWS`), then the :data:`NEAREST` exemplars of any code; above the memory's
 tempo the tempo's tilt also favours livelier exemplars (:data:`EXEMPLAR_TILT`); the idle between
-songs is the clips' own mean pose (:func:`_mean_pose`), not the default dancers'.
+songs is the clips' own mean pose (:func:`_mean_pose`), not the default dancers'. With ``mix`` the
+stream chooses as the default's does (the guard kept it in the dancers it began with).
 
 Style tokens: 1..3 are the default's dancers (cha-cha, rumba, waltz), :data:`STYLE_BASE` + i
 the library's i-th folder. The predictor hears a library style as "auto" (it knows only its
@@ -336,7 +337,9 @@ def library_model(model: DanceVQ, poses: list[np.ndarray], tracks: list[np.ndarr
     out.library_styles = tuple(names)
     out.default_styles = bool(mix)
     out.clip_periods = tuple(periods)
-    if chooser == "codes":  # read by DanceStream (member_choice, its idle); the compared "match" design as measured
+    # read by DanceStream (member_choice, its idle). Not with the default's dancers (mix): the guard kept the
+    # stream in whichever dancers' exemplars it began with; nor for the compared "match" design, as measured
+    if chooser == "codes" and not mix:
         out.code_draws, out.handover_guard, out.exemplar_tilt = LIBRARY_DRAWS, HANDOVER_GUARD, EXEMPLAR_TILT
         out.idle_base = _mean_pose(poses, model.destandardize_poses(model.pose_mean * 0).numpy())
     if centres is not None:
