@@ -57,9 +57,9 @@ STYLE_BASE: int = 4
 #: Most folders (styles) one library may bring (the memory grows by LIBRARY_MEMBERS slots per code each).
 MAX_STYLES: int = 16
 #: Most exemplars per code in all (mixed in or not; more folders share it, at least one each): the
-#: motion matching's cost per code step and a stream's start-up memory grow with it (a 30-minute
-#: library in 4 folders, 32 a code: peak 1.3 GB, per-hop own p99 3.3 ms, measured before the stream's tables came
-#: from one chunked FK pass; 16 a code now: 528 MB; docs/library.md).
+#: motion matching's cost per code step and a stream's start-up memory grow with it (a 29-minute
+#: library in 4 folders, benchmarks/studies/startup_memory.py: 32 a code holds 604 MB once started,
+#: over the 600-MB budget; 16 a code 517-520 MB; docs/library.md).
 MAX_MEMBERS: int = 16
 #: Codes a library's stream may draw a code step (the default's: 1, dance_stream.DRAWS). Most of a
 #: library's codes hold windows that the encoder gave to other codes (the shared 63-s sample's windows
