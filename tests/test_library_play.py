@@ -291,6 +291,25 @@ def test_the_shared_sample_hands_over_without_seams(loaded, tmp_path):
     assert seam_ratio(poses[int(round(WARP_LAG)) % seg:], seg, seg, radius=1) <= 1.2
 
 
+def test_a_library_idles_in_its_own_mean_pose(library, loaded):
+    """Without music the performer stands in the library's mean pose (library_player._mean_pose),
+    not the DWM dancers': the hips at the clips' mean height (swing 0.6 m, sway 1.0 m: 0.8),
+    where the default's idle stands them at 1.08 m (switched off: the model without ``idle_base``)."""
+    from models.features.audio_io import load_audio
+    from models.features.spectral import extract_features
+    from models.generate import load_library_model
+    from models.networks.dance_stream import DanceStream
+
+    model = load_library_model(loaded.model, library)
+    y, _ = load_audio(CLIP, 22050)
+    silence = extract_features(np.zeros_like(y[: 22050 * 3]), loaded.features)
+    s = DanceStream(model, seed=0)
+    poses = s.push(silence)
+    assert s.idle_weight == 1.0
+    want = np.mean([c.motion.root_pos[:, 1].mean() for c in load_library(library)])
+    assert abs(float(np.median(poses[:, 1])) - want) < 0.05, (np.median(poses[:, 1]), want)
+
+
 def test_tempo_from_bpm_or_motion(library, loaded):
     from models.generate import load_library_model
 
