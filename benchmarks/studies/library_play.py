@@ -198,7 +198,8 @@ def parse_args(argv):
     p.add_argument("--out", type=Path, default=REPO / "runs" / "library_play", help="report folder")
     p.add_argument("--save-checkpoint", type=Path, metavar="OUT.pt",
                    help="only write the library performer as a checkpoint (its folders' names and priors dropped: "
-                        "it dances auto) for `performer bench latency --checkpoint OUT.pt`, and stop")
+                        "it dances auto; and its own choice: one code a step, library_hops.py measures that) "
+                        "for `performer bench latency --checkpoint OUT.pt`, and stop")
     p.add_argument("--write-dwm", nargs="+", metavar=("DIR", "DANCE"),
                    help="only write these DWM dances as BVH into DIR (e.g. DIR DANCE_C_2 DANCE_R_5 DANCE_W_5) and stop")
     return p.parse_args(argv)
