@@ -494,8 +494,8 @@ def _inertialize_reference(window: np.ndarray, cont: np.ndarray, decay: np.ndarr
 
 
 def test_compiled_motion_matching_picks_and_bends_as_scipy_rotations_do():
-    """match_exemplar (one numba call on the live path): the exemplar the cost picks, sign-aligned to
-    the motion, bent from it by rotation-space inertialization (SciPy's Rotation as the reference)."""
+    """match_exemplar (one numba call on the live path): the exemplar the cost picks (less each one's
+    bias), sign-aligned to the motion, bent from it by rotation-space inertialization (SciPy's Rotation as the reference)."""
     from models.networks.dance_jit import match_exemplar
     from models.networks.dance_stream import _unit, hermite_decay, sign_continuous
 
@@ -519,10 +519,12 @@ def test_compiled_motion_matching_picks_and_bends_as_scipy_rotations_do():
         cost = cost / max(float(np.median(cost)), 1e-9)
         if frame >= 0:
             cost -= bonus * dips[:, frame]
+        bias = rng.normal(scale=0.5, size=n) if trial % 3 == 0 else np.zeros(n)  # a library's liveliness at the tempo
+        cost -= bias
         want_i = int(np.argmin(cost))
         cap = 0.4 if trial % 2 else 10.0
         want = _inertialize_reference(a[want_i], cont, decay, cap)
-        got_i, got = match_exemplar(cands, dips, cont, decay, frame, bonus, 8, cap)
+        got_i, got = match_exemplar(cands, dips, cont, decay, frame, bonus, 8, cap, bias)
         assert got.shape == want.shape and got.dtype == np.float32
         if n == 1 or np.ptp(np.sort(cost)[:2]) > 1e-5:  # no near tie: the same exemplar, the same poses
             assert got_i == want_i
@@ -543,7 +545,7 @@ def test_inertialization_starts_on_the_motion_and_never_whips_a_bone():
         still = np.repeat(_unit(rng.normal(size=(1, 1, POSE_DIM)).astype(np.float32)), 16, axis=1)
         cont = _unit(rng.normal(size=(2, POSE_DIM)).astype(np.float32))  # far from the exemplar, any velocity
         cont[1] = _unit(cont[0] + rng.normal(scale=0.3, size=POSE_DIM).astype(np.float32))
-        _, out = match_exemplar(sign_continuous(still), np.zeros((1, 8), np.float32), cont, decay, -1, 0.0, 8, 0.4)
+        _, out = match_exemplar(sign_continuous(still), np.zeros((1, 8), np.float32), cont, decay, -1, 0.0, 8, 0.4, np.zeros(1))
         q0, c0 = out[0, 3:].reshape(-1, 4), cont[0, 3:].reshape(-1, 4)
         np.testing.assert_allclose(np.abs((q0 * c0).sum(1)), 1.0, atol=1e-5)
         steps = np.degrees(2 * np.arccos(np.clip(np.abs((out[1:, 3:].reshape(15, -1, 4)

@@ -17,11 +17,13 @@ nearer the library's clips, and its median distance to the nearest DWM frame. Th
 
 * continuation: the share of code steps (dancing) whose exemplar continues the playing one (same
   clip, about 8 frames on): how often the player can play the user's dance on as recorded;
+* bends: at every code step, how far the handover bent the motion (degrees a bone: the played
+  exemplar's own first pose against the motion's), median and largest per recording;
 * seams: the handover seam ratio (benchmarks/studies/seams.py's measure for dance_vq: angular
   acceleration within 1 frame of frame ``8k + 2`` over the rest), per recording;
 * listening (models/evaluation/listening.py, as benchmarks/listening.py for the default): the
   stretch set of ``--music`` (recordings of 80-130 bpm, 0.8x/1.0x/1.25x, ``--seeds``): speed
-  ratio 1.25x over 0.8x, beat hit rate at 1.0x and its half-shifted control; the idle share of
+  ratio 1.25x over 0.8x (the mean over the seeds, and each seed's own: the worst must pass too), beat hit rate at 1.0x and its half-shifted control; the idle share of
   every recording up to the end of its music (presence set);
 * style: with each folder of the library requested, the share of dancing frames whose playing
   exemplar is that folder's (``DanceStream.playing_member``), and (after the slash) the share
@@ -53,6 +55,7 @@ import numpy as np  # noqa: E402
 
 SETTLE = 90  # frames (3 s) before anything is scored
 TARGETS = (("nearer_user", ">=", 0.90), ("median_cm", "<=", 6.2), ("seam", "<=", 1.2), ("speed_ratio", ">=", 1.40),
+           ("speed_ratio_seed_min", ">=", 1.40),
            ("hit", ">=", 0.40), ("hit_over_control", ">=", 1.5), ("idle_max", "<=", 0.02), ("style_min", ">=", 0.90))
 
 
@@ -121,13 +124,16 @@ def member_windows(model, poses: list[np.ndarray]) -> np.ndarray:
     return out
 
 
-def perform(model, feats: np.ndarray, style: str | None = None,
-            windows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def perform(model, feats: np.ndarray, style: str | None = None, windows: np.ndarray | None = None,
+            bends: list | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """(poses (T, P), dancing (T,) bool: idle weight 0 and past :data:`SETTLE`, the style token of
     the exemplar playing (T,): ``member_style``, library folder i = 4 + i, and the share of code
     steps whose exemplar is the playing one's own continuation: the same clip, starting within
     ``seg / 2`` frames of ``seg`` frames on; ``windows`` from :func:`member_windows`; NaN without)
-    of one stream, seed 0, in place."""
+    of one stream, seed 0, in place. ``bends`` receives, at every code step while dancing, how far
+    the handover bent the motion: the mean over the bones of the rotation (degrees) between the
+    played exemplar's own first pose and the motion's (library_player.bend_deg)."""
+    from models.networks.library_player import bend_deg
     from models.networks.dance_stream import DanceStream
 
     s = DanceStream(model, seed=0, style=style)
@@ -141,6 +147,8 @@ def perform(model, feats: np.ndarray, style: str | None = None,
         poses[t] = s.push(feats[t: t + 1])[0]
         dance[t] = s.idle_weight == 0.0 and t >= SETTLE
         token[t] = styles[s.playing_member] if s.playing_member is not None else -1
+        if bends is not None and len(s.codes_drawn) != n and s.playing_member is not None and dance[t]:
+            bends.append(bend_deg(s._members[s.playing_member][0], s._played[seg]))
         if windows is not None and len(s.codes_drawn) != n and s.playing_member is not None:
             w = windows[s.playing_member]
             if prev is not None and dance[t]:
@@ -190,7 +198,8 @@ def parse_args(argv):
     p.add_argument("--out", type=Path, default=REPO / "runs" / "library_play", help="report folder")
     p.add_argument("--save-checkpoint", type=Path, metavar="OUT.pt",
                    help="only write the library performer as a checkpoint (its folders' names and priors dropped: "
-                        "it dances auto) for `performer bench latency --checkpoint OUT.pt`, and stop")
+                        "it dances auto; and its own choice: one code a step, library_hops.py measures that) "
+                        "for `performer bench latency --checkpoint OUT.pt`, and stop")
     p.add_argument("--write-dwm", nargs="+", metavar=("DIR", "DANCE"),
                    help="only write these DWM dances as BVH into DIR (e.g. DIR DANCE_C_2 DANCE_R_5 DANCE_W_5) and stop")
     return p.parse_args(argv)
@@ -265,7 +274,9 @@ def main(argv: list[str] | None = None) -> int:
             row: dict = {}
             if "own" in sets:
                 for key, model in (("lib", lib), ("default", lm.model)):
-                    poses, dance, token, cont = perform(model, feats, windows=windows if key == "lib" else None)
+                    bends: list = []
+                    poses, dance, token, cont = perform(model, feats, windows=windows if key == "lib" else None,
+                                                        bends=bends)
                     pts = body_frame(poses[dance])
                     du, dd = near_user(pts), near_dwm(pts)
                     by = {f: float((du < dd)[token[dance] == STYLE_BASE + i].mean())
@@ -273,7 +284,9 @@ def main(argv: list[str] | None = None) -> int:
                     row[key] = {"frames": int(dance.sum()), "nearer_user": float((du < dd).mean()),
                                 "nearer_user_by_folder": by if key == "lib" else {},
                                 "median_user_cm": float(np.median(du) * 100), "median_dwm_cm": float(np.median(dd) * 100),
-                                "seam": handover_seam(model, poses), "continues": cont}
+                                "seam": handover_seam(model, poses), "continues": cont,
+                                "bend_median_deg": float(np.median(bends)) if bends else float("nan"),
+                                "bend_max_deg": float(np.max(bends)) if bends else float("nan")}
                     tot["lib" if key == "lib" else "def_user"].append(du)
                     tot["lib_dwm" if key == "lib" else "def_dwm"].append(dd)
                     if key == "lib":
@@ -304,6 +317,10 @@ def main(argv: list[str] | None = None) -> int:
                   + ", ".join(f"{f} {v:.3f}" for f, v in report["nearer_user_by_folder"].items()))
             report["seam"] = max(r["lib"]["seam"] for r in report["songs"].values())
             report["continues"] = float(np.nanmean([r["lib"]["continues"] for r in report["songs"].values()]))
+            for key in ("lib", "default"):
+                print(f"handover bend ({key}), degrees a bone, median / largest by recording: " + ", ".join(
+                    f"{n.split('_')[0]} {r[key]['bend_median_deg']:.1f}/{r[key]['bend_max_deg']:.0f}"
+                    for n, r in report["songs"].items()))
             print(f"code steps whose exemplar continues the playing window (same clip, {lib.config.seg} +- "
                   f"{lib.config.seg // 2} frames on), "
                   f"mean of recordings: {report['continues']:.3f}")
@@ -325,15 +342,20 @@ def main(argv: list[str] | None = None) -> int:
             half = float(np.mean([r["rates"]["1"]["hit_half"] for r in rows]))
             got = {"speed_ratio": float(np.mean([r["speed_ratio"] for r in rows])), "hit": hit, "hit_control": half,
                    "hit_over_control": hit / max(half, 1e-9), "songs": [r["song"] for r in rows],
-                   "speed_ratio_by_song": {r["song"]: r["speed_ratio"] for r in rows}}
+                   "speed_ratio_by_song": {r["song"]: r["speed_ratio"] for r in rows},
+                   # each seed's own: the mean over the songs of that seed's ratio (one draw of the choices)
+                   "speed_ratio_by_seed": {str(sd): float(np.mean([r["by_seed"][str(sd)]["speed_ratio"] for r in rows]))
+                                           for sd in a.seeds}}
+            got["speed_ratio_seed_min"] = min(got["speed_ratio_by_seed"].values())
             pres = L.presence(m, cache, None, opts)["music"]
             got["idle_max"] = max(r["idle_sounding"] for r in pres)
             got["idle_by_song"] = {r["recording"]: r["idle_sounding"] for r in pres}
             print(f"listening {key}: speed ratio 1.25x/0.8x {got['speed_ratio']:.2f} over {len(rows)} recordings, "
                   f"beat hit {hit:.3f} (control {half:.3f}, {got['hit_over_control']:.2f}x), "
-                  f"largest idle share {got['idle_max']:.3f}", flush=True)
+                  f"largest idle share {got['idle_max']:.3f}; speed ratio by seed "
+                  + ", ".join(f"{k} {v:.2f}" for k, v in got["speed_ratio_by_seed"].items()), flush=True)
             if key == "lib":
-                report.update({k: got[k] for k in ("speed_ratio", "hit", "hit_over_control", "idle_max")})
+                report.update({k: got[k] for k in ("speed_ratio", "speed_ratio_seed_min", "hit", "hit_over_control", "idle_max")})
             report.setdefault("listening", {})[key] = got
     if "default" in report:
         d = report["default"]

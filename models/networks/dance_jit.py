@@ -145,16 +145,17 @@ def _qexp(r):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def match_exemplar(cands, dips, cont, decay, beat_frame, beat_bonus, seg, vel_cap):  # pragma: no cover - compiled
+def match_exemplar(cands, dips, cont, decay, beat_frame, beat_bonus, seg, vel_cap, bias):  # pragma: no cover - compiled
     """Motion matching of the chosen code's exemplars, then inertialization (dance_stream.py).
 
     ``cands`` (n, F, P) exemplar windows, ``dips`` (n, seg) their speed dips, ``cont`` (2, P)
     the two frames the motion would play next, ``decay`` (2, D) Hermite weights,
     ``beat_frame`` the frame of the coming movement the beat tracker expects a beat on (-1:
-    none), ``beat_bonus`` the cost taken off an exemplar that dips there. Each exemplar's
+    none), ``beat_bonus`` the cost taken off an exemplar that dips there, ``bias`` (n,) a cost
+    taken off each exemplar (a library's liveliness at the tempo; zeros: none). Each exemplar's
     bones are sign-flipped onto ``cont[0]``'s hemisphere; the cost is the L1 distance of
     its first pose to ``cont[0]`` plus 4x that of its first velocity, over the median cost,
-    less the beat bonus. Returns (index of the best, its window (F, P) bent to continue
+    less the beat bonus and the bias. Returns (index of the best, its window (F, P) bent to continue
     from ``cont`` over D frames).
 
     The bend is inertialization in rotation space: per bone, the rotation from the
@@ -188,6 +189,8 @@ def match_exemplar(cands, dips, cont, decay, beat_frame, beat_bonus, seg, vel_ca
     if beat_frame >= 0:
         for i in range(n):
             cost[i] -= beat_bonus * dips[i, beat_frame]
+    for i in range(n):
+        cost[i] -= bias[i]
     best = int(np.argmin(cost))
     w = a[best]
     out = w.copy()

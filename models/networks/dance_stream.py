@@ -48,7 +48,7 @@ from models.networks import feet as feet_part
 from models.networks.feet import FeetLock
 from models.networks.stage import SpotStage, Stage, cached_travel
 from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate
-from models.networks.library_player import resolve_style
+from models.networks.library_player import NEAREST, bend_deg, member_choice, resolve_style
 from models.networks.member_tables import (CHUNK_FRAMES, MemberTables, code_energy, code_frequency, member_dips,  # noqa: F401
                                           member_positions, member_speed, member_tables)
 from models.networks.streaming import FEATURE_LIMIT
@@ -533,6 +533,10 @@ class DanceStream:
         # what the tempo's tilt reads (TEMPO_ENERGY, TEMPO_FREQ): liveliness and quickness
         self._tempo_z = (self._code_energy + np.float32(TEMPO_FREQ) * _cached_frequency(model, self._members)
                          if TEMPO_FREQ != 0.0 else self._code_energy)
+        # a library (library_player): codes drawn a step, the bend that draws the next, the tempo's tilt by exemplar
+        self._draws, self._guard, self._member_tilt = member_choice(model, speed, real, DRAWS)
+        where = np.argwhere(real)  # (n, 2) every exemplar's (code, slot); its first pose's quaternions (n, 4 J)
+        self._first = (self._members[:, :, 0, 3:][real], where) if self._guard > 0.0 else None
         self._fk_parents = np.array(POINT_PARENT_INDEX, np.int64)  # joint_speed's skeleton (SPEED_MATCH)
         self._fk_offsets = load_default_skeleton().point_offsets().astype(np.float64)
         # how much a repeat of each code is penalised (REPEAT_PENALTY): calm codes repeat freely
@@ -562,7 +566,8 @@ class DanceStream:
         skip = {0, self.seg // 2} if self.seg > 2 else {0}
         self._free = [0 if j in skip else sum(1 for i in range(j, self.seg) if i not in skip)
                       for j in range(self.seg)]
-        base = model.destandardize_poses(model.pose_mean * 0)  # the mean pose, unit quaternions
+        base = getattr(model, "idle_base", None)  # a library's own mean pose (library_player), else the dancers'
+        base = model.destandardize_poses(model.pose_mean * 0) if base is None else base  # unit quaternions
         self._idle_base = base.numpy().astype(np.float32)
         self._sway = IdleSway(self._idle_base)
         self._idle_lift = self._feet.lift_of(self._idle_base) if self._feet is not None else 0.0
@@ -772,7 +777,7 @@ class DanceStream:
             nxt = list(self._tokens)[-(pred.window - 1):]
             self._prefix = Prefix(pred, nxt, self._pstyle)
             self._prefix_auto = Prefix(pred, nxt, 0) if guided else None
-        draws = [m.sample(logits, self.rng) for _ in range(DRAWS)]
+        draws = [m.sample(logits, self.rng) for _ in range(self._draws)]
         if int(self._counts[draws[0]]) == 0:  # no exemplars (members = 0): the decoder writes the movement
             self._codes.append(draws[0])  # the decoder reads the new code
             segment = m.decode_last(np.fromiter(self._codes, np.int64))
@@ -786,19 +791,10 @@ class DanceStream:
             self._has_cont = False
             return
         codes = list(dict.fromkeys(draws))
-        pairs = [(c, j) for c in codes for j in range(int(self._counts[c]))]
-        if self.style and STYLE_MEMBERS:  # a requested style: its own dancers' exemplars where the codes have some
-            own = [(c, j) for c, j in pairs if self._member_style[c, j] == self.style]
-            pairs = own or pairs
-        if self._travels:  # near an edge: exemplars whose own travel heads inwards (stage.INWARDS)
-            keep = self._stage.inwards(np.array([self._travel[c, j, self.seg, :2] for c, j in pairs]))
-            pairs = pairs if keep is None else [p for p, k in zip(pairs, keep) if k]
-        if len(codes) == 1 and len(pairs) == int(self._counts[codes[0]]):  # all of one code's: a slice, no gathering
-            c, n = codes[0], len(pairs)
-            cands, dips = self._members[c, :n], self._dips[c, :n]  # (n, 2 seg, P), (n, seg)
-        else:
-            cands = np.stack([self._members[c, j] for c, j in pairs])
-            dips = np.stack([self._dips[c, j] for c, j in pairs])
+        # a library (self._guard > 0): the next drawn code's exemplars join only where the best so far would
+        # bend the motion past the guard, and where none of the drawn codes' does, the nearest of any code's
+        tries = [codes[:n] for n in range(1, len(codes) + 1)] + [None] if self._guard > 0.0 else [codes]
+        pairs, cands, dips, z = self._candidates(self._pairs(tries[0]))
         if not self._has_cont:  # the first movement starts from its own pose
             i = 0
             best = _unit(cands[0].copy())
@@ -808,8 +804,14 @@ class DanceStream:
             frame, clarity = beat if beat is not None else (-1, 0.0)
             at = self.seg + self._advance(self.seg)  # where the playing movement has got to
             cont = np.stack([warp_pose(self._played, at), warp_pose(self._played, at + 1.0)])
-            i, best = match_exemplar(cands, dips, cont, self._decay, frame, BEAT_WEIGHT * clarity,
-                                     self.seg, VEL_CAP)  # match_exemplar's quaternions are unit already
+            for k, use in enumerate(tries):
+                if k:
+                    pairs, cands, dips, z = self._candidates(self._pairs(use) if use else self._nearest(cont[0]))
+                bias = np.zeros(len(pairs)) if z is None else z * max(tilt, 0.0)  # livelier ones at a faster tempo
+                i, best = match_exemplar(cands, dips, cont, self._decay, frame, BEAT_WEIGHT * clarity,
+                                         self.seg, VEL_CAP, bias)  # match_exemplar's quaternions are unit already
+                if k + 1 == len(tries) or bend_deg(cands[i, 0], cont[0]) <= self._guard:
+                    break
         rate = self._rate_for(*pairs[i])
         if self._has_cont and SPEED_MATCH > 0.0:  # the speed the bend adds or takes away, undone
             rate = self._speed_matched(cands[i], best, rate)
@@ -819,6 +821,43 @@ class DanceStream:
         self._own_speed = float(self._member_speed[pairs[i]])
         self._commit(pairs[i][0])
         self._has_cont = True
+
+    def _pairs(self, codes: list[int]) -> list[tuple[int, int]]:
+        """(code, exemplar) of every exemplar of ``codes``."""
+        return [(c, j) for c in codes for j in range(int(self._counts[c]))]
+
+    def _nearest(self, pose: np.ndarray) -> list[tuple[int, int]]:
+        """(code, exemplar) of the :data:`~models.networks.library_player.NEAREST` exemplars of any code (of the
+        requested style's) whose first pose is nearest ``pose`` (P,) (mean over the bones of sqrt(1 - |q . q'|))."""
+        first, where = self._first  # (n, 4 J), (n, 2)
+        q = pose[3:].reshape(-1, 4)
+        block = np.zeros((q.size, len(q)), np.float32)  # each bone's quaternion in its own column: one matmul
+        block[np.arange(q.size), np.repeat(np.arange(len(q)), 4)] = q.ravel()
+        with single_thread_blas():
+            dot = first @ block  # (n, J)
+        d = np.sqrt(np.maximum(1.0 - np.abs(dot), 0.0)).mean(1)
+        if self.style and STYLE_MEMBERS:  # a requested style: its own exemplars, where it has any
+            own = self._member_style[where[:, 0], where[:, 1]] == self.style
+            d = np.where(own, d, np.inf) if own.any() else d
+        k = min(NEAREST, len(d))
+        return [(int(where[n, 0]), int(where[n, 1])) for n in np.argpartition(d, k - 1)[:k]]
+
+    def _candidates(self, pairs: list[tuple[int, int]]) -> tuple[list, np.ndarray, np.ndarray, np.ndarray | None]:
+        """(pairs (code, exemplar), their windows (n, 2 seg, P), dips (n, seg), liveliness weights (n,)
+        or None) of ``pairs`` as the style and the stage allow."""
+        codes = list(dict.fromkeys(c for c, _ in pairs))
+        if self.style and STYLE_MEMBERS:  # a requested style: its own dancers' exemplars where the codes have some
+            own = [(c, j) for c, j in pairs if self._member_style[c, j] == self.style]
+            pairs = own or pairs
+        if self._travels:  # near an edge: exemplars whose own travel heads inwards (stage.INWARDS)
+            keep = self._stage.inwards(np.array([self._travel[c, j, self.seg, :2] for c, j in pairs]))
+            pairs = pairs if keep is None else [p for p, k in zip(pairs, keep) if k]
+        tilt = self._member_tilt
+        if len(codes) == 1 and pairs == self._pairs(codes):  # all of one code's, in order: a slice, no gathering
+            c, n = codes[0], len(pairs)
+            return pairs, self._members[c, :n], self._dips[c, :n], None if tilt is None else tilt[c, :n]
+        return (pairs, np.stack([self._members[c, j] for c, j in pairs]), np.stack([self._dips[c, j] for c, j in pairs]),
+                None if tilt is None else np.array([tilt[p] for p in pairs]))
 
     def _repeat_penalty(self, logits: np.ndarray) -> np.ndarray:
         """``logits`` (K,) with each code drawn n >= :data:`REPEAT_FREE` times among the last

@@ -20,6 +20,14 @@ a ``dance_vq`` model a new choreographic memory made of the library's own window
 4. the style prior of a folder is how much likelier each code is among its windows than
    among the other folders' (``models.training.dance_vq.prior_from_counts``' formula).
 
+How its stream chooses (:func:`member_choice`, read by DanceStream; the attributes ``code_draws``,
+``handover_guard``, ``exemplar_tilt``, ``idle_base`` on the model): where the drawn code's exemplars
+would all bend the motion past :data:`HANDOVER_GUARD`, the next drawn code's join the matching (up
+to :data:`LIBRARY_DRAWS`), then the :data:`NEAREST` exemplars of any code; above the memory's
+tempo the tempo's tilt also favours livelier exemplars (:data:`EXEMPLAR_TILT`); the idle between
+songs is the clips' own mean pose (:func:`_mean_pose`), not the default dancers'. With ``mix`` the
+stream chooses as the default's does (the guard kept it in the dancers it began with).
+
 Style tokens: 1..3 are the default's dancers (cha-cha, rumba, waltz), :data:`STYLE_BASE` + i
 the library's i-th folder. The predictor hears a library style as "auto" (it knows only its
 three); the stream plays that folder's exemplars and adds its prior (:func:`resolve_style`).
@@ -49,10 +57,32 @@ STYLE_BASE: int = 4
 #: Most folders (styles) one library may bring (the memory grows by LIBRARY_MEMBERS slots per code each).
 MAX_STYLES: int = 16
 #: Most exemplars per code in all (mixed in or not; more folders share it, at least one each): the
-#: motion matching's cost per code step and a stream's start-up memory grow with it (a 30-minute
-#: library in 4 folders, 32 a code: peak 1.3 GB, per-hop own p99 3.3 ms, measured before the stream's tables came
-#: from one chunked FK pass; 16 a code now: 528 MB; docs/library.md).
+#: motion matching's cost per code step and a stream's start-up memory grow with it (a 29-minute
+#: library in 4 folders, benchmarks/studies/startup_memory.py: 32 a code holds 604 MB once started,
+#: over the 600-MB budget; 16 a code 517-520 MB; docs/library.md).
 MAX_MEMBERS: int = 16
+#: Codes a library's stream may draw a code step (the default's: 1, dance_stream.DRAWS). Most of a
+#: library's codes hold windows that the encoder gave to other codes (the shared 63-s sample's windows
+#: chose 99 of the 512), so all of one drawn code's exemplars can be far from the playing pose; on a
+#: calm song such a handover bent the motion by 35 degrees a bone (125 the worst bone), the worst
+#: seams. Where the matched exemplar would bend it past :data:`HANDOVER_GUARD`, the next drawn code's
+#: exemplars join the matching, up to this many codes, then the :data:`NEAREST` (docs/library.md).
+LIBRARY_DRAWS: int = 4
+#: Exemplars of any code, those whose first pose is nearest the motion, matched where none of the
+#: drawn codes' continues it within :data:`HANDOVER_GUARD`.
+NEAREST: int = 16
+#: Mean bone rotation (degrees) between the playing pose and the matched exemplar's first pose past
+#: which the next drawn code's exemplars are matched too (:data:`LIBRARY_DRAWS`). At 8 the stream
+#: never left the folder it started in nor a still stretch of a clip (it always found an exemplar
+#: that near); handovers on lively songs bend 5-16 degrees (median), so 20 stops only the far ones.
+HANDOVER_GUARD: float = 20.0
+#: Above the memory's tempo, the tempo's tilt (dance_stream.TEMPO_ENERGY: +0.5 to +0.9 at 1.25x on
+#: the listening songs) times this times an exemplar's liveliness (z-score of ln its mean joint
+#: speed over the memory) is taken off its matching cost: livelier exemplars of the drawn codes. A
+#: library's exemplars of one code come from unlike clips (a pop dance, a waltz), and the matching
+#: alone kept to whichever clip played, so a faster tempo did not reach the choice. Below it nothing
+#: (the calmest exemplars continue each other best: the performer stood still on a slow song).
+EXEMPLAR_TILT: float = 0.5
 #: Lags (frames) the kinematic tempo searches (:func:`kinematic_period`): 225 down to 25 bpm.
 KIN_LAGS: tuple[int, int] = (8, 72)
 #: Beats per minute the kinematic tempo is folded into (its octave is not in the motion).
@@ -103,6 +133,41 @@ def kinematic_period(poses: np.ndarray) -> float:
     while p < fast:
         p *= 2.0
     return float(p)
+
+
+def member_choice(model, speed: np.ndarray, real: np.ndarray, draws: int) -> tuple[int, float, np.ndarray | None]:
+    """(codes a code step may draw, the bend in degrees past which it draws the next (0: all at
+    once), each exemplar's liveliness weight (K, M) or None) of a stream of ``model``: a library
+    model's ``code_draws``, ``handover_guard`` and ``exemplar_tilt`` (:func:`library_model`) times
+    the z-score of ln ``speed`` (K, M, m/frame) over the ``real`` (K, M) exemplars; (draws, 0, None)
+    for a checkpoint's own memory (its choice as it always was: ``draws``, dance_stream.DRAWS)."""
+    draws, guard = int(getattr(model, "code_draws", draws)), float(getattr(model, "handover_guard", 0.0))
+    gain = float(getattr(model, "exemplar_tilt", 0.0))
+    if gain == 0.0 or not real.any():
+        return draws, guard, None
+    ln = np.log(np.maximum(speed, 1e-6))
+    mu, sd = float(ln[real].mean()), float(ln[real].std())
+    return draws, guard, np.where(real, gain * (ln - mu) / max(sd, 1e-6), 0.0)
+
+
+def bend_deg(pose: np.ndarray, target: np.ndarray) -> float:
+    """Mean over the bones of the rotation (degrees) between two poses (P,) of unit quaternions."""
+    dot = np.abs(np.add.reduce((pose[3:] * target[3:]).reshape(-1, 4), axis=1))
+    return float(np.degrees(2.0 * np.arccos(np.minimum(dot, 1.0))).mean())
+
+
+def _mean_pose(poses: list[np.ndarray], ref: np.ndarray) -> torch.Tensor:
+    """The clips' mean pose (P,): the mean hips position and, per bone, the mean of the rotations
+    put on ``ref``'s (P,) hemisphere, normalised. The stream's idle (dance_stream.idle_pose) stands in it:
+    the user's own rest between songs, which the fades into and out of the dance start from (the
+    default dancers' mean pose is 18 degrees a bone from the shared sample's, its hips 17 cm higher)."""
+    x = np.concatenate(poses).astype(np.float64)
+    q = x[:, 3:].reshape(len(x), -1, 4)
+    r = ref[3:].reshape(-1, 4)
+    q = q * np.where((q * r).sum(-1, keepdims=True) < 0, -1.0, 1.0)
+    m = q.sum(0)
+    m /= np.maximum(np.linalg.norm(m, axis=-1, keepdims=True), 1e-12)
+    return torch.from_numpy(np.concatenate([x[:, :3].mean(0), m.reshape(-1)]).astype(np.float32))
 
 
 def library_styles(model) -> tuple[str, ...]:
@@ -272,6 +337,11 @@ def library_model(model: DanceVQ, poses: list[np.ndarray], tracks: list[np.ndarr
     out.library_styles = tuple(names)
     out.default_styles = bool(mix)
     out.clip_periods = tuple(periods)
+    # read by DanceStream (member_choice, its idle). Not with the default's dancers (mix): the guard kept the
+    # stream in whichever dancers' exemplars it began with; nor for the compared "match" design, as measured
+    if chooser == "codes" and not mix:
+        out.code_draws, out.handover_guard, out.exemplar_tilt = LIBRARY_DRAWS, HANDOVER_GUARD, EXEMPLAR_TILT
+        out.idle_base = _mean_pose(poses, model.destandardize_poses(model.pose_mean * 0).numpy())
     if centres is not None:
         from models.networks.motion_match import MatchChooser, load_regression
 
