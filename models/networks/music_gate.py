@@ -129,7 +129,7 @@ PAUSE_STEADY: float = 0.25
 #: holds); a count up by 1 a frame of evidence and down by START_DECAY a frame without (capped at
 #: START_EVIDENCE) starts the dance on a frame of evidence at START_EVIDENCE (1.5 s of evidence).
 #: Chosen on espeak-ng hosts after training songs (idle_gate.py --parts espeak: at 40 frames one
-#: host held 0.94; docs/history.md, issue 43).
+#: host held 0.93; docs/history.md, issue 43).
 START_EVIDENCE: float = 45.0
 START_DECAY: float = 0.25
 #: Feature columns read: MFCC 1-2, log energy, MFCC 1-12 differences, energy difference, onset
