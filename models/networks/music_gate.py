@@ -303,8 +303,9 @@ class MusicGate:
     network that judges while dancing (the model's ``presence_stop``; None or all zeros:
     ``params`` in both states); voice_params: the packed voice network (the model's
     ``presence_voice``; None or all zeros: no voice-over rule); voice_rule: False switches the
-    voice-over rule off, the pause rule with it; pause_rule: False switches the pause rule off
-    (module docstring; without a steadiness column there is none).
+    voice-over rule off, the pause rule and the start with it; pause_rule: False switches the pause
+    rule off (module docstring; without a steadiness column there is none); start_rule: False
+    switches the voice-over start off (an idle performer starts on its detector alone).
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
