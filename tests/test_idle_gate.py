@@ -161,6 +161,29 @@ def test_a_voice_over_piano_is_danced_through_thanks_to_the_pause_rule() -> None
 
 
 @needs_shared
+def test_a_song_that_starts_under_a_voice_starts_the_dance_thanks_to_the_voice_over_start() -> None:
+    """Issue 43's song that starts under a host: sweetwaltz with the shared readers over all of it
+    at 0 dB, the voice there from the first second. Idle at most 2 % of its frames after the first
+    3 s (0.9 %); with the voice-over start off (``music_gate.MusicGate.start_rule``) the idle
+    performer's detector hears the voice and sits idle to 6.1 s (7.6 %)."""
+    from models.features.spectral import extract_features
+    from models.generate import load_model
+    from script_loader import load_script
+
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    lm = load_model(None)
+    if not lm.model.presence_voice.abs().sum() > 0:
+        pytest.skip(f"{lm.path} has no voice network (refit: python -m models.training.music_gate --voice-network)")
+    song = _recording("sweetwaltz_setuniman.ogg", 60.0)
+    feats = extract_features(ig.with_speech(song, _speech(), 0.0, len(song) // 735), lm.features)
+    on = DanceStream(lm.model, seed=7)
+    assert (on.listen(feats)[90:] > 0).mean() <= 0.02
+    off = DanceStream(lm.model, seed=7)
+    off._idle.presence.start_rule = False
+    assert (off.listen(feats)[90:] > 0).mean() > 0.05
+
+
+@needs_shared
 def test_a_recording_with_two_second_silences_cut_in_is_danced_through() -> None:
     """Issue 43's breaks on a real recording: 2 s of silence every 10 s, idle at most 2 % of its
     frames after the first 3 s (1.0 %; before the hold: 21 %)."""

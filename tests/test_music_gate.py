@@ -259,6 +259,33 @@ def test_a_voice_over_the_music_is_music_while_the_music_keeps_a_floor() -> None
     assert not any(hears(rows, never))  # the voice network hears no music: a crowd, noise
 
 
+def test_a_voice_over_the_music_starts_an_idle_performer_after_its_evidence() -> None:
+    """The voice-over start: an idle performer whose detector never hears music, a voice network
+    that does, the level steady (the floor holds): its frames count as music from the
+    START_EVIDENCE-th on; the same with the level falling 25 dB every other frame (a voice alone,
+    pausing) never do, nor with the start switched off (or the whole voice-over rule), nor
+    without a voice network, nor when it hears no music (a crowd, noise)."""
+    d = 64
+    rng = np.random.default_rng(0)
+    music, never = constant_network(10.0), constant_network(-10.0)
+    n = int(mg.START_EVIDENCE) + 20
+    rows = np.repeat(rng.normal(size=d).astype(np.float32)[None], n, 0)
+    rows[:, mg.ENERGY_COL] = -20.0
+    pausing = rows.copy()
+    pausing[1::2, mg.ENERGY_COL] = -20.0 - mg.FLOOR_DB - 7.0
+
+    def hears(x: np.ndarray, voice: np.ndarray, **rule: bool) -> list[bool]:  # idle throughout
+        g = mg.MusicGate(np.zeros(d), np.ones(d), never, -60.0, clarity_col=60, stop_params=never,
+                         voice_params=voice, **rule)
+        return [g.step(r, False) for r in x]
+
+    got = hears(rows, music)
+    assert not any(got[: int(mg.START_EVIDENCE) - 1]) and all(got[int(mg.START_EVIDENCE) - 1:])
+    assert not any(hears(pausing, music))
+    assert not any(hears(rows, music, start_rule=False)) and not any(hears(rows, music, voice_rule=False))
+    assert not any(hears(rows, np.zeros(mg.N_PARAMS))) and not any(hears(rows, never))
+
+
 def test_the_music_heard_in_the_voices_pauses_is_music() -> None:
     """The pause rule: a stop network that never hears music, no voice network. A dancing
     performer's sound whose quietest frames (every fourth, 12 dB down: a voice's pauses) hold

@@ -45,8 +45,9 @@ features as the engine computes them):
 ``--parts`` picks the parts (default ``recordings,mixes,gaps``). ``--floor-db`` and
 ``--voice-margin`` set the voice-over rule's ``music_gate.FLOOR_DB`` and ``VOICE_MARGIN`` (``inf``:
 that cue always holds; ``--floor-db 0``: the voice network's part off), ``--pause-steady`` its pause
-rule's ``PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off), to measure its
-parts alone.
+rule's ``PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off), ``--start-evidence``
+and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) and ``START_DECAY``, to
+measure its parts alone.
 
 It also prints the gate's own cost per frame (median and 99th percentile, microseconds).
 
@@ -230,6 +231,9 @@ def main(argv: list[str] | None = None) -> int:
                    "inf: the voice network alone, 0: the rule off)")
     p.add_argument("--voice-margin", type=float, help="the voice-over rule's VOICE_MARGIN (inf: the floor alone)")
     p.add_argument("--pause-steady", type=float, help="the voice-over rule's PAUSE_STEADY (inf: the pause rule off)")
+    p.add_argument("--start-evidence", type=float,
+                   help="the voice-over start's START_EVIDENCE, frames (inf: an idle performer starts on its detector alone)")
+    p.add_argument("--start-decay", type=float, help="the voice-over start's START_DECAY (frames a frame without evidence takes off)")
     args = p.parse_args(argv)
     parts = set(args.parts.split(","))
     known = {"recordings", "mixes", "gaps", "readers", "espeak"}
@@ -250,6 +254,10 @@ def main(argv: list[str] | None = None) -> int:
         gate.VOICE_MARGIN = args.voice_margin
     if args.pause_steady is not None:
         gate.PAUSE_STEADY = args.pause_steady
+    if args.start_evidence is not None:
+        gate.START_EVIDENCE = args.start_evidence
+    if args.start_decay is not None:
+        gate.START_DECAY = args.start_decay
     try:
         lm = load_model(args.checkpoint)
         if not getattr(lm.model, "takes_style", False):

@@ -54,6 +54,14 @@ the voice: the log energy's range over the last :data:`FLOOR_FRAMES` sounding fr
 music's level; a crowd or noise has no pauses, but there the voice network hears no music).
 ``voice_rule=False`` switches it off.
 
+**The voice-over start** (part of the voice-over rule): the rule above keeps a dancing performer
+dancing but never starts an idle one, whose detector hears a voice over a song as a voice (a
+song that starts under a host; a band that drops under the voice). An idle performer's frame
+also counts as music once both cues have held for long enough: a count of the frames where the
+voice network hears music and the floor holds, up 1 a frame, down :data:`START_DECAY` a frame
+without, reaches :data:`START_EVIDENCE` (1.5 s). ``start_rule=False`` (or ``voice_rule=False``)
+switches it off.
+
 **The music heard in the voice's pauses** (the pause rule, part of the voice-over rule; with
 the steadiness column only). Between a voice's words the music under it is heard alone, and
 music holds its notes; a voice alone pauses into room noise or its own reverberation. A
@@ -116,6 +124,14 @@ FLOOR_DB: float = 18.0
 #: docs/history.md, issue 43).
 PAUSE_FRAMES: int = 20
 PAUSE_STEADY: float = 0.25
+#: The voice-over start (module docstring): an idle performer's frame is evidence of music under
+#: a voice when both cues of the voice-over rule hold (the voice network hears music, the floor
+#: holds); a count up by 1 a frame of evidence and down by START_DECAY a frame without (capped at
+#: START_EVIDENCE) starts the dance on a frame of evidence at START_EVIDENCE (1.5 s of evidence).
+#: Chosen on espeak-ng hosts after training songs (idle_gate.py --parts espeak: at 40 frames one
+#: host held 0.93; docs/history.md, issue 43).
+START_EVIDENCE: float = 45.0
+START_DECAY: float = 0.25
 #: Feature columns read: MFCC 1-2, log energy, MFCC 1-12 differences, energy difference, onset
 #: (and the beat columns: the model's ``clarity_col`` and its neighbours).
 MFCC_COLS: tuple[int, ...] = (1, 2)
@@ -287,14 +303,15 @@ class MusicGate:
     network that judges while dancing (the model's ``presence_stop``; None or all zeros:
     ``params`` in both states); voice_params: the packed voice network (the model's
     ``presence_voice``; None or all zeros: no voice-over rule); voice_rule: False switches the
-    voice-over rule off, the pause rule with it; pause_rule: False switches the pause rule off
-    (module docstring; without a steadiness column there is none).
+    voice-over rule off, the pause rule and the start with it; pause_rule: False switches the pause
+    rule off (module docstring; without a steadiness column there is none); start_rule: False
+    switches the voice-over start off (an idle performer starts on its detector alone).
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
                  clarity_col: int, steadiness_col: int = -1, tau_music: float = TAU_MUSIC,
                  stop_params: np.ndarray | None = None, voice_params: np.ndarray | None = None,
-                 voice_rule: bool = True, pause_rule: bool = True) -> None:
+                 voice_rule: bool = True, pause_rule: bool = True, start_rule: bool = True) -> None:
         self._ccol = int(clarity_col)
         self._scol = int(steadiness_col)
         self._mfcc_mean = np.asarray(feat_mean, np.float64)[list(MFCC_COLS)]
@@ -307,6 +324,7 @@ class MusicGate:
         self._voice = self._network(voice_params) if self.has_voice else self._start
         self.voice_rule = bool(voice_rule)
         self.pause_rule = bool(pause_rule)
+        self.start_rule = bool(start_rule)
         self._pause_e = np.zeros(PAUSE_FRAMES)  # the last sounding frames' log energy (dB) and steadiness
         self._pause_s = np.zeros(PAUSE_FRAMES)
         self._pause_at = np.zeros(2)  # next slot, slots filled
@@ -336,6 +354,8 @@ class MusicGate:
         self._pause_at[:] = 0.0
         self.pause_steady = -math.inf  # the steadiness in the voice's pauses (-inf: no steadiness column)
         self.pause_frames = 0  # frames the pause rule kept as music
+        self.evidence = 0.0  # the voice-over start's count (frames, START_EVIDENCE starts)
+        self.start_frames = 0  # frames the voice-over start heard as music
 
     def step(self, row: np.ndarray, dancing: bool) -> bool:
         """True when frame ``row`` (D,) sounds like music to a performer that is ``dancing``."""
@@ -350,7 +370,10 @@ class MusicGate:
                    float(row[self._scol]) if self._scol >= 0 else math.nan, self._cues)
         self.floor_db, self.pause_steady = float(self._cues[0]), float(self._cues[1])
         if not dancing:
-            return self.logit > MARGIN_START
+            if self.logit > MARGIN_START:
+                return True
+            return self.voice_rule and self.start_rule and self._voice_start()
+        self.evidence = 0.0
         if self.logit > -MARGIN_STOP:
             return True
         if self.voice_rule and self.pause_rule and self.pause_steady > PAUSE_STEADY:
@@ -359,6 +382,16 @@ class MusicGate:
         if self.voice_rule and self.has_voice and self.floor_db < FLOOR_DB \
                 and presence_logit(self.stats, *self._voice) > -VOICE_MARGIN:
             self.voice_frames += 1  # a voice over the music: still music
+            return True
+        return False
+
+    def _voice_start(self) -> bool:
+        """The voice-over start on this idle frame: the evidence count, and whether it has reached
+        START_EVIDENCE (module docstring)."""
+        ev = self.has_voice and self.floor_db < FLOOR_DB and presence_logit(self.stats, *self._voice) > -VOICE_MARGIN
+        self.evidence = min(START_EVIDENCE, self.evidence + 1.0) if ev else max(0.0, self.evidence - START_DECAY)
+        if ev and self.evidence >= START_EVIDENCE:
+            self.start_frames += 1
             return True
         return False
 
