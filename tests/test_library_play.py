@@ -419,3 +419,21 @@ def test_the_live_style_control_switches_library_folders(library):
         proc.terminate()
         proc.wait(timeout=30)
         rx.close()
+
+
+def test_bench_latency_measures_the_library_it_is_given(library, tmp_path):
+    """`performer bench latency --library` times a performer that dances the library (its model
+    reports the file), and names the checkpoint-only figures it skips instead of failing them."""
+    import json
+
+    out = tmp_path / "bench"
+    r = performer("bench", "latency", "--library", library, "--seconds", "3", "--naive-seconds", "0",
+                  "--no-offline", "--warmup", "0.5", "--out", out)
+    assert r.returncode == 0, r.stderr[-2000:]
+    result = json.loads((out / "latency.json").read_text())
+    assert result["library"] == str(library)
+    assert result["metrics"]["per_hop_ms_p99_own"] > 0
+    assert set(result["not_applicable"]) >= {"stream_offline_max_abs", "model_step_naive_over_streaming"}
+    assert "dancing the library" in (out / "latency.md").read_text()
+    bad = performer("bench", "latency", "--library", tmp_path / "nope.npz", "--out", out)
+    assert bad.returncode == 2 and "nope.npz" in bad.stderr and "Traceback" not in bad.stderr

@@ -65,6 +65,7 @@ class RunSettings:
     lead_ms: float = 0.0  # the single performer's lead (`performer run --lead`)
     inject_ms: float = 0.0  # testing hook: extra work in the first performer's lane (realtime/bench/reference.py)
     inject_every: int = 8  # ... on every this many frames
+    library: Path | None = None  # the single performer dances this library (`performer run --library`)
 
 
 class _Child:
@@ -145,7 +146,8 @@ def run_performers(specs: list[StreamSpec], settings: RunSettings, workdir: Path
         workers = []
         common = {"checkpoint": str(settings.checkpoint), "block_size": settings.block_size,
                   "seconds": settings.seconds, "threads": settings.threads, "warmup_s": settings.warmup_s,
-                  "model": settings.model, "lead_ms": settings.lead_ms}
+                  "model": settings.model, "lead_ms": settings.lead_ms,
+                  "library": None if settings.library is None else str(settings.library)}
         if settings.inject_ms > 0:
             common.update(inject_ms=settings.inject_ms, inject_every=settings.inject_every)
         if ensemble:

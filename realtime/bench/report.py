@@ -93,7 +93,7 @@ def latency_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
         f"* Audio: `{r['audio']}`, {s['frames']} frames ({st['seconds']:g} s) replayed in real time at "
         f"{st['sample_rate']} Hz in blocks of {st['block_size']} ({_f(a['block_ms'])} ms)",
         f"* Checkpoint: `{r['checkpoint']}` ({r['checkpoint_source']}, model {r.get('model', '?')}); torch threads "
-        f"per performer: {st['threads']}",
+        f"per performer: {st['threads']}" + (f"; dancing the library `{r['library']}`" if r.get("library") else ""),
         f"* Machine: {machine_line(r)}",
         f"* During the replay all CPUs were {_f(r['machine_busy_percent'], 0)}% busy (any process); this "
         f"performer used {_f(s['cpu_percent'], 1)}% of one CPU ({_f(s['cpu_ms_per_frame'])} ms CPU per frame), "
@@ -160,7 +160,10 @@ def latency_markdown(r: dict, budgets: list[Budget] | None = None) -> str:
 
 def _model_step_lines(r: dict, notes: dict[str, str]) -> list[str]:
     """The model-only cost table: streaming against the naive recompute, or (no naive
-    baseline: dance_vq) the streaming model alone, its code steps apart."""
+    baseline: dance_vq) the streaming model alone, its code steps apart; none for a library run."""
+    if "model_step" not in r:
+        why = (r.get("not_applicable") or {}).get("stream_offline_max_abs", "not in this result")
+        return [f"The model alone, the naive baseline and streaming against offline: not measured ({why}).", ""]
     ms = r["model_step"]
     if ms.get("naive_us") is None:
         rows = [("every frame", ms["streaming_us"]),

@@ -44,6 +44,7 @@ class BenchConfig:
     lead_ms: float = 0.0  # the performer's lead (`performer run --lead`; latency only)
     inject_ms: float = 0.0  # testing hook: ms of extra work in the first performer's lane ...
     inject_every: int = 8  # ... every this many frames (realtime/bench/reference.py)
+    library: Path | None = None  # a user's library (`performer run --library`; latency only)
     notes: list[str] = field(default_factory=list)
 
 
@@ -538,7 +539,8 @@ def _sweep(cfg: BenchConfig):
 
 def _settings(cfg: BenchConfig, checkpoint: Path, seconds: float, model: str = "streaming") -> RunSettings:
     return RunSettings(checkpoint, seconds, cfg.block_size, cfg.threads, cfg.warmup_s, model,
-                       lead_ms=cfg.lead_ms, inject_ms=cfg.inject_ms, inject_every=cfg.inject_every)
+                       lead_ms=cfg.lead_ms, inject_ms=cfg.inject_ms, inject_every=cfg.inject_every,
+                       library=cfg.library)
 
 
 def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seconds: float = 10.0,
@@ -556,6 +558,10 @@ def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seco
        (:func:`stream_vs_offline`), in this process;
     4. offline real-time factor on the whole file, the checkpoint's offline pass vs the
        paper's U-Net (``offline``).
+
+    With ``cfg.library`` (a user's library, as ``performer run --library``) the performer of
+    step 1 dances it; steps 2-4 measure the checkpoint alone, so they are skipped and the
+    result names them under ``not_applicable``.
     """
     import torch
 
@@ -578,7 +584,8 @@ def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seco
             "checkpoint_source": how,
             "machine": machine_info(cores),
             "settings": {"seconds": seconds, "naive_seconds": naive_seconds, **{
-                k: v for k, v in asdict(cfg).items() if k not in ("checkpoint", "notes")}},
+                k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(cfg).items()
+                if k not in ("checkpoint", "notes")}},
             "algorithmic": algorithmic_latency(cfg.sample_rate, cfg.block_size),
         }
         seg = audio_segment(audio, cfg.sample_rate, max(seconds, naive_seconds), 0.0, work / "audio.npy")
@@ -598,22 +605,31 @@ def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seco
         result["lane_cycle"].pop("medians")
         result["lane_cycle"]["reference_cpu_ms_p50"] = summarize(
             np.asarray(rec.get("reference_cpu_ms", []), dtype=np.float64))["p50"]
-        naive, reason = naive_baseline(loaded.model)
-        if naive_seconds > 0 and naive is not None:
-            nrun = run_performers([spec], _settings(cfg, checkpoint, naive_seconds, "naive"), work / "naive")
-            result["naive"] = stream_metrics(nrun["streams"][0], skip_frames=NAIVE_FULL_WINDOW)
-        elif naive is None:
-            result["not_applicable"] = {"model_step_naive_over_streaming": reason}
+        if cfg.library is not None:  # steps 2-4 would measure the checkpoint, not the library it dances
+            why = f"measures the checkpoint alone, not the library {Path(cfg.library).name} it dances"
+            result["library"] = rec.get("library")  # as the performer's model reports it
+            if result["library"] is None:
+                raise RuntimeError(f"the bench performer did not dance the library {cfg.library}")
+            result["not_applicable"] = {k: why for k in ("model_step_naive_over_streaming",
+                                                         "per_hop_naive_over_streaming", "stream_offline_max_abs",
+                                                         "rtf_causal", "rtf_unet_gan")}
+        else:
+            naive, reason = naive_baseline(loaded.model)
+            if naive_seconds > 0 and naive is not None:
+                nrun = run_performers([spec], _settings(cfg, checkpoint, naive_seconds, "naive"), work / "naive")
+                result["naive"] = stream_metrics(nrun["streams"][0], skip_frames=NAIVE_FULL_WINDOW)
+            elif naive is None:
+                result["not_applicable"] = {"model_step_naive_over_streaming": reason}
 
-        torch.set_num_threads(cfg.threads)
-        x, _ = load_audio(audio, SAMPLE_RATE)
-        feats = extract_features(x[: 60 * SAMPLE_RATE], loaded.features)  # the model's own features
-        result["model_step"] = model_step_costs(checkpoint, feats)
-        result["stream_vs_offline"] = stream_vs_offline(checkpoint, feats)
-        result["components"] = component_costs(checkpoint, np.load(seg), cfg.sample_rate, cfg.block_size)
-        if offline:
-            torch.set_num_threads(len(cores))
-            result["offline"] = offline_rtf(audio, checkpoint)
+            torch.set_num_threads(cfg.threads)
+            x, _ = load_audio(audio, SAMPLE_RATE)
+            feats = extract_features(x[: 60 * SAMPLE_RATE], loaded.features)  # the model's own features
+            result["model_step"] = model_step_costs(checkpoint, feats)
+            result["stream_vs_offline"] = stream_vs_offline(checkpoint, feats)
+            result["components"] = component_costs(checkpoint, np.load(seg), cfg.sample_rate, cfg.block_size)
+            if offline:
+                torch.set_num_threads(len(cores))
+                result["offline"] = offline_rtf(audio, checkpoint)
         result["machine"]["loadavg_end"] = list(os.getloadavg())
     result["metrics"] = latency_metrics(result)
     result["_series"] = series
@@ -639,7 +655,6 @@ def latency_metrics(r: dict) -> dict[str, float]:
         "lost_frames": s["lost_osc"] + s["lost_ws"],
         "cpu_percent": s["cpu_percent"],
         "peak_rss_mb": s["peak_rss_mb"],
-        "stream_offline_max_abs": r["stream_vs_offline"]["max_abs"],
         "reference_ms_p50": s["reference_ms"]["p50"],  # the machine's speed during the run
         "reference_ms_p99": s["reference_ms"]["p99"],
         "others_busy_percent": r["others_busy_percent"],  # other processes' share of the CPUs (quiet budgets)
@@ -647,7 +662,9 @@ def latency_metrics(r: dict) -> dict[str, float]:
         "lane_cycle_ms": r["lane_cycle"]["ms"],
         "lane_cycle_over_reference": r["lane_cycle"]["ms"] / r["lane_cycle"]["reference_cpu_ms_p50"],
     }
-    if r["model_step"].get("ratio_p50") is not None:
+    if "stream_vs_offline" in r:
+        m["stream_offline_max_abs"] = r["stream_vs_offline"]["max_abs"]
+    if r.get("model_step", {}).get("ratio_p50") is not None:
         m["model_step_naive_over_streaming"] = r["model_step"]["ratio_p50"]
     if "naive" in r:
         m["per_hop_naive_over_streaming"] = r["naive"]["per_hop_ms"]["p50"] / s["per_hop_ms"]["p50"]

@@ -155,6 +155,12 @@ def _model(pipeline, kind: str, checkpoint: str):
     return naive
 
 
+def _library_of(model) -> str | None:
+    """The library file the streaming model dances (``library_path`` of its network), else None."""
+    path = getattr(getattr(model, "model", None), "library_path", None)
+    return None if path is None else str(path)
+
+
 def _say(obj: dict) -> None:
     sys.stdout.write(json.dumps(obj) + "\n")
     sys.stdout.flush()
@@ -193,7 +199,8 @@ def run(spec: dict) -> dict:
               if spec.get("inject_ms") else None)
     probe = ReferenceProbe()
     if ensemble is None:
-        pipeline = build_pipeline(spec["checkpoint"], lead=float(spec.get("lead_ms", 0.0)))
+        pipeline = build_pipeline(spec["checkpoint"], lead=float(spec.get("lead_ms", 0.0)),
+                                  library=spec.get("library"))
         model = _model(pipeline, spec.get("model", "streaming"), spec["checkpoint"])
         lanes = [(spec.get("name", "audio"), [OscSink("127.0.0.1", int(spec["osc_port"]), mode="vmc"), server,
                                                TimingSink(frames_max)])]
@@ -253,6 +260,8 @@ def run(spec: dict) -> dict:
         "compute_cpu_ms": engine.compute_cpu_ms.values()[: lanes[0][1][2].count].tolist(),  # the worker's CPU
         "injected": None if inject is None else {"ms": inject.seconds * 1000.0, "every": inject.every,
                                                  "frames": inject.injected},
+        # the library the single performer danced, as its model reports it (performer run --library)
+        "library": None if ensemble is not None else _library_of(pipeline.model),
     }
     records = []
     for name, (osc, ws, timing) in lanes:

@@ -132,6 +132,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     lat.add_argument("--label", help="name of the recording in reports (default: file name)")
     lat.add_argument("--lead", type=float, default=0.0, metavar="MS",
                      help="the performer's lead, ms, as `performer run --lead` (default 0; dance_vq models)")
+    lat.add_argument("--library", metavar="FILE.npz",
+                     help="the performer dances this library, as `performer run --library` (performer library "
+                          "build); the in-process model figures (naive ratio, stream vs offline, offline RTF) "
+                          "measure the checkpoint alone and are skipped")
     _common(lat)
     lat.set_defaults(func=latency)
 
@@ -188,7 +192,19 @@ def _config(args):
     return BenchConfig(checkpoint=None if args.checkpoint is None else Path(args.checkpoint),
                        sample_rate=args.sample_rate, block_size=args.block_size, threads=args.threads,
                        warmup_s=args.warmup, cores=args.cores, lead_ms=getattr(args, "lead", 0.0),
-                       inject_ms=args.inject_ms, inject_every=args.inject_every)
+                       inject_ms=args.inject_ms, inject_every=args.inject_every, library=_library(args))
+
+
+def _library(args) -> Path | None:
+    """``--library`` as a Path (latency only); ConfigError naming it when the file is missing."""
+    from models.errors import ConfigError
+
+    lib = getattr(args, "library", None)
+    if lib is None:
+        return None
+    if not Path(lib).is_file():
+        raise ConfigError(f"--library {lib}: no such file (build one with `performer library build`)")
+    return Path(lib)
 
 
 def _audio(path: str | None) -> Path:
