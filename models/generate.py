@@ -310,11 +310,16 @@ def load_library_model(model, path: str | Path, mix: bool = False, chooser: str 
     from models.networks.library_player import library_model
 
     clips = load_library(path)
-    tracks = [clip_tracks(c.motion) for c in clips]
-    out = library_model(model, [p for p, _ in tracks], [t for _, t in tracks], [c.folder for c in clips], mix=mix,
-                        bpm=[c.bpm for c in clips], chooser=chooser)
+    folders, bpm = [c.folder for c in clips], [c.bpm for c in clips]
+    poses, travel = [], []
+    while clips:  # each clip's motion let go once its tracks are out: the build's peak is what it holds then
+        p, t = clip_tracks(clips.pop(0).motion)
+        poses.append(p)
+        travel.append(t)
+    _release_freed()
+    out = library_model(model, poses, travel, folders, mix=mix, bpm=bpm, chooser=chooser)
     out.library_path = Path(path)
-    del clips, tracks
+    del poses, travel
     _release_freed()
     return out
 

@@ -161,13 +161,15 @@ def _mean_pose(poses: list[np.ndarray], ref: np.ndarray) -> torch.Tensor:
     put on ``ref``'s (P,) hemisphere, normalised. The stream's idle (dance_stream.idle_pose) stands in it:
     the user's own rest between songs, which the fades into and out of the dance start from (the
     default dancers' mean pose is 18 degrees a bone from the shared sample's, its hips 17 cm higher)."""
-    x = np.concatenate(poses).astype(np.float64)
-    q = x[:, 3:].reshape(len(x), -1, 4)
     r = ref[3:].reshape(-1, 4)
-    q = q * np.where((q * r).sum(-1, keepdims=True) < 0, -1.0, 1.0)
-    m = q.sum(0)
+    m, hips, n = 0.0, 0.0, 0
+    for p in poses:  # clip by clip: all clips at once in float64 was +95 MB of a 30-min library's build peak
+        x = p.astype(np.float64)
+        q = x[:, 3:].reshape(len(x), -1, 4)
+        m = m + (q * np.where((q * r).sum(-1, keepdims=True) < 0, -1.0, 1.0)).sum(0)
+        hips, n = hips + x[:, :3].sum(0), n + len(x)
     m /= np.maximum(np.linalg.norm(m, axis=-1, keepdims=True), 1e-12)
-    return torch.from_numpy(np.concatenate([x[:, :3].mean(0), m.reshape(-1)]).astype(np.float32))
+    return torch.from_numpy(np.concatenate([hips / n, m.reshape(-1)]).astype(np.float32))
 
 
 def library_styles(model) -> tuple[str, ...]:
