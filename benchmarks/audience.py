@@ -63,7 +63,7 @@ if str(REPO) not in sys.path:  # run as a script from anywhere
 
 import numpy as np  # noqa: E402
 
-from realtime.sched import parse_cpus  # noqa: E402
+from realtime import sched  # noqa: E402
 
 SUBJECT = "performer.main"
 
@@ -204,16 +204,6 @@ def _peak_rss(pid: int) -> int:
     return 0
 
 
-def _pin_all_threads(cpus: set[int], pid: int | str = "self") -> None:
-    """Pin every thread of process ``pid`` (already running ones: numpy's, torch's) to ``cpus``;
-    threads and children started later inherit it from their parent thread."""
-    for tid in os.listdir(f"/proc/{pid}/task"):
-        try:
-            os.sched_setaffinity(int(tid), cpus)
-        except (ProcessLookupError, OSError):
-            pass  # a thread that ended
-
-
 def _affinity(pid: int) -> list[int]:
     """The CPUs every thread of ``pid`` may run on (the union over its threads), read back."""
     cpus: set[int] = set()
@@ -346,7 +336,7 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int,
             time.sleep(0.2)
         time.sleep(1.0)
         if performer_cpus is not None:
-            _pin_all_threads(performer_cpus)  # the engine's threads and publisher child inherit it
+            sched.pin(os.getpid(), performer_cpus)  # every thread; the engine's and the publisher child inherit it
         pinned = {"performer": _affinity(os.getpid()), "broker": sorted({c for b in brokers for c in _affinity(b.proc.pid)}),
                   "subscribers": sorted({c for p in [*subs, probe] for c in _affinity(p.pid)})}
         c0 = sum(b.cpu_rss()[0] for b in brokers)
@@ -366,7 +356,7 @@ def run_size(n: int, seconds: float, procs: int, cluster: int, block: int,
         for p in [*subs, probe]:
             p.wait(120)
     finally:
-        _pin_all_threads(every_cpu)
+        sched.pin(os.getpid(), every_cpu)
         (folder / "stop").write_text("1")
         for p in [*subs, *([probe] if probe is not None else [])]:
             if p.poll() is None:
@@ -520,7 +510,7 @@ def main(argv: list[str] | None = None) -> int:
     for flag, text in (("--performer-cpus", args.performer_cpus), ("--audience-cpus", args.audience_cpus),
                        ("--publisher-cpus", args.publisher_cpus)):
         try:
-            cpus = None if text is None else parse_cpus(text)
+            cpus = None if text is None else sched.parse_cpus(text)
         except ValueError:
             p.error(f"{flag} {text!r}: give CPU numbers such as 0, 0-1 or 0,2")
         if cpus is not None and not cpus <= usable:

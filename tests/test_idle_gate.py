@@ -114,12 +114,11 @@ def test_a_voice_alone_still_idles_within_two_seconds_and_holds() -> None:
     assert w[idle_at] == 1.0 and idle_at - g0 < 60 and np.all(w[idle_at:g1] == 1.0)
 
 
-@needs_shared
-def test_a_voice_over_a_beat_is_danced_through_thanks_to_the_voice_over_rule() -> None:
-    """Issue 43's rapper: vibeace (jazz-funk) with the shared readers over all of it at -6 dB:
-    idle at most 2 % of its frames after the first 3 s (1.0 %); with the voice-over rule off
-    (``music_gate.MusicGate.voice_rule``) the stop network hears the voice and stops (14.2 %).
-    A voice alone still idles with the rule on (the test above)."""
+def _idle_with_and_without(name: str, seconds: float, db: float, switch: str) -> tuple[float, float]:
+    """Idle share of the frames after the first 3 s of the shared recording ``name`` (its first
+    ``seconds``) with the shared readers over all of it at ``db`` relative to the music, for the
+    shipped default with the gate's ``switch`` (a MusicGate flag) on, then off. Skips where the
+    default has no voice network or no steadiness column (nothing to switch)."""
     from models.features.spectral import extract_features
     from models.generate import load_model
     from script_loader import load_script
@@ -128,13 +127,24 @@ def test_a_voice_over_a_beat_is_danced_through_thanks_to_the_voice_over_rule() -
     lm = load_model(None)
     if not lm.model.presence_voice.abs().sum() > 0:
         pytest.skip(f"{lm.path} has no voice network (refit: python -m models.training.music_gate --voice-network)")
-    song = _recording("vibeace_kevinmacleod.ogg", 70.0)
-    feats = extract_features(ig.with_speech(song, _speech(), -6.0, len(song) // 735), lm.features)
-    on = DanceStream(lm.model, seed=7)
-    assert (on.listen(feats)[90:] > 0).mean() <= 0.02
-    off = DanceStream(lm.model, seed=7)
-    off._idle.presence.voice_rule = False
-    assert (off.listen(feats)[90:] > 0).mean() > 0.1
+    if switch == "pause_rule" and lm.model.config.gate_col < 0:
+        pytest.skip(f"{lm.path} has no presence detector with the steadiness column: no pause rule")
+    song = _recording(name, seconds)
+    feats = extract_features(ig.with_speech(song, _speech(), db, len(song) // 735), lm.features)
+    on, off = DanceStream(lm.model, seed=7), DanceStream(lm.model, seed=7)
+    setattr(off._idle.presence, switch, False)
+    return float((on.listen(feats)[90:] > 0).mean()), float((off.listen(feats)[90:] > 0).mean())
+
+
+@needs_shared
+def test_a_voice_over_a_beat_is_danced_through_thanks_to_the_voice_over_rule() -> None:
+    """Issue 43's rapper: vibeace (jazz-funk) with the shared readers over all of it at -6 dB:
+    idle at most 2 % of its frames after the first 3 s (1.0 %); with the voice-over rule off
+    (``music_gate.MusicGate.voice_rule``) the stop network hears the voice and stops (14.2 %).
+    A voice alone still idles with the rule on (the test above)."""
+    on, off = _idle_with_and_without("vibeace_kevinmacleod.ogg", 70.0, -6.0, "voice_rule")
+    assert on <= 0.02
+    assert off > 0.1
 
 
 @needs_shared
@@ -143,21 +153,9 @@ def test_a_voice_over_piano_is_danced_through_thanks_to_the_pause_rule() -> None
     readers over it at -6 dB. The piano heard in the voice's pauses keeps it music: idle at most
     2 % of the frames after the first 3 s (0.0 %); with the pause rule off
     (``music_gate.MusicGate.pause_rule``; the voice network's part on) 6.3 %."""
-    from models.features.spectral import extract_features
-    from models.generate import load_model
-    from script_loader import load_script
-
-    ig = load_script("benchmarks/studies/idle_gate.py")
-    lm = load_model(None)
-    song = _recording("pistachio_ragtime_lenaorsa.ogg", 80.0)
-    feats = extract_features(ig.with_speech(song, _speech(), -6.0, len(song) // 735), lm.features)
-    on = DanceStream(lm.model, seed=7)
-    if on._idle.presence is None or lm.model.config.gate_col < 0:
-        pytest.skip(f"{lm.path} has no presence detector with the steadiness column: no pause rule")
-    assert (on.listen(feats)[90:] > 0).mean() <= 0.02
-    off = DanceStream(lm.model, seed=7)
-    off._idle.presence.pause_rule = False
-    assert (off.listen(feats)[90:] > 0).mean() > 0.04
+    on, off = _idle_with_and_without("pistachio_ragtime_lenaorsa.ogg", 80.0, -6.0, "pause_rule")
+    assert on <= 0.02
+    assert off > 0.04
 
 
 @needs_shared
@@ -166,21 +164,9 @@ def test_a_song_that_starts_under_a_voice_starts_the_dance_thanks_to_the_voice_o
     at 0 dB, the voice there from the first second. Idle at most 2 % of its frames after the first
     3 s (0.9 %); with the voice-over start off (``music_gate.MusicGate.start_rule``) the idle
     performer's detector hears the voice and sits idle to 6.1 s (7.6 %)."""
-    from models.features.spectral import extract_features
-    from models.generate import load_model
-    from script_loader import load_script
-
-    ig = load_script("benchmarks/studies/idle_gate.py")
-    lm = load_model(None)
-    if not lm.model.presence_voice.abs().sum() > 0:
-        pytest.skip(f"{lm.path} has no voice network (refit: python -m models.training.music_gate --voice-network)")
-    song = _recording("sweetwaltz_setuniman.ogg", 60.0)
-    feats = extract_features(ig.with_speech(song, _speech(), 0.0, len(song) // 735), lm.features)
-    on = DanceStream(lm.model, seed=7)
-    assert (on.listen(feats)[90:] > 0).mean() <= 0.02
-    off = DanceStream(lm.model, seed=7)
-    off._idle.presence.start_rule = False
-    assert (off.listen(feats)[90:] > 0).mean() > 0.05
+    on, off = _idle_with_and_without("sweetwaltz_setuniman.ogg", 60.0, 0.0, "start_rule")
+    assert on <= 0.02
+    assert off > 0.05
 
 
 @needs_shared

@@ -379,16 +379,20 @@ class MusicGate:
         if self.voice_rule and self.pause_rule and self.pause_steady > PAUSE_STEADY:
             self.pause_frames += 1  # the music heard in the voice's pauses: still music
             return True
-        if self.voice_rule and self.has_voice and self.floor_db < FLOOR_DB \
-                and presence_logit(self.stats, *self._voice) > -VOICE_MARGIN:
+        if self.voice_rule and self._voice_over():
             self.voice_frames += 1  # a voice over the music: still music
             return True
         return False
 
+    def _voice_over(self) -> bool:
+        """Both cues of the voice-over rule on this frame: the voice network hears music and the
+        energy floor holds (module docstring)."""
+        return self.has_voice and self.floor_db < FLOOR_DB and presence_logit(self.stats, *self._voice) > -VOICE_MARGIN
+
     def _voice_start(self) -> bool:
         """The voice-over start on this idle frame: the evidence count, and whether it has reached
         START_EVIDENCE (module docstring)."""
-        ev = self.has_voice and self.floor_db < FLOOR_DB and presence_logit(self.stats, *self._voice) > -VOICE_MARGIN
+        ev = self._voice_over()
         self.evidence = min(START_EVIDENCE, self.evidence + 1.0) if ev else max(0.0, self.evidence - START_DECAY)
         if ev and self.evidence >= START_EVIDENCE:
             self.start_frames += 1
