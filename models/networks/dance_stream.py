@@ -48,6 +48,8 @@ from models.networks import feet as feet_part
 from models.networks.feet import FeetLock
 from models.networks.stage import SpotStage, Stage, cached_travel
 from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate
+from models.networks import lead as lead_part
+from models.networks.lead import PhaseForecast
 from models.networks.library_player import NEAREST, bend_deg, member_choice, resolve_style
 from models.networks.member_tables import (CHUNK_FRAMES, MemberTables, code_energy, code_frequency, member_dips,  # noqa: F401
                                           member_positions, member_speed, member_tables)
@@ -558,6 +560,7 @@ class DanceStream:
         cc = c.clarity_col
         self._beat_cols = (cc - 2, cc - 1, cc, cc + 1) if 0 <= cc and cc + 1 < c.feature_dim else None
         self._onset_col = c.onset_col if 0 <= c.onset_col < c.feature_dim else None
+        self._forecast = PhaseForecast()  # the lead's beat forecast (models/networks/lead.py), fed the onsets
         self._decay = hermite_decay(DECAY_FRAMES * self.seg // 8)  # (2, D): match_exemplar's
         # Frames of the cycle the next code step's prefix is computed on: all but the code step
         # and the frame half a cycle from it, where the code step of a performer staggered by half
@@ -595,6 +598,7 @@ class DanceStream:
         self._rate_from = 1.0  # ... and at its start
         self._tempo = TempoFollower()
         self._onsets = np.zeros(DENSITY_WINDOW, np.float64)  # the last DENSITY_WINDOW onset strengths, a ring
+        self._forecast.reset()
         self._density = 0.0  # their onset density (per s), taken at each code step
         self._lag = WARP_LAG  # exemplar frames the beat warp plays behind the movement
         self._has_cont = False  # the playing movement has a real continuation to match the next one to
@@ -677,12 +681,18 @@ class DanceStream:
         return self._stage
 
     def _ahead(self, row: np.ndarray) -> np.ndarray:
-        """``row`` (D,) with the beat tracker's phase advanced by the lead (a copy): its
-        forecast for ``self._lead`` frames on, ``theta + 2 pi L / period``."""
+        """``row`` (D,) with the beat tracker's phase as it will read ``self._lead`` frames on
+        (a copy; its clarity and period as now): :class:`PhaseForecast` on the onsets, or
+        without an onset column (or ``ONSET_FORECAST`` off) ``theta + 2 pi L / period``."""
         ccos, csin, _, logp = self._beat_cols
-        a = 2.0 * math.pi * self._lead / (15.0 * 2.0 ** float(row[logp]))
-        c, s, x, y = math.cos(a), math.sin(a), float(row[ccos]), float(row[csin])
+        x, y, period = float(row[ccos]), float(row[csin]), 15.0 * 2.0 ** float(row[logp])
         out = row.copy()
+        if self._onset_col is not None and lead_part.ONSET_FORECAST:
+            a, r = self._forecast.phase(self._lead, period), math.hypot(x, y)
+            out[ccos], out[csin] = r * math.cos(a), r * math.sin(a)
+            return out
+        a = 2.0 * math.pi * self._lead / period
+        c, s = math.cos(a), math.sin(a)
         out[ccos], out[csin] = x * c - y * s, x * s + y * c
         return out
 
@@ -1067,6 +1077,8 @@ class DanceStream:
             t = self.frame
             if t % self.seg == 0:
                 self._lead = self._lead_next  # a new lead starts with a movement
+            if self._onset_col is not None:
+                self._forecast.push(float(x[i, self._onset_col]))
             row = self._ahead(x[i]) if self._lead and self._beat_cols is not None else x[i]
             push_history(self._hist, row, self._feat_mean, self._feat_std)  # its first _fd columns, standardised
             self._raw = row
