@@ -59,19 +59,39 @@ def test_bad_input_is_one_line_and_exit_2(args, message, capsys, tmp_path):
     assert not out.exists()
 
 
-def test_music_mode_scores_each_recording_up_to_the_end_of_its_music(tmp_path):
+def test_music_mode_scores_each_recording_up_to_the_end_of_its_music(tmp_path, capsys):
     """``--music DIR`` (issue 43: the lead on any song): each recording of DIR, cut at --max-s,
-    danced at every lead and scored against its own beats; the lead keeps the beat behind the delay."""
+    danced at every lead and scored against its own beats; the lead keeps the beat behind the delay.
+    ``--spread``: the ratio with its intervals over the seeds and over the recording's 5-s blocks."""
+    import re
     import shutil
 
     shutil.copy(REPO / "models" / "assets" / "clip.ogg", tmp_path / "clip.ogg")
     out = tmp_path / "l.json"
-    assert lb.main(["--music", str(tmp_path), "--leads", "0", "133", "--seeds", "0", "--max-s", "15",
-                    "--json", str(out)]) == 0
+    assert lb.main(["--music", str(tmp_path), "--leads", "0", "133", "--seeds", "0", "1", "--max-s", "15",
+                    "--spread", "--json", str(out)]) == 0
     row = json.loads(out.read_text())["clip"]
     assert set(row) == {"0", "133", "chance"}
     hits, beats = row["133"]["seen"]
-    assert 10 < beats < 15 * 5 and hits > row["133"]["no_lead"][0]
+    assert 20 < beats < 2 * 15 * 5 and hits > row["133"]["no_lead"][0]
+    line = capsys.readouterr().out.strip().splitlines()[-3]
+    ratio, lo, hi, blo, bhi = map(float, re.fullmatch(r"clip: (\S+) \[(\S+), (\S+)\] / \[(\S+), (\S+)\]", line).groups())
+    assert ratio == round((hits / beats) / (row["0"]["undelayed"][0] / row["0"]["undelayed"][1]), 2)
+    assert lo <= ratio <= hi and blo <= ratio <= bhi
+
+
+def test_the_spread_redraws_seeds_and_blocks():
+    """Two blocks, one all hits and one none: redrawing the blocks spans 0x..1x-ish, redrawing
+    two identical seeds does not move the ratio at all."""
+    mus = np.arange(0, 300, 15)
+    blocks = lb.block_hits(np.array([0, 15, 30, 160, 166, 210, 290]), mus, 2)
+    assert blocks.tolist() == [[3, 3], [2, 4]]  # 160 and 290 miss (5 frames from a beat)
+    d = {"0": [blocks, blocks], "133": [blocks, blocks]}
+    r = lb.spread(d, 133.0)
+    assert r["ratio"] == r["seeds_lo"] == r["seeds_hi"] == 1.0
+    assert r["blocks_lo"] == r["blocks_hi"] == 1.0  # the same blocks for both leads
+    d["133"] = [blocks[::-1].copy(), blocks[::-1].copy()]
+    assert lb.spread(d, 133.0)["blocks_hi"] > lb.spread(d, 133.0)["blocks_lo"]
 
 
 @pytest.mark.parametrize("args", [["--data", "x", "--music", "y"], []])

@@ -41,6 +41,9 @@ import numpy as np  # noqa: E402
 
 #: Leads measured by default, ms (0 = none; 67 and 133 ms are 2 and 4 frames at 30 fps).
 LEADS_MS: tuple[float, ...] = (0.0, 67.0, 133.0)
+#: Blocks of a recording (s) that ``--spread`` redraws to tell how much a ratio owes to the
+#: recording's few beats rather than to the lead.
+BLOCK_S: float = 5.0
 
 
 def lead_frames(lead_ms: float) -> int:
@@ -58,12 +61,68 @@ def seen_hits(kin: np.ndarray, mus: np.ndarray, delay: int) -> tuple[int, int]:
     return int(round(beat_hit_rate(kin + delay, mus) * len(kin))), len(kin)
 
 
+def block_hits(kin: np.ndarray, mus: np.ndarray, blocks: int) -> np.ndarray:
+    """(blocks, 2) int: per :data:`BLOCK_S` block of the recording, (kinematic beats at frames ``kin``
+    within +-2 frames of a music beat, kinematic beats), each beat counted in the block it falls in."""
+    from models.evaluation.beats import BEAT_TOLERANCE
+
+    kin = np.asarray(kin, np.int64)
+    out = np.zeros((blocks, 2), np.int64)
+    if len(kin) == 0 or len(mus) == 0:
+        return out
+    hit = np.min(np.abs(kin[:, None] - np.asarray(mus)[None, :]), axis=1) <= BEAT_TOLERANCE
+    b = np.clip(kin // int(round(BLOCK_S * 30)), 0, blocks - 1)
+    np.add.at(out[:, 0], b, hit.astype(np.int64))
+    np.add.at(out[:, 1], b, 1)
+    return out
+
+
+def spread(detail: dict[str, list[np.ndarray]], lead_ms: float, draws: int = 4000) -> dict[str, float]:
+    """The ratio at ``lead_ms`` (the lead's motion behind its delay over lead 0's, no delay) of one
+    recording from :func:`measure_song`'s ``detail``, and its 95 % bootstrap intervals: over the
+    seeds (both leads' seeds redrawn) and over the recording's :data:`BLOCK_S` blocks (the same
+    blocks for both, all seeds): ``{"ratio", "seeds_lo", "seeds_hi", "blocks_lo", "blocks_hi"}``."""
+    a, b = np.stack(detail[f"{lead_ms:g}"]), np.stack(detail["0"])  # (seeds, blocks, 2)
+    rng = np.random.default_rng(0)
+
+    def ratio(x: np.ndarray, y: np.ndarray) -> float:
+        return (x[..., 0].sum() / max(x[..., 1].sum(), 1)) / max(y[..., 0].sum() / max(y[..., 1].sum(), 1), 1e-9)
+
+    n, k = a.shape[:2]
+    by_seed = [ratio(a[rng.integers(0, n, n)], b[rng.integers(0, n, n)]) for _ in range(draws)]
+    by_block = [ratio(a[:, i], b[:, i]) for i in (rng.integers(0, k, k) for _ in range(draws))]
+    (slo, shi), (blo, bhi) = np.percentile(by_seed, [2.5, 97.5]), np.percentile(by_block, [2.5, 97.5])
+    return {"ratio": ratio(a, b), "seeds_lo": slo, "seeds_hi": shi, "blocks_lo": blo, "blocks_hi": bhi}
+
+
+def oracle_generate(model, features: np.ndarray, seed: int = 0, lead: float = 0.0) -> np.ndarray:
+    """``dance_stream.generate`` with the lead's beat phase read from the features ``lead`` frames
+    on (the tracker's true phase there, its clarity as now): what no causal forecast can beat."""
+    import math
+
+    from models.networks.dance_stream import DanceStream
+
+    class Oracle(DanceStream):
+        def _ahead(self, row: np.ndarray) -> np.ndarray:
+            ccos, csin = self._beat_cols[:2]
+            j = min(self.frame + self._lead, len(features) - 1)
+            a, r = math.atan2(features[j, csin], features[j, ccos]), math.hypot(row[ccos], row[csin])
+            out = row.copy()
+            out[ccos], out[csin] = r * math.cos(a), r * math.sin(a)
+            return out
+
+    return Oracle(model, seed=seed, lead_ms=lead).push(features)
+
+
 def measure_song(model, features: np.ndarray, mus: np.ndarray, leads: Sequence[float],
-                 seeds: Sequence[int] = (0,)) -> dict[str, dict[str, list[int]]]:
+                 seeds: Sequence[int] = (0,), detail: dict | None = None,
+                 oracle: bool = False) -> dict[str, dict[str, list[int]]]:
     """``{str(lead_ms): {"seen": [hits, beats], "no_lead": [hits, beats], "undelayed": [hits, beats]},
     "chance": hit rate of beats at random frames}`` for one song, counts summed over ``seeds``: ``seen`` the lead's motion behind a display delay of
     the lead, ``no_lead`` lead 0's motion behind the same delay, ``undelayed`` the lead's
-    motion with no delay. ``leads[0]`` must be 0."""
+    motion with no delay. ``leads[0]`` must be 0. ``detail``, if given, gets per lead (``str(ms)``)
+    one :func:`block_hits` array a seed of the lead's motion behind its delay (for :func:`spread`).
+    ``oracle``: the leads danced with :func:`oracle_generate` instead."""
     from models.evaluation.beats import kinematic_beats
     from models.evaluation.evaluate import positions
     from models.networks.dance_stream import generate as stream_generate
@@ -73,11 +132,15 @@ def measure_song(model, features: np.ndarray, mus: np.ndarray, leads: Sequence[f
     out: dict = {f"{ms:g}": {"seen": [0, 0], "no_lead": [0, 0], "undelayed": [0, 0]} for ms in leads}
     out["chance"] = chance_hit_rate(mus, len(features))
     for seed in seeds:
-        kins = {ms: kinematic_beats(positions(stream_generate(model, features, seed=seed, lead=ms))) for ms in leads}
+        gen = oracle_generate if oracle else stream_generate
+        kins = {ms: kinematic_beats(positions(gen(model, features, seed=seed, lead=ms))) for ms in leads}
         for ms in leads:
             d, row = lead_frames(ms), out[f"{ms:g}"]
             for key, kin, delay in (("seen", kins[ms], d), ("no_lead", kins[leads[0]], d), ("undelayed", kins[ms], 0)):
                 row[key] = [a + b for a, b in zip(row[key], seen_hits(kin, mus, delay))]
+            if detail is not None:
+                blocks = max(1, -(-len(features) // int(round(BLOCK_S * 30))))
+                detail.setdefault(f"{ms:g}", []).append(block_hits(kins[ms] + d, mus, blocks))
     return out
 
 
@@ -117,8 +180,10 @@ def song_table(results: dict[str, dict], leads: Sequence[float]) -> str:
 
 
 def run(checkpoint: str, data_root: str | Path, cache_dir: str | Path | None, leads: Sequence[float],
-        seeds: Sequence[int] = (0,), songs: Sequence[str] | None = None, log=print) -> dict[str, dict]:
-    """Load, generate and score every validation dance (see the module docstring); ``{song: measure_song(...)}``."""
+        seeds: Sequence[int] = (0,), songs: Sequence[str] | None = None, log=print,
+        details: dict | None = None) -> dict[str, dict]:
+    """Load, generate and score every validation dance (see the module docstring); ``{song: measure_song(...)}``
+    (``details``, if given: ``{song: measure_song's detail}``)."""
     import torch
 
     from models.errors import ConfigError
@@ -135,12 +200,14 @@ def run(checkpoint: str, data_root: str | Path, cache_dir: str | Path | None, le
     with torch.no_grad():
         for i, c in enumerate(load_clips(data_root, names, lm.features, opts), 1):
             log(f"  [{i}/{len(names)}] {c.name}: lead {', '.join(f'{x:g}' for x in leads)} ms")
-            out[c.name] = measure_song(lm.model, c.features, clip_music_beats(data_root, c), leads, seeds)
+            out[c.name] = measure_song(lm.model, c.features, clip_music_beats(data_root, c), leads, seeds,
+                                       None if details is None else details.setdefault(c.name, {}))
     return out
 
 
 def run_music(checkpoint: str, music_dir: str | Path, leads: Sequence[float], seeds: Sequence[int] = (0,),
-              songs: Sequence[str] | None = None, max_s: float | None = None, log=print) -> dict[str, dict]:
+              songs: Sequence[str] | None = None, max_s: float | None = None, log=print,
+              details: dict | None = None, oracle: bool = False) -> dict[str, dict]:
     """:func:`run` on every recording of ``music_dir`` (or those whose stem is in ``songs``): the
     features of the recording up to the end of its music (at most ``max_s`` seconds), its beats
     by ``librosa.beat.beat_track`` on the same span; ``{stem: measure_song(...)}``."""
@@ -170,7 +237,8 @@ def run_music(checkpoint: str, music_dir: str | Path, leads: Sequence[float], se
             feats = feats[:end]
             mus = music_beats(audio[: end * HOP], SAMPLE_RATE, FPS)  # frame t ends at sample (t + 1) HOP
             log(f"  [{i}/{len(files)}] {f.stem} ({end / FPS:.0f} s): lead {', '.join(f'{x:g}' for x in leads)} ms")
-            out[f.stem] = measure_song(lm.model, feats, mus[mus < end], leads, seeds)
+            out[f.stem] = measure_song(lm.model, feats, mus[mus < end], leads, seeds,
+                                       None if details is None else details.setdefault(f.stem, {}), oracle)
     return out
 
 
@@ -196,8 +264,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS), metavar="N",
                    help="generation seeds, each run at every lead, counts summed "
                         f"(default {' '.join(map(str, SEEDS))}, as benchmarks/listening.py)")
+    p.add_argument("--spread", action="store_true",
+                   help=f"also print each song's ratio at the last lead with 95 %% bootstrap intervals over the "
+                        f"seeds and over its {BLOCK_S:g}-s blocks (how much of it is the draw, how much the song)")
+    p.add_argument("--oracle", action="store_true",
+                   help="with --music: dance each lead with the tracker's true phase of the lead's frame "
+                        "(read from the recording's future, the ceiling of any forecast) instead of the stream's forecast")
+    p.add_argument("--rotation", action="store_true",
+                   help="the lead's phase as the tracker's of now rotated by 2 pi L / P (the forecast before "
+                        "issue 43; models.networks.lead.ONSET_FORECAST off) instead of its forecast from the onsets")
     p.add_argument("--json", metavar="OUT", help="also write every song's counts as JSON")
     a = p.parse_args(argv)
+    if a.oracle and not a.music:
+        p.error("--oracle needs --music")
     if any(not 0.0 <= x <= 200.0 for x in a.leads) or a.leads[0] != 0.0:
         p.error("--leads must each be in [0, 200] ms, the first 0 (the reference)")
     import torch
@@ -205,10 +284,17 @@ def main(argv: list[str] | None = None) -> int:
     from models.errors import PerformerError
 
     torch.set_num_threads(1)
+    if a.rotation:
+        from models.networks import lead as lead_part
+
+        lead_part.ONSET_FORECAST = False
     try:
         log = lambda m: print(m, file=sys.stderr)  # noqa: E731
-        results = (run_music(a.checkpoint, a.music, a.leads, a.seeds, a.songs, a.max_s, log=log) if a.music else
-                   run(a.checkpoint, a.data, a.cache, a.leads, a.seeds, a.songs, log=log))
+        details: dict | None = {} if a.spread else None
+        results = (run_music(a.checkpoint, a.music, a.leads, a.seeds, a.songs, a.max_s, log=log, details=details,
+                             oracle=a.oracle)
+                   if a.music else run(a.checkpoint, a.data, a.cache, a.leads, a.seeds, a.songs, log=log,
+                                       details=details))
     except (PerformerError, OSError) as e:
         print(f"lead.py: {e}", file=sys.stderr)
         return 2
@@ -222,6 +308,13 @@ def main(argv: list[str] | None = None) -> int:
     print("\nPer song: ratio to the song's lead 0 hit rate (no delay) of what the audience sees behind a "
           "display delay of the lead, with the lead / without it\n")
     print(song_table(results, a.leads))
+    if details:
+        print(f"\nPer song at {a.leads[-1]:g} ms: the ratio, and its 95 % bootstrap interval over the seeds / over "
+              f"the song's {BLOCK_S:g}-s blocks\n")
+        for song, d in details.items():
+            r = spread(d, a.leads[-1])
+            print(f"{song}: {r['ratio']:.2f} [{r['seeds_lo']:.2f}, {r['seeds_hi']:.2f}] / "
+                  f"[{r['blocks_lo']:.2f}, {r['blocks_hi']:.2f}]")
     if a.json:
         Path(a.json).parent.mkdir(parents=True, exist_ok=True)
         Path(a.json).write_text(json.dumps(results, indent=1))
