@@ -2,9 +2,9 @@
 
 With ``--lead`` the stream reads every beat-tracker phase as the tracker's forecast for ``L``
 frames (30 fps) later. Rotating the phase by ``2 pi L / P`` carries on the beats the
-tracker has settled on; but where its period is not the music's (brahms: the tracker at
-about 106 bpm, librosa's beats at 150), its phase at lead 0 is pulled onto each new onset
-as it arrives, and that is where lead 0's speed dips land, which a rotation never does.
+tracker has settled on; but at lead 0 each new onset pulls the phase onto itself as it
+arrives (the newest frames weigh most in the tracker's window), and that is where lead 0's
+speed dips land, which a rotation never does (brahms in rubato: docs/listening.md, "Lead").
 :class:`PhaseForecast` instead runs the tracker's own arithmetic
 (:func:`models.features.context._beat_columns`) on its onset window as it will stand ``L``
 frames on: the onsets heard, then ``L`` more taken as those one tracker period ``P`` earlier
@@ -13,7 +13,10 @@ What it earns on each shared recording: docs/listening.md, "Lead".
 
 State: the last :data:`TEMPO_WINDOW` onset strengths twice over (a ring, as
 :class:`models.features.context.ContextTracker` keeps them) and a scratch window of the same
-size; nothing is allocated per frame.
+size; nothing is allocated per frame. Cost, a frame with a lead (the rotation: 0.4 µs)::
+
+    python -m timeit -s "from models.networks.lead import PhaseForecast; f = PhaseForecast(); \
+        [f.push(i % 7 / 7) for i in range(400)]; f.phase(4, 15.3)" "f.phase(4, 15.3)"
 """
 
 from __future__ import annotations
