@@ -17,7 +17,11 @@ and each lead's ratio to lead 0's hit rate with no delay (issue 25, target 5: at
 ``--music DIR`` scores every recording of DIR instead (issue 43: the lead on any song), each
 up to the end of its music (``models.evaluation.listening.music_end``: trailing silence,
 brahms' applause), against ``librosa.beat.beat_track`` on the recording; ``--max-s`` cuts
-each to its first seconds.
+each to its first seconds. ``--spread`` adds, per song, 95 % bootstrap intervals of the last
+lead's ratio over the seeds and over the song's 5-s blocks (is a shortfall the draw, or the
+few beats of one song?); ``--oracle`` dances the leads with the tracker's true phase of the
+lead's frame (the ceiling of any forecast); ``--rotation`` with the forecast the lead read
+before issue 43 (the phase rotated by ``2 pi L / P``).
 
 Each song is danced with seeds 0 to 5 (``--seeds``, as benchmarks/listening.py) at every lead. Hit rates are pooled
 over songs and seeds (every kinematic beat counts once), with the smallest and largest song
