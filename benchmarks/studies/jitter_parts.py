@@ -1,0 +1,219 @@
+"""Where the performer's jitter between a song's ends comes from: each part of the stream switched off (issue 39).
+
+The validation dances, the shipped checkpoint's live stream (seeds ``--seeds``) on each of
+``--stages`` (0 = in place), against the dancers in place, as ``jitter_wrap.py`` reads them
+(its ``interior``: the jitter band's energy, above 6 Hz, with the first and last ``--ends`` s of
+every song left out, the FFT over the whole song). For every seed and stage the variants run one
+after the other in the same process (same load), each a set of constants (``--part NAME=SETS``,
+SETS ``part.CONST=VALUE`` joined by ``,``; part ``stream`` (models/networks/dance_stream.py),
+``stage``, ``feet`` or ``tables`` (member_tables.py); ``nofeet`` as a SET: the feet step off). Default parts:
+
+- ``shipped``: as shipped;
+- ``warp``: the beat warp off (``BEAT_WARP=0``);
+- ``tempo``: every movement at its own pace and chosen regardless of the tempo (``FOLLOW_TEMPO=0``);
+- ``tilt``: the tempo's tilt of the choice off, the rate still following (``TEMPO_ENERGY=0``);
+- ``match``: speed matching off (``SPEED_MATCH=0``);
+- ``carry``: the inertialization carries no velocity (``VEL_CAP=0``);
+- ``feet``: the feet step off.
+
+Printed per run: ``raw`` (the headline's jitter ratio), ``interior``, ``hands`` / ``feet`` (the
+interior ratio of those points alone, jitter_wrap's groups), ``amp`` (0.25-3 Hz band amplitude),
+``jerk`` (ratio, travel included), ``hann`` (the jitter ratio without the wrap: each song
+Hann-windowed before its FFT, :func:`hann_energy`), and where the hands' interior energy lies: ``hand/o`` the
+share within one frame of a handover (3 of every 8 frames), ``clamp`` the share of the frames
+whose beat-warp lag sits at a bound (0 or 2 ``WARP_LAG``: its read-out speed jumps there) and
+the share of the hands' energy within 2 frames of such a frame::
+
+    .venv/bin/python benchmarks/studies/jitter_parts.py --data ../shared/data/dwm --seeds 0 1 2 3
+
+Exit status 2 on a missing or unreadable checkpoint or dataset.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+if str(REPO) not in sys.path:  # run as a script from anywhere
+    sys.path.insert(0, str(REPO))
+if str(Path(__file__).resolve().parent) not in sys.path:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import numpy as np  # noqa: E402
+
+DEFAULT_PARTS = ("shipped=", "warp=stream.BEAT_WARP=0", "tempo=stream.FOLLOW_TEMPO=0", "tilt=stream.TEMPO_ENERGY=0",
+                 "match=stream.SPEED_MATCH=0", "carry=stream.VEL_CAP=0", "feet=nofeet")
+
+
+def parse_part(text: str) -> tuple[str, list[tuple[str, str, str]], bool]:
+    """``NAME=part.CONST=V,...`` -> (name, [(part, const, value)], feet on); ValueError on a bad one."""
+    from models.networks import dance_stream, feet, member_tables, stage
+
+    name, _, sets = text.partition("=")
+    if not name:
+        raise ValueError(f"--part wants NAME=part.CONST=VALUE,..., got {text!r}")
+    out, feet_on = [], True
+    for item in filter(None, sets.split(",")):
+        if item == "nofeet":
+            feet_on = False
+            continue
+        key, _, value = item.partition("=")
+        part, _, const = key.partition(".")
+        mod = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables}.get(part)
+        if mod is None or not const.isupper() or not hasattr(mod, const) or not value:
+            raise ValueError(f"--part {name}: wants stream.|stage.|feet.|tables.CONST=VALUE of an existing constant, got {item!r}")
+        out.append((part, const, value))
+    return name, out, feet_on
+
+
+def _apply(sets: list[tuple[str, str, str]]) -> dict:
+    """Set the constants; returns what to restore."""
+    from models.networks import dance_stream, feet, member_tables, stage
+
+    mods = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables}
+    old = {}
+    for part, const, value in sets:
+        mod = mods[part]
+        was = getattr(mod, const)
+        old[(part, const)] = was
+        if isinstance(was, bool):
+            setattr(mod, const, value.lower() in ("1", "true"))
+        elif isinstance(was, tuple):
+            setattr(mod, const, tuple(float(v) for v in value.split(":")))
+        else:
+            setattr(mod, const, type(was)(float(value)))
+    return old
+
+
+def _restore(old: dict) -> None:
+    from models.networks import dance_stream, feet, member_tables, stage
+
+    mods = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables}
+    for (part, const), was in old.items():
+        setattr(mods[part], const, was)
+
+
+def hann_energy(pos: dict[str, np.ndarray], band: tuple[float, float], fps: float = 30.0) -> tuple[float, int]:
+    """(band energy, values) of every song's positions (T, J, 3) m, each minus its mean and
+    Hann-windowed before its FFT (so no step from its last frame back to its first), the energy
+    divided by the window's mean square (what the window took away from a steady signal)."""
+    from models.evaluation.metrics import _band_energy
+
+    e, n = 0.0, 0
+    for p in pos.values():
+        w = np.hanning(len(p))
+        e += _band_energy((p - p.mean(axis=0)) * w[:, None, None], band, fps) / float((w * w).mean())
+        n += p.size
+    return e, n
+
+
+def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], ends_s: float,
+        parts: list[tuple[str, list, bool]], cache: str) -> None:
+    """Print the table (see the module docstring)."""
+    import torch
+
+    from models.evaluation.evaluate import positions
+    from models.evaluation.metrics import JITTER_BAND, band_ratios, in_place, jerk
+    from models.networks import dance_stream
+    from models.rig.skeleton import POINT_INDEX
+
+    from jitter_wrap import FEET, HANDS, summary, validation_clips
+
+    class Probe(dance_stream.DanceStream):
+        """The stream, noting each frame whether the beat warp's lag sits at a bound."""
+
+        def reset(self) -> None:
+            super().reset()
+            self.clamped: list[bool] = []
+
+        def _warped(self, j: int) -> np.ndarray:
+            out = super()._warped(j)
+            self.clamped.append(self._lag <= 0.0 or self._lag >= 2.0 * dance_stream.WARP_LAG)
+            return out
+
+    lm, clips = validation_clips(data_root, checkpoint, cache)
+    cut = int(round(ends_s * 30))
+    real = {c.name: in_place(positions(c.poses)) for c in clips}
+    rs = summary(real, cut)
+    rh, rn = hann_energy(real, JITTER_BAND)
+    hands = [POINT_INDEX[n] for n in HANDS]
+    feet_ix = [POINT_INDEX[n] for n in FEET]
+    print(f"{'stage':<6} {'seed':>4} {'part':<10} {'raw':>6} {'interior':>8} {'hands':>6} {'feet':>6} {'amp':>6} "
+          f"{'jerk':>6} {'hann':>6} {'hand/o':>7} {'clamp':>6} {'near':>6}", flush=True)
+    for stage in stages:
+        for seed in seeds:
+            for name, sets, feet_on in parts:
+                old = _apply(sets)
+                try:
+                    kw = {} if stage in ("0", "") else {"stage": stage}
+                    pos, world, clamp = {}, [], {}
+                    for c in clips:
+                        s = Probe(lm.model, seed=seed, feet=feet_on, **kw)
+                        with torch.no_grad():
+                            poses = s.push(c.features)
+                        world.append(positions(poses))
+                        pos[c.name] = in_place(world[-1])
+                        clamp[c.name] = np.array(s.clamped)
+                finally:
+                    _restore(old)
+                gs = summary(pos, cut)
+                gh, gn = hann_energy(pos, JITTER_BAND)
+                bands = band_ratios(list(pos.values()), list(real.values()), root=None)
+                inner = np.sqrt((gs["inner"] / gs["n_inner"]) / (rs["inner"] / rs["n_inner"]))
+                part = {g: np.sqrt(gs["inner_j"][ix].sum() / rs["inner_j"][ix].sum())
+                        for g, ix in (("hands", hands), ("feet", feet_ix))}
+                e_h = e_ho = e_near = 0.0
+                n_cl = n_all = 0
+                for cname, e in gs["frames"].items():
+                    he = e[:, hands].sum(axis=1)[cut:-cut]
+                    t = np.arange(cut, len(e) - cut)
+                    ho = np.isin(t % 8, (7, 0, 1))
+                    cl = clamp[cname][cut:-cut]
+                    near = np.convolve(cl.astype(float), np.ones(5), mode="same") > 0
+                    e_h += he.sum()
+                    e_ho += he[ho].sum()
+                    e_near += he[near].sum()
+                    n_cl += cl.sum()
+                    n_all += len(cl)
+                print(f"{stage:<6} {seed:>4} {name:<10} {bands['jitter']:>6.3f} {inner:>8.3f} {part['hands']:>6.2f} "
+                      f"{part['feet']:>6.2f} {bands['band_amp']:>6.3f} {jerk(world) / jerk(list(real.values())):>6.3f} "
+                      f"{np.sqrt((gh / gn) / (rh / rn)):>6.3f} {e_ho / e_h:>7.1%} {n_cl / n_all:>6.1%} {e_near / e_h:>6.1%}", flush=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from foot_skating import study_parser
+
+    p = study_parser(__doc__)
+    p.add_argument("--seeds", type=int, nargs="+", default=[0], metavar="N", help="the stream's seeds (default 0)")
+    p.add_argument("--stages", nargs="+", default=["0", "3x2"], metavar="WxD",
+                   help="stages to dance on, 0 = in place (default: 0 3x2)")
+    p.add_argument("--ends", type=float, default=0.5, metavar="S",
+                   help="seconds at each end of a song left out (default 0.5)")
+    p.add_argument("--part", action="append", default=None, metavar="NAME=SETS",
+                   help="a variant: NAME=stream.CONST=V,feet.CONST=V,nofeet (repeatable; default: "
+                        + " ".join(DEFAULT_PARTS) + ")")
+    a = p.parse_args(argv)
+    if a.ends <= 0 or a.ends > 10:
+        p.error(f"--ends must be in (0, 10] seconds, got {a.ends:g}")
+    if a.set:
+        p.error("--set: use --part NAME=feet.CONST=VALUE here")
+    try:
+        parts = [parse_part(t) for t in (a.part or DEFAULT_PARTS)]
+    except ValueError as e:
+        p.error(str(e))
+    import torch
+
+    from models.errors import PerformerError
+
+    torch.set_num_threads(1)
+    try:
+        run(a.data, a.checkpoint, a.seeds, a.stages, a.ends, parts, a.cache)
+    except (PerformerError, OSError) as e:
+        print(f"jitter_parts.py: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
