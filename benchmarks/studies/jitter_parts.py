@@ -22,7 +22,9 @@ interior ratio of those points alone, jitter_wrap's groups), ``amp`` (0.25-3 Hz 
 Hann-windowed before its FFT, :func:`hann_energy`), and where the hands' interior energy lies: ``hand/o`` the
 share within one frame of a handover (3 of every 8 frames), ``clamp`` the share of the frames
 whose beat-warp lag sits at a bound (0 or 2 ``WARP_LAG``: its read-out speed jumps there) and
-the share of the hands' energy within 2 frames of such a frame::
+the share of the hands' energy within 2 frames of such a frame. ``--songs``: per song too, the
+hands' interior RMS above 6 Hz (mm, summed over the hand points) against the dancer's, its share of
+the run's hand energy, and the mean tempo z (``DanceStream._tempo_z``) of the codes drawn, above each run's row::
 
     .venv/bin/python benchmarks/studies/jitter_parts.py --data ../shared/data/dwm --seeds 0 1 2 3
 
@@ -109,7 +111,7 @@ def hann_energy(pos: dict[str, np.ndarray], band: tuple[float, float], fps: floa
 
 
 def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], ends_s: float,
-        parts: list[tuple[str, list, bool]], cache: str) -> None:
+        parts: list[tuple[str, list, bool]], cache: str, songs: bool = False) -> None:
     """Print the table (see the module docstring)."""
     import torch
 
@@ -147,7 +149,7 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                 old = _apply(sets)
                 try:
                     kw = {} if stage in ("0", "") else {"stage": stage}
-                    pos, world, clamp = {}, [], {}
+                    pos, world, clamp, drawn = {}, [], {}, {}
                     for c in clips:
                         s = Probe(lm.model, seed=seed, feet=feet_on, **kw)
                         with torch.no_grad():
@@ -155,6 +157,7 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                         world.append(positions(poses))
                         pos[c.name] = in_place(world[-1])
                         clamp[c.name] = np.array(s.clamped)
+                        drawn[c.name] = float(s._tempo_z[np.array(s.codes_drawn)].mean())
                 finally:
                     _restore(old)
                 gs = summary(pos, cut)
@@ -176,6 +179,13 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                     e_near += he[near].sum()
                     n_cl += cl.sum()
                     n_all += len(cl)
+                if songs:  # per song: the hands' interior RMS above 6 Hz (mm, over the hand points), the drawn z
+                    for cname, e in gs["frames"].items():
+                        he = e[cut:-cut, hands].sum(axis=1).mean()
+                        hr = rs["frames"][cname][cut:-cut, hands].sum(axis=1).mean()
+                        print(f"  {cname:<11} hands {np.sqrt(he) * 1000:6.2f} mm (dancer {np.sqrt(hr) * 1000:6.2f}), "
+                              f"{he * (len(e) - 2 * cut) / e_h:6.1%} of the run's hand energy; drawn codes' "
+                              f"tempo z {drawn[cname]:+.2f}")
                 print(f"{stage:<6} {seed:>4} {name:<10} {bands['jitter']:>6.3f} {inner:>8.3f} {part['hands']:>6.2f} "
                       f"{part['feet']:>6.2f} {bands['band_amp']:>6.3f} {jerk(world) / jerk(list(real.values())):>6.3f} "
                       f"{np.sqrt((gh / gn) / (rh / rn)):>6.3f} {e_ho / e_h:>7.1%} {n_cl / n_all:>6.1%} {e_near / e_h:>6.1%}", flush=True)
@@ -190,6 +200,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="stages to dance on, 0 = in place (default: 0 3x2)")
     p.add_argument("--ends", type=float, default=0.5, metavar="S",
                    help="seconds at each end of a song left out (default 0.5)")
+    p.add_argument("--songs", action="store_true",
+                   help="also per song: the hands' interior RMS against the dancer's, and the drawn codes' mean tempo z")
     p.add_argument("--part", action="append", default=None, metavar="NAME=SETS",
                    help="a variant: NAME=stream.CONST=V,feet.CONST=V,nofeet (repeatable; default: "
                         + " ".join(DEFAULT_PARTS) + ")")
@@ -208,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(1)
     try:
-        run(a.data, a.checkpoint, a.seeds, a.stages, a.ends, parts, a.cache)
+        run(a.data, a.checkpoint, a.seeds, a.stages, a.ends, parts, a.cache, a.songs)
     except (PerformerError, OSError) as e:
         print(f"jitter_parts.py: {e}", file=sys.stderr)
         return 2
