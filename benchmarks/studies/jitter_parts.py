@@ -24,7 +24,9 @@ share within one frame of a handover (3 of every 8 frames), ``clamp`` the share 
 whose beat-warp lag sits at a bound (0 or 2 ``WARP_LAG``: its read-out speed jumps there) and
 the share of the hands' energy within 2 frames of such a frame. ``--songs``: per song too, the
 hands' interior RMS above 6 Hz (mm, summed over the hand points) against the dancer's, its share of
-the run's hand energy, and the mean tempo z (``DanceStream._tempo_z``) of the codes drawn, above each run's row::
+the run's hand energy, and the mean tempo z (``DanceStream._tempo_z``) of the codes drawn, above each run's row.
+``--fd`` (in place only): ``performer evaluate``'s FD and beat hit rate too. A SET ``tail=Z:SIGMA`` plays
+the exemplars of the codes whose tempo z is above Z low-passed by a further Gaussian of SIGMA frames::
 
     .venv/bin/python benchmarks/studies/jitter_parts.py --data ../shared/data/dwm --seeds 0 1 2 3
 
@@ -48,25 +50,33 @@ DEFAULT_PARTS = ("shipped=", "warp=stream.BEAT_WARP=0", "tempo=stream.FOLLOW_TEM
                  "match=stream.SPEED_MATCH=0", "carry=stream.VEL_CAP=0", "feet=nofeet")
 
 
-def parse_part(text: str) -> tuple[str, list[tuple[str, str, str]], bool]:
-    """``NAME=part.CONST=V,...`` -> (name, [(part, const, value)], feet on); ValueError on a bad one."""
+def parse_part(text: str) -> tuple[str, list[tuple[str, str, str]], bool, tuple[float, float] | None]:
+    """``NAME=part.CONST=V,...`` -> (name, [(part, const, value)], feet on, (tail z, sigma) or None);
+    ValueError on a bad one."""
     from models.networks import dance_stream, feet, member_tables, stage
 
     name, _, sets = text.partition("=")
     if not name:
         raise ValueError(f"--part wants NAME=part.CONST=VALUE,..., got {text!r}")
-    out, feet_on = [], True
+    out, feet_on, tail = [], True, None
     for item in filter(None, sets.split(",")):
         if item == "nofeet":
             feet_on = False
             continue
         key, _, value = item.partition("=")
+        if key == "tail":  # tail=Z:SIGMA
+            try:
+                z, sigma = (float(v) for v in value.split(":"))
+            except ValueError:
+                raise ValueError(f"--part {name}: tail wants Z:SIGMA, got {value!r}") from None
+            tail = (z, sigma)
+            continue
         part, _, const = key.partition(".")
         mod = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables}.get(part)
         if mod is None or not const.isupper() or not hasattr(mod, const) or not value:
             raise ValueError(f"--part {name}: wants stream.|stage.|feet.|tables.CONST=VALUE of an existing constant, got {item!r}")
         out.append((part, const, value))
-    return name, out, feet_on
+    return name, out, feet_on, tail
 
 
 def _apply(sets: list[tuple[str, str, str]]) -> dict:
@@ -111,7 +121,7 @@ def hann_energy(pos: dict[str, np.ndarray], band: tuple[float, float], fps: floa
 
 
 def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], ends_s: float,
-        parts: list[tuple[str, list, bool]], cache: str, songs: bool = False) -> None:
+        parts: list[tuple], cache: str, songs: bool = False, fd: bool = False) -> None:
     """Print the table (see the module docstring)."""
     import torch
 
@@ -122,8 +132,26 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
 
     from jitter_wrap import FEET, HANDS, summary, validation_clips
 
+    from scipy.ndimage import gaussian_filter1d
+
+    tails: dict = {}  # (z, sigma) -> the memory with those codes' exemplars low-passed further
+
     class Probe(dance_stream.DanceStream):
-        """The stream, noting each frame whether the beat warp's lag sits at a bound."""
+        """The stream, noting each frame whether the beat warp's lag sits at a bound; with ``tail``
+        (z, sigma) the exemplars of the codes whose tempo z is above z low-passed by a further
+        Gaussian of sigma frames (the draw, read from the shipped tables, unchanged)."""
+
+        def __init__(self, *args, tail: tuple[float, float] | None = None, **kw) -> None:
+            super().__init__(*args, **kw)
+            if tail is not None:
+                if tail not in tails:
+                    mem = self._members.copy()
+                    for c in np.where((self._tempo_z > tail[0]) & (self._counts > 0))[0]:
+                        n = int(self._counts[c])
+                        mem[c, :n] = dance_stream._unit(gaussian_filter1d(mem[c, :n], tail[1], axis=1,
+                                                                          mode="nearest").astype(np.float32))
+                    tails[tail] = mem
+                self._members = tails[tail]
 
         def reset(self) -> None:
             super().reset()
@@ -135,6 +163,17 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
             return out
 
     lm, clips = validation_clips(data_root, checkpoint, cache)
+    if fd:  # performer evaluate's FD and beat hit (in place), its style classifier
+        from models.evaluation.classifier import embed
+        from models.evaluation.evaluate import (EvalOptions, classifier_windows, load_clips, real_set, set_metrics,
+                                                split_dances, style_classifier)
+
+        opts = EvalOptions(cache_dir=cache, progress=False)
+        val = real_set(data_root, clips, progress=False)
+        train = real_set(data_root, load_clips(data_root, split_dances(data_root, opts)[0], lm.features, opts),
+                         False, False)
+        classifier = style_classifier(train, opts.classifier_epochs, opts.seed, cache)
+        real_emb = embed(classifier, classifier_windows(val.positions))
     cut = int(round(ends_s * 30))
     real = {c.name: in_place(positions(c.poses)) for c in clips}
     rs = summary(real, cut)
@@ -142,16 +181,16 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
     hands = [POINT_INDEX[n] for n in HANDS]
     feet_ix = [POINT_INDEX[n] for n in FEET]
     print(f"{'stage':<6} {'seed':>4} {'part':<10} {'raw':>6} {'interior':>8} {'hands':>6} {'feet':>6} {'amp':>6} "
-          f"{'jerk':>6} {'hann':>6} {'hand/o':>7} {'clamp':>6} {'near':>6}", flush=True)
+          f"{'jerk':>6} {'hann':>6} {'hand/o':>7} {'clamp':>6} {'near':>6}" + ("     FD   beat" if fd else ""), flush=True)
     for stage in stages:
         for seed in seeds:
-            for name, sets, feet_on in parts:
+            for name, sets, feet_on, tail in parts:
                 old = _apply(sets)
                 try:
                     kw = {} if stage in ("0", "") else {"stage": stage}
                     pos, world, clamp, drawn = {}, [], {}, {}
                     for c in clips:
-                        s = Probe(lm.model, seed=seed, feet=feet_on, **kw)
+                        s = Probe(lm.model, seed=seed, feet=feet_on, tail=tail, **kw)
                         with torch.no_grad():
                             poses = s.push(c.features)
                         world.append(positions(poses))
@@ -179,6 +218,10 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                     e_near += he[near].sum()
                     n_cl += cl.sum()
                     n_all += len(cl)
+                extra = ""
+                if fd:
+                    row = set_metrics(world, val, real_emb, classifier)
+                    extra = f" {row['fd']:>6.2f} {row['beat_hit_rate']:>6.3f}"
                 if songs:  # per song: the hands' interior RMS above 6 Hz (mm, over the hand points), the drawn z
                     for cname, e in gs["frames"].items():
                         he = e[cut:-cut, hands].sum(axis=1).mean()
@@ -188,7 +231,7 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                               f"tempo z {drawn[cname]:+.2f}")
                 print(f"{stage:<6} {seed:>4} {name:<10} {bands['jitter']:>6.3f} {inner:>8.3f} {part['hands']:>6.2f} "
                       f"{part['feet']:>6.2f} {bands['band_amp']:>6.3f} {jerk(world) / jerk(list(real.values())):>6.3f} "
-                      f"{np.sqrt((gh / gn) / (rh / rn)):>6.3f} {e_ho / e_h:>7.1%} {n_cl / n_all:>6.1%} {e_near / e_h:>6.1%}", flush=True)
+                      f"{np.sqrt((gh / gn) / (rh / rn)):>6.3f} {e_ho / e_h:>7.1%} {n_cl / n_all:>6.1%} {e_near / e_h:>6.1%}" + extra, flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -200,6 +243,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="stages to dance on, 0 = in place (default: 0 3x2)")
     p.add_argument("--ends", type=float, default=0.5, metavar="S",
                    help="seconds at each end of a song left out (default 0.5)")
+    p.add_argument("--fd", action="store_true",
+                   help="also performer evaluate's FD and beat hit rate (with --stages 0; trains or loads its style classifier)")
     p.add_argument("--songs", action="store_true",
                    help="also per song: the hands' interior RMS against the dancer's, and the drawn codes' mean tempo z")
     p.add_argument("--part", action="append", default=None, metavar="NAME=SETS",
@@ -220,7 +265,9 @@ def main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(1)
     try:
-        run(a.data, a.checkpoint, a.seeds, a.stages, a.ends, parts, a.cache, a.songs)
+        if a.fd and any(st not in ("0", "") for st in a.stages):
+            p.error("--fd scores the dance in place, as performer evaluate does: give --stages 0")
+        run(a.data, a.checkpoint, a.seeds, a.stages, a.ends, parts, a.cache, a.songs, a.fd)
     except (PerformerError, OSError) as e:
         print(f"jitter_parts.py: {e}", file=sys.stderr)
         return 2
