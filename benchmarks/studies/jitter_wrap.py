@@ -114,22 +114,29 @@ def summary(pos: dict[str, np.ndarray], cut: int) -> dict:
     return out
 
 
+def validation_clips(data_root: str, checkpoint: str, cache: str) -> tuple:
+    """(the loaded checkpoint, the validation dances' clips: features and the dancers' poses)."""
+    from models.evaluation.evaluate import EvalOptions, load_clips, validation_names
+    from models.generate import load_model
+
+    lm = load_model(checkpoint)
+    opts = EvalOptions(cache_dir=cache, progress=False)
+    return lm, load_clips(data_root, validation_names(data_root, None, opts), lm.features, opts)
+
+
 def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], ends_s: float, feet: bool,
         worst: int, cache: str, travelling: bool = False) -> None:
     """Print the table (see the module docstring)."""
     import torch
 
-    from models.evaluation.evaluate import EvalOptions, load_clips, positions, validation_names
+    from models.evaluation.evaluate import positions
     from models.evaluation.metrics import band_ratios, in_place, jerk
-    from models.generate import load_model
     from models.networks import dance_stream
     from models.rig.skeleton import POINT_INDEX
 
     from foot_skating import mirrored, travelling_poses
 
-    lm = load_model(checkpoint)
-    opts = EvalOptions(cache_dir=cache, progress=False)
-    clips = load_clips(data_root, validation_names(data_root, None, opts), lm.features, opts)
+    lm, clips = validation_clips(data_root, checkpoint, cache)
     cut = int(round(ends_s * 30))
     real = {c.name: in_place(positions(travelling_poses(data_root, c.name, c.num_frames, c.first_frame)
                                        if travelling else c.poses)) for c in clips}

@@ -171,6 +171,13 @@ ENERGY_GAIN: float = 3.0
 #: strength energy 0 moved as much as energy 1 on DANCE_R_5, and energy 2 less than 1 on
 #: DANCE_C_2). 0: the choice ignores the tempo.
 TEMPO_ENERGY: float = 4.0
+#: The tempo's tilt reads each code's z (:data:`TEMPO_ENERGY`'s liveliness plus quickness) clipped to
+#: +-TILT_Z_CAP. Unclipped, a fast song draws mostly the memory's top tail (DANCE_C_2 at 126 bpm:
+#: drawn z +2.85; 13 % of the codes have z > 2), whose exemplars tremble: most of the hands' jitter
+#: between the songs' ends (1.5-1.9x the dancers'). 1.5 takes the interior jitter in place from
+#: 1.38-1.61 to 1.03-1.17 but FD from 3.69 to 9.45, so not shipped (docs/stage.md,
+#: benchmarks/studies/jitter_parts.py). inf: the z as it is.
+TILT_Z_CAP: float = float("inf")
 #: Tempo and frequency: the tempo's logit tilt (:data:`TEMPO_ENERGY`) reads each code's liveliness
 #: plus this times its movements' frequency (:func:`code_frequency`'s z-score: mean joint
 #: acceleration over mean joint speed, the root's travel taken out). At a faster tempo the
@@ -779,7 +786,7 @@ class DanceStream:
                 logits = logits + bias
             tilt = self._tempo_tilt()
             if tilt != 0.0:  # livelier codes at a faster tempo, calmer at a slower one (TEMPO_ENERGY)
-                logits = logits + np.float32(tilt) * self._tempo_z
+                logits = logits + np.float32(tilt) * np.clip(self._tempo_z, -TILT_Z_CAP, TILT_Z_CAP)
             if REPEAT_PENALTY > 0.0 and len(self.codes_drawn) >= REPEAT_FREE:
                 logits = self._repeat_penalty(logits)
             self._tokens.append(token)
