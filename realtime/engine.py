@@ -340,8 +340,8 @@ class _RunQueueClock:
     process added up (the worker's own, and those of a thread that holds the interpreter lock
     the worker needs while another process has the CPU), and the calling thread's CPU time.
     ``after=True`` (the read that ends a hop) reads the calling thread's CPU time first, the
-    others' waits after, so that neither read's own work is booked to the hop: every file stays
-    open (one ``pread`` each, no open/close per read; 3-10x cheaper).
+    others' waits after, so that neither read's own work is booked to the hop. Every file stays
+    open: a read is one ``pread`` each, no open/close (docs/latency.md, input_stage.py).
     """
 
     _REFRESH_S = 1.0  # how often the thread list is read again
