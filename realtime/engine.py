@@ -339,6 +339,9 @@ class _RunQueueClock:
     Calling it returns ``(waited, on_cpu)`` in seconds: the waits of every thread of the
     process added up (the worker's own, and those of a thread that holds the interpreter lock
     the worker needs while another process has the CPU), and the calling thread's CPU time.
+    ``after=True`` (the read that ends a hop) reads the calling thread's CPU time first, the
+    others' waits after, so that neither read's own work is booked to the hop. Every file stays
+    open: a read is one ``pread`` each, no open/close (docs/latency.md, input_stage.py).
     """
 
     _REFRESH_S = 1.0  # how often the thread list is read again
@@ -347,42 +350,60 @@ class _RunQueueClock:
         import os
 
         self._os = os
-        self._tids: list[str] = []
+        self._fds: dict[str, int] = {}  # thread id -> its schedstat, open
         self._listed = -1e9
         try:
             self._me: int | None = os.open("/proc/thread-self/schedstat", os.O_RDONLY)
         except OSError:
             self._me = None
 
-    def _read(self, path: str) -> list[int] | None:
+    def _relist(self) -> None:
+        """Open the schedstat of threads that started, close those of threads that ended."""
         try:
-            with open(path, "rb") as f:
-                return [int(x) for x in f.read().split()[:2]]
-        except (OSError, ValueError):
-            return None  # a thread that ended
+            tids = set(self._os.listdir("/proc/self/task"))
+        except OSError:
+            tids = set()
+        for tid in list(self._fds):
+            if tid not in tids:
+                self._os.close(self._fds.pop(tid))
+        for tid in tids - self._fds.keys():
+            try:
+                self._fds[tid] = self._os.open(f"/proc/self/task/{tid}/schedstat", self._os.O_RDONLY)
+            except OSError:
+                pass  # a thread that ended
 
-    def __call__(self) -> tuple[float, float]:
+    def _waits(self) -> int:
+        waited = 0
+        for tid, fd in list(self._fds.items()):
+            try:
+                waited += int(self._os.pread(fd, 128, 0).split()[1])
+            except (OSError, ValueError, IndexError):  # a thread that ended
+                self._os.close(self._fds.pop(tid))
+        return waited
+
+    def _own(self) -> int:
+        try:
+            return int(self._os.pread(self._me, 128, 0).split()[0])
+        except (OSError, ValueError, IndexError):
+            return 0
+
+    def __call__(self, after: bool = False) -> tuple[float, float]:
         if self._me is None:
             return 0.0, 0.0
+        if after:
+            on_cpu = self._own()
+            return self._waits() * 1e-9, on_cpu * 1e-9
         now = time.monotonic()
         if now - self._listed > self._REFRESH_S:
-            try:
-                self._tids = self._os.listdir("/proc/self/task")
-            except OSError:
-                self._tids = []
+            self._relist()
             self._listed = now
-        waited = 0
-        for tid in self._tids:
-            st = self._read(f"/proc/self/task/{tid}/schedstat")
-            if st is not None and len(st) == 2:
-                waited += st[1]
-        try:
-            on_cpu = int(self._os.pread(self._me, 128, 0).split()[0])
-        except (OSError, ValueError, IndexError):
-            on_cpu = 0
-        return waited * 1e-9, on_cpu * 1e-9
+        waited = self._waits()
+        return waited * 1e-9, self._own() * 1e-9
 
     def __del__(self) -> None:
+        for fd in self._fds.values():
+            self._os.close(fd)
+        self._fds = {}
         if self._me is not None:
             self._os.close(self._me)
             self._me = None
@@ -1152,8 +1173,8 @@ class Engine:
                 self.state = live
             st.down = False
             self._last_audio = now
+            w0, c0 = waited() if waited is not None else (0.0, 0.0)  # the clock's reads: outside the hop
             t0 = time.perf_counter()
-            w0, c0 = waited() if waited is not None else (0.0, 0.0)
             block = self._sanitize(self._mixdown(n))
             p0 = self._consumed
             self._consumed += n
@@ -1167,18 +1188,19 @@ class Engine:
                 acc += t_in
                 acc_in += t_in
                 if waited is not None:
-                    w1, c1 = waited()
-                    acc_wait += _hop_wait(time.perf_counter() - t0, w1 - w0, c1 - c0)
+                    w1, c1 = waited(after=True)
+                    acc_wait += _hop_wait(t_in, w1 - w0, c1 - c0)
                     acc_cpu += c1 - c0
                 continue
             frames = max(len(feats) for _, feats in ready)
             self._run_lanes(ready, p0)
-            per_frame_ms = (acc + time.perf_counter() - t0) * 1000.0 / frames
+            hop = time.perf_counter() - t0
+            per_frame_ms = (acc + hop) * 1000.0 / frames
             in_ms = (acc_in + t_in) * 1000.0 / frames
             wait_ms = cpu_ms = 0.0
             if waited is not None:
-                w1, c1 = waited()
-                wait_ms = (acc_wait + _hop_wait(time.perf_counter() - t0, w1 - w0, c1 - c0)) * 1000.0 / frames
+                w1, c1 = waited(after=True)
+                wait_ms = (acc_wait + _hop_wait(hop, w1 - w0, c1 - c0)) * 1000.0 / frames
                 cpu_ms = (acc_cpu + c1 - c0) * 1000.0 / frames
             for _ in range(frames):
                 self.compute_ms.add(per_frame_ms)

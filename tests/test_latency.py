@@ -338,6 +338,41 @@ def test_run_queue_clock_counts_the_time_another_thread_held_the_cpu():
         assert 0 < on_cpu < 0.8 and waited > 0.1, got  # (a wait is booked when the thread gets the CPU back)
 
 
+def test_run_queue_clock_reads_open_files_and_follows_the_threads():
+    """The clock keeps each thread's schedstat open (a read is one pread: the engine reads it
+    around every audio block, outside the hop it times), opens a new thread's at the next
+    refresh and closes an ended one's; ``after=True`` gives the same figures (Linux)."""
+    import os
+    import threading
+
+    from realtime.engine import _RunQueueClock
+
+    if not os.path.exists("/proc/thread-self/schedstat"):
+        pytest.skip("no /proc/thread-self/schedstat here")
+    clock = _RunQueueClock()
+    clock()
+    assert set(clock._fds) == set(os.listdir("/proc/self/task"))
+    fds = dict(clock._fds)
+    for _ in range(3):
+        clock()
+        clock(after=True)
+    assert clock._fds == fds, "the files were opened again"
+    stop = threading.Event()
+    t = threading.Thread(target=stop.wait)
+    t.start()
+    clock._listed = -1e9  # the next read lists the threads again
+    clock()
+    assert str(t.native_id) in clock._fds
+    stop.set()
+    t.join()
+    for _ in range(200):  # the ended thread's file: its read fails once the kernel is done with it
+        waited, on_cpu = clock(after=True)
+        if str(t.native_id) not in clock._fds:
+            break
+        time.sleep(0.01)
+    assert str(t.native_id) not in clock._fds and waited >= 0 and on_cpu > 0
+
+
 @pytest.mark.parametrize("text, needle", [
     ("[latency]\nper_hop_ms_p99 = 5.0\n", "expected { max = X }"),
     ("[latency]\nper_hop_ms_p99 = { most = 5.0 }\n", "expected { max = X }"),

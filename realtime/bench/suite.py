@@ -193,6 +193,18 @@ def own_hop_ms(compute_ms, wait_ms) -> np.ndarray:
     return hop - wait
 
 
+def _hop_tails(wall_ms: np.ndarray, own_ms: np.ndarray, cpu_ms: np.ndarray) -> dict[str, float | None]:
+    """The whole hop's wall, own and worker CPU time per frame (ms): p50 and p99.9 of each
+    (None where none is known), for A/B tables (benchmarks/studies/ensemble_ab.py)."""
+    out: dict[str, float | None] = {}
+    for name, v in (("wall", wall_ms), ("own", own_ms), ("cpu", cpu_ms)):
+        v = np.asarray(v, dtype=np.float64)
+        v = v[np.isfinite(v)]
+        for q, key in ((50, "p50"), (99.9, "p999")):
+            out[f"per_hop_ms_{key}_{name}"] = float(np.percentile(v, q)) if len(v) else None
+    return out
+
+
 def _cpu_ms(rec: dict, n: int) -> np.ndarray:
     """The worker thread's CPU time of each of ``n`` hops, ms (NaN where not recorded)."""
     cpu = np.asarray(rec.get("compute_cpu_ms", []), dtype=np.float64)[:n]
@@ -830,6 +842,8 @@ def _ensemble_row(n: int, mode: str, run: dict, cycle: int = 1) -> dict:
         own = summarize(own_hop_ms(proc["compute_ms"], proc.get("compute_wait_ms")))
         cpu = summarize(_cpu_ms(proc, len(proc["compute_ms"])))
         own_p99, cpu_p99, own_p95, cpu_p95 = own["p99"], cpu["p99"], own["p95"], cpu["p95"]
+        tails = _hop_tails(proc["compute_ms"], own_hop_ms(proc["compute_ms"], proc.get("compute_wait_ms")),
+                           _cpu_ms(proc, len(proc["compute_ms"])))
         features_p50 = summarize(np.asarray(proc["features_ms"]))["p50"]
         cpu_s, rss = proc["cpu_s"], proc["peak_rss_mb"]
         extractors = proc["extractors"]
@@ -846,7 +860,7 @@ def _ensemble_row(n: int, mode: str, run: dict, cycle: int = 1) -> dict:
         cpu_p99 = max(m["per_hop_cpu_ms"]["p99"] for m in per)
         own_p95 = max(m["per_hop_own_ms"]["p95"] for m in per)
         cpu_p95 = max(m["per_hop_cpu_ms"]["p95"] for m in per)
-        features_p50 = None
+        features_p50, tails = None, {}
         cpu_s, rss = sum(r["cpu_s"] for r in run["streams"]), sum(m["peak_rss_mb"] for m in per)
         extractors = n
         reference = summarize(np.concatenate([np.asarray(r.get("reference_ms", []), dtype=np.float64)
@@ -862,6 +876,7 @@ def _ensemble_row(n: int, mode: str, run: dict, cycle: int = 1) -> dict:
         "per_hop_ms_p95_own": own_p95,
         "per_hop_ms_p95_cpu": cpu_p95,
         "features_ms_p50": features_p50,
+        **tails,  # one process: wall, own and CPU p50 / p99.9 of the whole hop
         "performer_part_ms_p50": [m["per_hop_ms"]["p50"] for m in per] if "process" in run else None,
         "phases": [r.get("phase", 0) for r in run["streams"]],
         "cpu_ms_per_frame": 1000.0 * cpu_s / max(frames, 1),
