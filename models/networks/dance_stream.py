@@ -538,6 +538,8 @@ class DanceStream:
         self._draws, self._guard, self._member_tilt = member_choice(model, speed, real, DRAWS)
         where = np.argwhere(real)  # (n, 2) every exemplar's (code, slot); its first pose's quaternions (n, 4 J)
         self._first = (self._members[:, :, 0, 3:][real], where) if self._guard > 0.0 else None
+        tok = self._member_style[where[:, 0], where[:, 1]]  # the same by member style token: a folder's own search
+        self._first_of = {int(t): (self._first[0][tok == t], where[tok == t]) for t in np.unique(tok)} if self._first else {}
         self._folders = folder_choice(model, speed, real)  # under auto, the library folder the drawn codes choose; None: any
         self._fk_parents = np.array(POINT_PARENT_INDEX, np.int64)  # joint_speed's skeleton (SPEED_MATCH)
         self._fk_offsets = load_default_skeleton().point_offsets().astype(np.float64)
@@ -836,24 +838,20 @@ class DanceStream:
     def _nearest(self, pose: np.ndarray) -> list[tuple[int, int]]:
         """(code, exemplar) of the :data:`~models.networks.library_player.NEAREST` exemplars of any code (of the
         requested style's) whose first pose is nearest ``pose`` (P,) (mean over the bones of sqrt(1 - |q . q'|))."""
-        first, where = self._first  # (n, 4 J), (n, 2)
+        tok = self.style or self._own  # a requested style (or auto's folder): its own exemplars, where it has any
+        first, where = self._first_of.get(tok, self._first) if tok and STYLE_MEMBERS else self._first  # (n, 4 J), (n, 2)
         q = pose[3:].reshape(-1, 4)
         block = np.zeros((q.size, len(q)), np.float32)  # each bone's quaternion in its own column: one matmul
         block[np.arange(q.size), np.repeat(np.arange(len(q)), 4)] = q.ravel()
         with single_thread_blas():
             dot = first @ block  # (n, J)
         d = np.sqrt(np.maximum(1.0 - np.abs(dot), 0.0)).mean(1)
-        tok = self.style or self._own
-        if tok and STYLE_MEMBERS:  # a requested style (or auto's folder): its own exemplars, where it has any
-            own = self._member_style[where[:, 0], where[:, 1]] == tok
-            d = np.where(own, d, np.inf) if own.any() else d
         k = min(NEAREST, len(d))
         return [(int(where[n, 0]), int(where[n, 1])) for n in np.argpartition(d, k - 1)[:k]]
 
     def _candidates(self, pairs: list[tuple[int, int]]) -> tuple[list, np.ndarray, np.ndarray, np.ndarray | None]:
         """(pairs (code, exemplar), their windows (n, 2 seg, P), dips (n, seg), liveliness weights (n,)
         or None) of ``pairs`` as the style and the stage allow."""
-        codes = list(dict.fromkeys(c for c, _ in pairs))
         tok = self.style or self._own
         if tok and STYLE_MEMBERS:  # a requested style (or auto's folder): its own exemplars where the codes have some
             own = [(c, j) for c, j in pairs if self._member_style[c, j] == tok]
@@ -862,9 +860,10 @@ class DanceStream:
             keep = self._stage.inwards(np.array([self._travel[c, j, self.seg, :2] for c, j in pairs]))
             pairs = pairs if keep is None else [p for p, k in zip(pairs, keep) if k]
         tilt = self._member_tilt
-        if len(codes) == 1 and pairs == self._pairs(codes):  # all of one code's, in order: a slice, no gathering
-            c, n = codes[0], len(pairs)
-            return pairs, self._members[c, :n], self._dips[c, :n], None if tilt is None else tilt[c, :n]
+        c, a = pairs[0] if pairs else (-1, 0)
+        if pairs == [(c, j) for j in range(a, a + len(pairs))]:  # a run of one code's (a folder's): a slice, no gathering
+            b = a + len(pairs)
+            return pairs, self._members[c, a:b], self._dips[c, a:b], None if tilt is None else tilt[c, a:b]
         return (pairs, np.stack([self._members[c, j] for c, j in pairs]), np.stack([self._dips[c, j] for c, j in pairs]),
                 None if tilt is None else np.array([tilt[p] for p in pairs]))
 
