@@ -239,6 +239,9 @@ def parse_args(argv):
     p.add_argument("--chooser", choices=("codes", "match"), default="codes",
                    help="what picks the library's movements: codes (the default's predictor, shipped) or match "
                         "(music descriptors -> nearest windows, issue 40's second design; docs/library.md)")
+    p.add_argument("--no-folder-choice", action="store_true",
+                   help="every set but folders with library_folders.FOLDER_CHOICE off: under auto the stream matches "
+                        "among every folder's exemplars (and keeps to the one it starts in); the baseline")
     p.add_argument("--cache", type=Path, default=REPO / ".cache" / "library_play", help="DWM frames cache")
     p.add_argument("--out", type=Path, default=REPO / "runs" / "library_play", help="report folder")
     p.add_argument("--save-checkpoint", type=Path, metavar="OUT.pt",
@@ -257,6 +260,10 @@ def main(argv: list[str] | None = None) -> int:
     from models.errors import PerformerError
 
     torch.set_num_threads(1)
+    if a.no_folder_choice:
+        import models.networks.library_folders as lf
+
+        lf.FOLDER_CHOICE = False
     if a.write_dwm:
         try:
             write_dwm(Path(a.write_dwm[0]), a.write_dwm[1:], a.data / "dwm")
