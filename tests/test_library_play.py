@@ -263,7 +263,7 @@ def test_auto_plays_every_folder_of_a_library(loaded, features):
 def test_the_folder_choice_moves_at_once_unseen_and_on_evidence_while_dancing():
     """library_folders.FolderChoice: the first movement and a full idle take the drawn code's likeliest
     folder at once; while dancing it moves only after FOLDER_DWELL code steps and once the running
-    mean of the drawn codes' priors leads by FOLDER_MARGIN."""
+    mean of the drawn codes' priors leads by FOLDER_MARGIN; after a requested style, from its folder."""
     from models.networks.library_folders import FOLDER_DWELL, FolderChoice
 
     prior = np.log(np.array([[0.9, 0.1], [0.1, 0.9]]))  # code 0 is folder 0's, code 1 folder 1's
@@ -273,6 +273,8 @@ def test_the_folder_choice_moves_at_once_unseen_and_on_evidence_while_dancing():
     steps = [f.step(1, free=False) for _ in range(FOLDER_DWELL + 4)]
     assert steps[0] == 0 and steps[FOLDER_DWELL - 2] == 0 and steps[-1] == 1 and f.moves == 1, steps
     assert all(f.step(c, free=False) == 1 for c in (0, 1) * 6)  # a folder's code now and then does not move it
+    f.follow(0)  # a requested style played folder 0: auto goes on from it, after the dwell
+    assert f.step(1, free=False) == 0
 
 
 def test_a_faster_tempo_chooses_the_livelier_folder():

@@ -797,7 +797,9 @@ class DanceStream:
             self._commit(draws[0])
             self._has_cont = False
             return
-        if self._folders is not None:  # the folder the drawn code chooses, at once where no dance is seen
+        if self._folders is not None and self.style:  # a requested folder plays: auto takes over from it
+            self._folders.follow(self.style - STYLE_BASE)
+        elif self._folders is not None:  # the folder the drawn code chooses, at once where no dance is seen
             self._own = STYLE_BASE + self._folders.step(draws[0], not self._has_cont or self.idle_weight >= 1.0, tilt)
         codes = list(dict.fromkeys(draws))
         # a library (self._guard > 0): the next drawn code's exemplars join only where the best so far would

@@ -15,6 +15,7 @@ the stream plays only the playing folder's exemplars, and moves
   like any other (the drawn codes' exemplars of that folder, else its nearest: the smallest bend
   it has) and inertialized.
 
+A requested style (``--style``, the live control) plays its folder, and ``auto`` takes over from it.
 State: the playing folder, the means (F,), code steps since the last move. A few operations a
 code step (every 8 frames at 30 fps); never blocks.
 """
@@ -71,6 +72,12 @@ class FolderChoice:
             self.folder, self._since = best, 0
             self.moves += 1
         return self.folder
+
+
+    def follow(self, folder: int) -> None:
+        """A requested style plays ``folder`` (index) this code step: ``auto`` takes over from it, after
+        :data:`FOLDER_DWELL` code steps at the earliest."""
+        self.folder, self._since = folder, 0
 
 
 def folder_choice(model, speed: np.ndarray, real: np.ndarray) -> FolderChoice | None:
