@@ -236,6 +236,58 @@ def test_a_far_handover_draws_the_next_code_then_the_nearest_exemplars(loaded, f
         f"median handover bend {np.median(bends):.1f} degrees a bone"
 
 
+def test_auto_plays_every_folder_of_a_library(loaded, features):
+    """Under auto the music chooses the library folder (models/networks/library_folders.py): streams of
+    seeds 0-2 over the bundled clip play both folders' exemplars (swing 344 of the 1,620 dancing
+    frames; seed 1 moves twice while dancing). Switched off (FOLDER_CHOICE False) the far-handover
+    guard kept every stream in the folder it started in: all 1,620 sway."""
+    from models.data.library import clip_tracks
+    from models.networks.dance_stream import DanceStream
+    from models.networks.library_player import STYLE_BASE, library_model
+
+    tracks = [clip_tracks(swinging_dance(1, height=0.6)), clip_tracks(swinging_dance(2))]
+    model = library_model(loaded.model, [p for p, _ in tracks], [t for _, t in tracks], ["swing", "sway"])
+    played, moved = [], 0
+    for seed in (0, 1, 2):
+        s, own = DanceStream(model, seed=seed), []
+        for t in range(len(features)):
+            s.push(features[t: t + 1])
+            if s.playing_member is not None and t >= 60 and s.idle_weight == 0.0:
+                own.append(int(model.member_style[s.playing_member]))
+        moved += int(np.sum(np.diff(own) != 0))
+        played += own
+    share = {f: float(np.mean(np.array(played) == STYLE_BASE + i)) for i, f in enumerate(("swing", "sway"))}
+    assert len(played) > 600 and min(share.values()) >= 0.05 and moved >= 1, (share, moved)
+
+
+def test_the_folder_choice_moves_at_once_unseen_and_on_evidence_while_dancing():
+    """library_folders.FolderChoice: the first movement and a full idle take the drawn code's likeliest
+    folder at once; while dancing it moves only after FOLDER_DWELL code steps and once the running
+    mean of the drawn codes' priors leads by FOLDER_MARGIN; after a requested style, from its folder."""
+    from models.networks.library_folders import FOLDER_DWELL, FolderChoice
+
+    prior = np.log(np.array([[0.9, 0.1], [0.1, 0.9]]))  # code 0 is folder 0's, code 1 folder 1's
+    f = FolderChoice(prior)
+    assert f.step(1, free=False) == 1  # the first movement: the drawn code's folder
+    assert f.step(0, free=True) == 0  # fully idle: at once
+    steps = [f.step(1, free=False) for _ in range(FOLDER_DWELL + 4)]
+    assert steps[0] == 0 and steps[FOLDER_DWELL - 2] == 0 and steps[-1] == 1 and f.moves == 1, steps
+    assert all(f.step(c, free=False) == 1 for c in (0, 1) * 6)  # a folder's code now and then does not move it
+    f.follow(0)  # a requested style played folder 0: auto goes on from it, after the dwell
+    assert f.step(1, free=False) == 0
+
+
+def test_a_faster_tempo_chooses_the_livelier_folder():
+    """library_folders.FOLDER_TEMPO: with codes that say nothing of the folder, the tempo's tilt (+ above
+    the memory's tempo, - below) times each folder's liveliness chooses: the livelier folder at a faster
+    tempo, the calmer at a slower one (FOLDER_TEMPO 0: the first folder both times)."""
+    from models.networks.library_folders import FolderChoice
+
+    f = FolderChoice(np.log(np.full((2, 2), 0.5)), lively=np.array([-0.5, 0.5]))  # folder 1 the livelier
+    assert f.step(0, free=True, tilt=0.6) == 1
+    assert f.step(0, free=True, tilt=-0.6) == 0
+
+
 def test_a_faster_tempo_plays_the_livelier_clips(loaded):
     """The tempo's tilt reads each exemplar's liveliness too (library_player.EXEMPLAR_TILT): a library of
     one dance at two paces (0.6x and 1.6x, both given 120 bpm) to the bundled clip at 0.8x and 1.25x

@@ -25,6 +25,10 @@ nearer the library's clips, and its median distance to the nearest DWM frame. Th
   stretch set of ``--music`` (recordings of 80-130 bpm, 0.8x/1.0x/1.25x, ``--seeds``): speed
   ratio 1.25x over 0.8x (the mean over the seeds, and each seed's own: the worst must pass too), beat hit rate at 1.0x and its half-shifted control; the idle share of
   every recording up to the end of its music (presence set);
+* folders: under ``auto``, each folder's share of the dancing frames (by the playing exemplar's
+  folder) and the folder changes a minute of dancing, with the music's folder choice
+  (models/networks/library_folders.py) off and on, the two interleaved recording by recording,
+  with each one's seam ratio;
 * style: with each folder of the library requested, the share of dancing frames whose playing
   exemplar is that folder's (``DanceStream.playing_member``), and (after the slash) the share
   nearer that folder's clips than the other folders' (the handover's bend counts against it).
@@ -158,6 +162,46 @@ def perform(model, feats: np.ndarray, style: str | None = None, windows: np.ndar
     return poses, dance, token, (cont / steps if steps else float("nan"))
 
 
+def folder_shares(model, feats: np.ndarray) -> dict:
+    """Under auto, with the folder choice (library_folders.FOLDER_CHOICE) off, then on: the dancing
+    frames' folder tokens' counts, the folder changes among consecutive dancing frames, the dancing
+    frames and the seam ratio, one stream each (seed 0)."""
+    import models.networks.library_folders as lf
+
+    out, was = {}, lf.FOLDER_CHOICE
+    try:
+        for key, on in (("off", False), ("on", True)):
+            lf.FOLDER_CHOICE = on
+            poses, dance, token, _ = perform(model, feats)
+            tok = token[dance]
+            lib = tok[tok >= 4]
+            out[key] = {"frames": int(dance.sum()), "tokens": {int(t): int((tok == t).sum()) for t in np.unique(tok)},
+                        "changes": int(np.sum(lib[1:] != lib[:-1])), "seam": handover_seam(model, poses)}
+    finally:
+        lf.FOLDER_CHOICE = was
+    return out
+
+
+def summarize_folders(rows: list[dict], names) -> dict:
+    """Each folder's share of all dancing frames, the folder changes a minute of dancing (30 fps),
+    the worst seam, off and on (:func:`folder_shares` of every recording); printed."""
+    from models.networks.library_player import STYLE_BASE
+
+    out = {}
+    for key in ("off", "on"):
+        n = sum(r[key]["frames"] for r in rows)
+        share = {f: sum(r[key]["tokens"].get(STYLE_BASE + i, 0) for r in rows) / max(n, 1) for i, f in enumerate(names)}
+        per_min = sum(r[key]["changes"] for r in rows) / max(n / 1800.0, 1e-9)
+        rec = [min(r[key]["tokens"].get(STYLE_BASE + i, 0) / max(r[key]["frames"], 1) for i in range(len(names)))
+               for r in rows]
+        out[key] = {"share": share, "changes_per_min": per_min, "seam": max(r[key]["seam"] for r in rows),
+                    "recordings_with_both": int(sum(v > 0 for v in rec))}
+        print(f"auto, folder choice {key}: dancing frames by folder " + ", ".join(f"{f} {v:.3f}" for f, v in share.items())
+              + f"; {per_min:.2f} folder changes a minute; {out[key]['recordings_with_both']} of {len(rows)} "
+              f"recordings play every folder; worst seam {out[key]['seam']:.2f}")
+    return out
+
+
 def handover_seam(model, poses: np.ndarray) -> float:
     from models.networks.blend import seam_ratio
     from models.networks.dance_stream import WARP_LAG
@@ -190,10 +234,14 @@ def parse_args(argv):
     p.add_argument("--start", type=float, default=10.0, help="excerpt start, s (default 10)")
     p.add_argument("--seconds", type=float, default=45.0, help="excerpt length, s (default 45)")
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1], help="listening stretch-set seeds (default 0 1)")
-    p.add_argument("--sets", default="own,listening,style", help="comma-separated: own, listening, style (default all)")
+    p.add_argument("--sets", default="own,listening,style,folders",
+                   help="comma-separated: own, listening, style, folders (default all)")
     p.add_argument("--chooser", choices=("codes", "match"), default="codes",
                    help="what picks the library's movements: codes (the default's predictor, shipped) or match "
                         "(music descriptors -> nearest windows, issue 40's second design; docs/library.md)")
+    p.add_argument("--no-folder-choice", action="store_true",
+                   help="every set but folders with library_folders.FOLDER_CHOICE off: under auto the stream matches "
+                        "among every folder's exemplars (and keeps to the one it starts in); the baseline")
     p.add_argument("--cache", type=Path, default=REPO / ".cache" / "library_play", help="DWM frames cache")
     p.add_argument("--out", type=Path, default=REPO / "runs" / "library_play", help="report folder")
     p.add_argument("--save-checkpoint", type=Path, metavar="OUT.pt",
@@ -212,6 +260,10 @@ def main(argv: list[str] | None = None) -> int:
     from models.errors import PerformerError
 
     torch.set_num_threads(1)
+    if a.no_folder_choice:
+        import models.networks.library_folders as lf
+
+        lf.FOLDER_CHOICE = False
     if a.write_dwm:
         try:
             write_dwm(Path(a.write_dwm[0]), a.write_dwm[1:], a.data / "dwm")
@@ -259,11 +311,12 @@ def main(argv: list[str] | None = None) -> int:
                     "clip_bpm": [round(1800.0 / p, 1) if p else 0.0 for p in lib.clip_periods], "songs": {}}
     print(f"library {a.library}: {len(clips)} clips, folders {', '.join(lib.library_styles)}, tempi "
           f"{report['clip_bpm']} bpm; {lib.config.members} exemplars a code")
-    if "own" in sets or "style" in sets:
-        skip = {c.name for c in clips}
-        near_dwm = Nearest(dwm_frames(a.data / "dwm", a.cache, skip))
-        report["dwm_left_out"] = sorted(skip & {d.name for d in (a.data / "dwm").iterdir()})
-        windows = member_windows(lib, [clip_tracks(c.motion)[0] for c in clips])
+    if sets & {"own", "style", "folders"}:
+        if "own" in sets:
+            skip = {c.name for c in clips}
+            near_dwm = Nearest(dwm_frames(a.data / "dwm", a.cache, skip))
+            report["dwm_left_out"] = sorted(skip & {d.name for d in (a.data / "dwm").iterdir()})
+            windows = member_windows(lib, [clip_tracks(c.motion)[0] for c in clips])
         tot = {"lib": [], "lib_dwm": [], "def_user": [], "def_dwm": [], "lib_tok": []}
         print(f"{'recording':<38} {'lib: nearer user':>16} {'median cm':>9} {'seam':>5} | {'default: nearer user':>20} "
               f"{'to DWM cm':>9} {'seam':>5}" + "".join(f" {'style ' + f:>14}" for f in lib.library_styles))
@@ -298,6 +351,11 @@ def main(argv: list[str] | None = None) -> int:
                     others = np.min([Nearest(x)(pts) for g, x in folders.items() if g != f], axis=0)
                     row.setdefault("style", {})[f] = float((token[dance] == STYLE_BASE + i).mean())
                     row.setdefault("style_nearer", {})[f] = float((Nearest(own)(pts) < others).mean())
+            if "folders" in sets and len(folders) > 1:
+                row["folders"] = folder_shares(lib, feats)
+                print(f"  {p.stem[:30]} auto folders (token: frames), choice off / on: "
+                      + " / ".join(f"{row['folders'][k]['tokens']} {row['folders'][k]['changes']} changes, seam "
+                                   f"{row['folders'][k]['seam']:.2f}" for k in ("off", "on")), flush=True)
             report["songs"][p.stem] = row
             li, de = row.get("lib", {}), row.get("default", {})
             print(f"{p.stem[:38]:<38} {li.get('nearer_user', np.nan):16.3f} {li.get('median_user_cm', np.nan):9.2f} "
@@ -326,6 +384,8 @@ def main(argv: list[str] | None = None) -> int:
                   f"mean of recordings: {report['continues']:.3f}")
             report["default"] = {"nearer_user": float((bu < bd).mean()), "median_dwm_cm": float(np.median(bd) * 100),
                                  "seam": max(r["default"]["seam"] for r in report["songs"].values())}
+        if "folders" in sets and len(folders) > 1:
+            report["folders"] = summarize_folders([r["folders"] for r in report["songs"].values()], lib.library_styles)
         if "style" in sets and len(folders) > 1:
             report["style_min"] = min(v for r in report["songs"].values() for v in r["style"].values())
             report["style_nearer_min"] = min(v for r in report["songs"].values() for v in r["style_nearer"].values())

@@ -50,7 +50,8 @@ from models.networks.stage import SpotStage, Stage, cached_travel
 from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate
 from models.networks import lead as lead_part
 from models.networks.lead import PhaseForecast
-from models.networks.library_player import NEAREST, bend_deg, member_choice, resolve_style
+from models.networks.library_folders import folder_choice
+from models.networks.library_player import NEAREST, STYLE_BASE, bend_deg, member_choice, resolve_style
 from models.networks.member_tables import (CHUNK_FRAMES, MemberTables, code_energy, code_frequency, member_dips,  # noqa: F401
                                           member_positions, member_speed, member_tables)
 from models.networks.streaming import FEATURE_LIMIT
@@ -546,6 +547,9 @@ class DanceStream:
         self._draws, self._guard, self._member_tilt = member_choice(model, speed, real, DRAWS)
         where = np.argwhere(real)  # (n, 2) every exemplar's (code, slot); its first pose's quaternions (n, 4 J)
         self._first = (self._members[:, :, 0, 3:][real], where) if self._guard > 0.0 else None
+        tok = self._member_style[where[:, 0], where[:, 1]]  # the same by member style token: a folder's own search
+        self._first_of = {int(t): (self._first[0][tok == t], where[tok == t]) for t in np.unique(tok)} if self._first else {}
+        self._folders = folder_choice(model, speed, real)  # under auto, the library folder the drawn codes choose; None: any
         self._fk_parents = np.array(POINT_PARENT_INDEX, np.int64)  # joint_speed's skeleton (SPEED_MATCH)
         self._fk_offsets = load_default_skeleton().point_offsets().astype(np.float64)
         # how much a repeat of each code is penalised (REPEAT_PENALTY): calm codes repeat freely
@@ -609,6 +613,9 @@ class DanceStream:
         self._density = 0.0  # their onset density (per s), taken at each code step
         self._lag = WARP_LAG  # exemplar frames the beat warp plays behind the movement
         self._has_cont = False  # the playing movement has a real continuation to match the next one to
+        self._own = 0  # member style token the exemplars are kept to under auto (self._folders); 0 any
+        if self._folders is not None:
+            self._folders.reset()
         self.playing_member: tuple[int, int] | None = None  # (code, exemplar) of the playing movement; None: decoded
         self._idle.reset()  # no music, fully idle: a stream starts at rest and fades in on music
         self._played_contact = np.zeros((3 * self.seg, 3), np.float32)  # each foot's contact and the lift, as _played
@@ -807,6 +814,10 @@ class DanceStream:
             self._commit(draws[0])
             self._has_cont = False
             return
+        if self._folders is not None and self.style:  # a requested folder plays: auto takes over from it
+            self._folders.follow(self.style - STYLE_BASE)
+        elif self._folders is not None:  # the folder the drawn code chooses, at once where no dance is seen
+            self._own = STYLE_BASE + self._folders.step(draws[0], not self._has_cont or self.idle_weight >= 1.0, tilt)
         codes = list(dict.fromkeys(draws))
         # a library (self._guard > 0): the next drawn code's exemplars join only where the best so far would
         # bend the motion past the guard, and where none of the drawn codes' does, the nearest of any code's
@@ -846,33 +857,32 @@ class DanceStream:
     def _nearest(self, pose: np.ndarray) -> list[tuple[int, int]]:
         """(code, exemplar) of the :data:`~models.networks.library_player.NEAREST` exemplars of any code (of the
         requested style's) whose first pose is nearest ``pose`` (P,) (mean over the bones of sqrt(1 - |q . q'|))."""
-        first, where = self._first  # (n, 4 J), (n, 2)
+        tok = self.style or self._own  # a requested style (or auto's folder): its own exemplars, where it has any
+        first, where = self._first_of.get(tok, self._first) if tok and STYLE_MEMBERS else self._first  # (n, 4 J), (n, 2)
         q = pose[3:].reshape(-1, 4)
         block = np.zeros((q.size, len(q)), np.float32)  # each bone's quaternion in its own column: one matmul
         block[np.arange(q.size), np.repeat(np.arange(len(q)), 4)] = q.ravel()
         with single_thread_blas():
             dot = first @ block  # (n, J)
         d = np.sqrt(np.maximum(1.0 - np.abs(dot), 0.0)).mean(1)
-        if self.style and STYLE_MEMBERS:  # a requested style: its own exemplars, where it has any
-            own = self._member_style[where[:, 0], where[:, 1]] == self.style
-            d = np.where(own, d, np.inf) if own.any() else d
         k = min(NEAREST, len(d))
         return [(int(where[n, 0]), int(where[n, 1])) for n in np.argpartition(d, k - 1)[:k]]
 
     def _candidates(self, pairs: list[tuple[int, int]]) -> tuple[list, np.ndarray, np.ndarray, np.ndarray | None]:
         """(pairs (code, exemplar), their windows (n, 2 seg, P), dips (n, seg), liveliness weights (n,)
         or None) of ``pairs`` as the style and the stage allow."""
-        codes = list(dict.fromkeys(c for c, _ in pairs))
-        if self.style and STYLE_MEMBERS:  # a requested style: its own dancers' exemplars where the codes have some
-            own = [(c, j) for c, j in pairs if self._member_style[c, j] == self.style]
+        tok = self.style or self._own
+        if tok and STYLE_MEMBERS:  # a requested style (or auto's folder): its own exemplars where the codes have some
+            own = [(c, j) for c, j in pairs if self._member_style[c, j] == tok]
             pairs = own or pairs
         if self._travels:  # near an edge: exemplars whose own travel heads inwards (stage.INWARDS)
             keep = self._stage.inwards(np.array([self._travel[c, j, self.seg, :2] for c, j in pairs]))
             pairs = pairs if keep is None else [p for p, k in zip(pairs, keep) if k]
         tilt = self._member_tilt
-        if len(codes) == 1 and pairs == self._pairs(codes):  # all of one code's, in order: a slice, no gathering
-            c, n = codes[0], len(pairs)
-            return pairs, self._members[c, :n], self._dips[c, :n], None if tilt is None else tilt[c, :n]
+        c, a = pairs[0] if pairs else (-1, 0)
+        if pairs == [(c, j) for j in range(a, a + len(pairs))]:  # a run of one code's (a folder's): a slice, no gathering
+            b = a + len(pairs)
+            return pairs, self._members[c, a:b], self._dips[c, a:b], None if tilt is None else tilt[c, a:b]
         return (pairs, np.stack([self._members[c, j] for c, j in pairs]), np.stack([self._dips[c, j] for c, j in pairs]),
                 None if tilt is None else np.array([tilt[p] for p in pairs]))
 

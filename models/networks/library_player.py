@@ -25,8 +25,9 @@ How its stream chooses (:func:`member_choice`, read by DanceStream; the attribut
 would all bend the motion past :data:`HANDOVER_GUARD`, the next drawn code's join the matching (up
 to :data:`LIBRARY_DRAWS`), then the :data:`NEAREST` exemplars of any code; above the memory's
 tempo the tempo's tilt also favours livelier exemplars (:data:`EXEMPLAR_TILT`); the idle between
-songs is the clips' own mean pose (:func:`_mean_pose`), not the default dancers'. With ``mix`` the
-stream chooses as the default's does (the guard kept it in the dancers it began with).
+songs is the clips' own mean pose (:func:`_mean_pose`), not the default dancers'; under ``auto`` a
+library of two or more folders plays one at a time, the one the music chooses (library_folders.py).
+With ``mix`` the stream chooses as the default's does (the guard kept it in the dancers it began with).
 
 Style tokens: 1..3 are the default's dancers (cha-cha, rumba, waltz), :data:`STYLE_BASE` + i
 the library's i-th folder. The predictor hears a library style as "auto" (it knows only its
