@@ -47,7 +47,10 @@ features as the engine computes them):
 that cue always holds; ``--floor-db 0``: the voice network's part off), ``--pause-steady`` its pause
 rule's ``PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off), ``--start-evidence``
 and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) and ``START_DECAY``, to
-measure its parts alone.
+measure its parts alone; ``--off`` switches off the parts that have no constant to set:
+``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
+settles), ``margin`` (music by the detector's margin alone clears the count), ``resume`` (the
+voice-over start's count starts from 0 when a voice stops the dance).
 
 It also prints the gate's own cost per frame (median and 99th percentile, microseconds).
 
@@ -89,6 +92,26 @@ SETTLE_TARGET_S: dict[str, float] = {"silence": 3.0, "speech": 2.0}
 SETTLE_TARGET_OTHER_S: float = 2.5
 
 
+#: Parts of the gate ``--off`` switches off: name -> (``IdleGate`` or its ``MusicGate``, attribute).
+SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_only"), "margin": ("presence", "margin_hold"),
+                                        "resume": ("presence", "resume_rule")}
+#: The switches ``--off`` named (set by main).
+OFF: set[str] = set()
+
+
+def new_stream(lm, seed: int):
+    """A fresh :class:`DanceStream` of ``lm`` with the gate's parts named in :data:`OFF` switched off."""
+    from models.networks.dance_stream import DanceStream
+
+    stream = DanceStream(lm.model, seed=seed)
+    for name in OFF:
+        where, attr = SWITCHES[name]
+        part = stream._idle if where == "idle" else stream._idle.presence
+        if part is not None:
+            setattr(part, attr, False)
+    return stream
+
+
 def rms_dbfs(x: np.ndarray) -> float:
     return float(20 * np.log10(np.sqrt(np.mean(np.square(x, dtype=np.float64))) + 1e-12))
 
@@ -128,9 +151,8 @@ def idle_sounding(lm, audio: np.ndarray, end: int, seed: int) -> float:
     """Share of frames after the first 3 s up to frame ``end`` (the end of the recording's music)
     in which the gate of a fresh stream on ``audio`` (n,) is not fully dancing."""
     from models.features.spectral import extract_features
-    from models.networks.dance_stream import DanceStream
 
-    w = DanceStream(lm.model, seed=seed).listen(extract_features(audio, lm.features))
+    w = new_stream(lm, seed).listen(extract_features(audio, lm.features))
     return float((w[90:end] > 0).mean()) if end > 90 else 0.0
 
 
@@ -147,12 +169,11 @@ def excerpt(data: Path, name: str, seconds: float) -> np.ndarray:
 def run_gap(lm, a: np.ndarray, gap: np.ndarray, b: np.ndarray, seed: int) -> dict:
     """Song ``a``, ``gap``, song ``b`` through a fresh stream: the gap's settle, held, back, fade steps."""
     from models.features.spectral import extract_features
-    from models.networks.dance_stream import DanceStream
 
     gap = gap[: len(gap) // HOP * HOP]
     audio = np.concatenate([a, gap, b]).astype(np.float32)
     feats = extract_features(audio, lm.features)
-    stream = DanceStream(lm.model, seed=seed)
+    stream = new_stream(lm, seed)
     poses = np.empty((len(feats), lm.model.config.pose_dim), np.float32)
     w = np.empty(len(feats))
     for t in range(len(feats)):
@@ -234,8 +255,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--start-evidence", type=float,
                    help="the voice-over start's START_EVIDENCE, frames (inf: an idle performer starts on its detector alone)")
     p.add_argument("--start-decay", type=float, help="the voice-over start's START_DECAY (frames a frame without evidence takes off)")
+    p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
+                   "through voids the whole stop count), margin (music by the margin alone clears the count), resume (the "
+                   "voice-over start's count starts from 0 at a stop)")
     args = p.parse_args(argv)
     parts = set(args.parts.split(","))
+    off = {o for o in args.off.split(",") if o}
+    if off - set(SWITCHES):
+        p.error(f"--off: unknown part(s) {sorted(off - set(SWITCHES))}; known: {', '.join(SWITCHES)}")
+    OFF.update(off)
     known = {"recordings", "mixes", "gaps", "readers", "espeak"}
     if parts - known:
         p.error(f"--parts: unknown part(s) {sorted(parts - known)}")
@@ -244,7 +272,6 @@ def main(argv: list[str] | None = None) -> int:
     from models.features.audio_io import load_audio
     from models.features.spectral import extract_features
     from models.generate import load_model
-    from models.networks.dance_stream import DanceStream
     from models.networks import music_gate as gate
     from models.training import music_gate as mg
 
@@ -278,7 +305,7 @@ def main(argv: list[str] | None = None) -> int:
     rec_rows, cost = [], []
     for name, audio in (recordings if "recordings" in parts else []):
         feats = extract_features(audio, lm.features)
-        stream = DanceStream(lm.model, seed=args.seed)
+        stream = new_stream(lm, args.seed)
         w = np.empty(len(feats))
         for t in range(len(feats)):  # one frame at a time, as the engine pushes them
             t0 = time.perf_counter()

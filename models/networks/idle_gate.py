@@ -22,7 +22,14 @@ reader's pauses between words still tell speech from music), but a dancing perfo
 only once the break has lasted :data:`BREAK_HOLD_SILENT` frames (silence: idle within 3 s of
 its start) or :data:`BREAK_HOLD` (an audible quiet, crowd or room after a song: idle within
 2.5 s). The stop-time breaks and breakdowns of a song (up to 2 s) are danced through, and
-what a break danced through counted towards the stop is void when it ends.
+what a break danced through counted towards the stop is void when it ends: the count goes back
+to what it was before the break (``break_count``), not to 0, so a reader's one-frame pause between
+two words does not void what the words before it counted (issue 43: reader 5703 after
+nutcracker idle in 2.50 s, 1.63 s with it). ``void_breaks_only=False``: a break voids the whole
+count, as before.
+
+A frame the presence detector hears as music by its margin alone (``music_gate.MusicGate.in_margin``)
+neither counts towards the stop nor clears the count.
 
 After :data:`ABSENT_FRAMES` frames without music (a sure detector's frame counting up to
 twice, ``music_gate.SURE_COUNT``) the performer fades over :data:`FADE_FRAMES` into the idle;
@@ -79,17 +86,20 @@ class IdleGate:
     hold_breaks: False judges break frames by the detector like any other (as before breaks
     were held: silence stopped after :data:`ABSENT_FRAMES`); voice_rule: False hears a voice
     over the music as the stop network does (``music_gate.MusicGate``'s voice-over rule off;
-    ``presence.voice_rule`` switches it on a running gate).
+    ``presence.voice_rule`` switches it on a running gate); void_breaks_only: False voids the
+    whole count when a break is danced through (module docstring).
 
     State (``reset``): ``music`` (bool), ``run`` (frames of disagreement, weighted),
     ``w_idle`` (0..1), ``level`` (dB), ``break_frames`` (the current break's length),
-    ``break_silent`` (every frame of it silent), ``forced_idle``.
+    ``break_silent`` (every frame of it silent), ``break_count`` (``run`` as the break began),
+    ``forced_idle``.
     """
 
     def __init__(self, model: DanceVQ, feat_mean: np.ndarray, feat_std: np.ndarray, hold_breaks: bool = True,
-                 voice_rule: bool = True) -> None:
+                 voice_rule: bool = True, void_breaks_only: bool = True) -> None:
         c = model.config
         self.hold_breaks = bool(hold_breaks)
+        self.void_breaks_only = bool(void_breaks_only)
         self.energy_min, self._gate_b = (float(v) for v in model.gate)
         self._ecol = c.energy_col if 0 <= c.energy_col < c.feature_dim else None
         self._gcols = [*GATE_MFCC, c.clarity_col] if 0 <= c.clarity_col < c.feature_dim else []
@@ -115,6 +125,7 @@ class IdleGate:
         self.level = math.nan  # the music's running level, dB (NaN: nothing heard yet)
         self.break_frames = 0
         self.break_silent = True
+        self.break_count = 0.0  # ``run`` as the current break began
         self.present = False  # the detector's verdict on the last frame
         self._ema = np.zeros(len(self._gcols))  # the logistic detector's running mean
         if self.presence is not None:
@@ -160,18 +171,23 @@ class IdleGate:
         held = False
         if self.hold_breaks and self._ecol is not None:
             was = self.break_frames
+            if not was:
+                self.break_count = self.run
             if self._is_break(float(row[self._ecol])):
                 held = self.music and self.break_frames < (BREAK_HOLD_SILENT if self.break_silent else BREAK_HOLD)
-            elif was and self.music:
-                self.run = 0.0  # a break danced through: what it counted towards the stop is void
+            elif was and self.music:  # a break danced through: what it counted towards the stop is void
+                self.run = self.break_count if self.void_breaks_only else 0.0
         present = self._detector(row)
         self.present = present
         count = 1.0  # a sure detector counts a frame as more than one (music_gate.SURE_COUNT)
         if self.music and not present and self.presence is not None:
             count = self.presence.stop_count()
-        self.run = self.run + count if present != self.music else 0.0
+        if present != self.music:
+            self.run += count
+        elif not (self.music and self.presence is not None and self.presence.in_margin):
+            self.run = 0.0  # music by the detector's margin alone neither counts nor clears
         start = PRESENT_FRAMES if self.presence is None else START_FRAMES  # the presence detector's own
-        if self.run >= (start if present else ABSENT_FRAMES) and not held:
+        if present != self.music and self.run >= (start if present else ABSENT_FRAMES) and not held:
             self.music, self.run = present, 0.0
         target = 1.0 if (self.forced_idle or not self.music) else 0.0
         step = 1.0 / FADE_FRAMES
