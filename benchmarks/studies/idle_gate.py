@@ -50,7 +50,9 @@ and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) a
 measure its parts alone; ``--off`` switches off the parts that have no constant to set:
 ``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
 settles), ``margin`` (music by the detector's margin alone clears the count), ``resume`` (the
-voice-over start's count starts from 0 when a voice stops the dance).
+voice-over start's count starts from 0 when a voice stops the dance). ``--trace`` prints the gate's
+state frame by frame at each stop of a recording with the readers over it, or through a reader
+after a recording, instead of the tables (which network or rule said what).
 
 It also prints the gate's own cost per frame (median and 99th percentile, microseconds).
 
@@ -79,6 +81,8 @@ GAPS: tuple[tuple[str, str, float | None], ...] = (
     ("room -60", "room", -60.0), ("pink -30", "pink", -30.0))
 SR = 22050
 HOP = 735
+#: The log energy's feature column (dB).
+ENERGY = 13
 #: Levels (dB relative to the recording's RMS) of the speech laid over each recording.
 MIX_DB: tuple[float, ...] = (0.0, -6.0)
 #: Lengths (s) of the silences cut into each recording, one every :data:`BREAK_EVERY_S`.
@@ -110,6 +114,38 @@ def new_stream(lm, seed: int):
         if part is not None:
             setattr(part, attr, False)
     return stream
+
+
+def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
+    """The gate's state frame by frame (a fresh stream on ``feats`` (T, D), :data:`OFF` applied) over
+    each (first, last) frame window: time (s), idle weight, music (the gate's state), heard (the
+    detector's verdict), the stop or start logit (running mean), the voice network's logit, the
+    floor (dB range over 1 s), the pauses' steadiness, kept by the voice-over (V) or pause (P) rule,
+    the stop count, the break's frames, the log energy (dB). An empty window: every stop of the
+    dance after 3 s, from 1.5 s before it to its return."""
+    from models.networks.music_gate import presence_logit
+
+    stream = new_stream(lm, 7)
+    ig, pg = stream._idle, stream._idle.presence
+    if pg is None:
+        return ["(no presence detector: nothing to trace)"]
+    rows, music = [], []
+    for t in range(len(feats)):
+        kv, kp = pg.voice_frames, pg.pause_frames
+        w = ig.step(np.asarray(feats[t], np.float32))
+        vz = presence_logit(pg.stats, *pg._voice) if pg.has_voice else float("nan")
+        kept = "V" if pg.voice_frames > kv else "P" if pg.pause_frames > kp else "-"
+        music.append(ig.music)
+        rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
+                    f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f}")
+    if windows == [(0, 0)]:
+        windows = []
+        for t in range(91, len(music)):
+            if music[t - 1] and not music[t]:
+                back = next((u for u in range(t, len(music)) if music[u]), len(music) - 1)
+                windows.append((max(0, t - 45), min(len(music) - 1, back + 6)))
+    head = "      s    w m h  logit  voice floor pause k count brk    dB"
+    return [line for a, b in windows for line in [f"-- frames {a}-{b}", head, *rows[a: b + 1]]]
 
 
 def rms_dbfs(x: np.ndarray) -> float:
@@ -227,6 +263,47 @@ def espeak_rows(lm, data: Path, seed: int) -> tuple[list[dict], list[dict]]:
     return mixes, hosts
 
 
+def print_trace(lm, args, recordings: list, speech: list) -> int:
+    """``--trace``: the gate's state frame by frame (:func:`trace`) on a shared recording with the
+    readers over it, or on a reader after one; 2 on a name that matches nothing."""
+    from models.evaluation.listening import music_end
+    from models.features.spectral import extract_features
+
+    name, _, what = args.trace.partition("@")
+    shared = [(n, a) for n, a in recordings if n in {f.name for f in args.music.glob("*.ogg")}]
+    rec = [(i, n, a) for i, (n, a) in enumerate(shared) if n.startswith(name)]
+    reader = [(n, x) for n, x in speech if n.removeprefix("librispeech_").startswith(what) or n.startswith(what)]
+    if not rec or not what:
+        print(f"idle_gate: --trace {args.trace!r}: no shared recording starts with {name!r} (RECORDING@DB or RECORDING@READER)",
+              file=sys.stderr)
+        return 2
+    i, rname, audio = rec[0]
+    audio = audio[: len(audio) // HOP * HOP]
+    if reader:
+        cut = lambda x: x[int(len(x) * args.reader_at): int(len(x) * args.reader_at) + int(args.song_s * SR)]  # noqa: E731
+        a, b = cut(audio), cut(shared[(i + 1) % len(shared)][1])
+        a, b = a[: len(a) // HOP * HOP], b[: len(b) // HOP * HOP]
+        talk = reader[0][1] * 10 ** ((rms_dbfs(a) - rms_dbfs(reader[0][1])) / 20)
+        talk = talk[: len(talk) // HOP * HOP]
+        feats = extract_features(np.concatenate([a, talk, b]).astype(np.float32), lm.features)
+        g0 = len(a) // HOP
+        print(f"{reader[0][0]} after {rname} (the gap starts at {g0 / 30:.2f} s)")
+        lines = trace(lm, feats, [(g0 - 3, g0 + 75)])
+    else:
+        try:
+            db = float(what)
+        except ValueError:
+            print(f"idle_gate: --trace {args.trace!r}: {what!r} is neither a level (dB) nor a reader", file=sys.stderr)
+            return 2
+        sound, _ = music_end(lm, extract_features(audio, lm.features), Path(rname).stem)
+        talk = np.concatenate([x for _, x in speech])
+        feats = extract_features(with_speech(audio, talk, db, sound), lm.features)
+        print(f"{rname} with the readers over it at {db:g} dB: every stop after 3 s")
+        lines = trace(lm, feats, [(0, 0)])
+    print("\n".join(lines))
+    return 0
+
+
 def settle_target(gap: str) -> float:
     """Most seconds to fully idle on gap ``gap`` (its label): :data:`SETTLE_TARGET_S`."""
     return SETTLE_TARGET_S.get(gap.split()[0], SETTLE_TARGET_OTHER_S)
@@ -258,6 +335,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
                    "through voids the whole stop count), margin (music by the margin alone clears the count), resume (the "
                    "voice-over start's count starts from 0 at a stop)")
+    p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
+                   "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
+                   "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "
+                   "the gap's first 2.5 s)")
     args = p.parse_args(argv)
     parts = set(args.parts.split(","))
     off = {o for o in args.off.split(",") if o}
@@ -297,6 +378,8 @@ def main(argv: list[str] | None = None) -> int:
     except (PerformerError, OSError) as e:
         print(f"idle_gate: {e}", file=sys.stderr)
         return 2
+    if args.trace:
+        return print_trace(lm, args, recordings, speech)
     fitted = bool(lm.model.presence.abs().sum() > 0)
     print(f"{lm.path}: detector {'presence network (models/networks/music_gate.py)' if fitted else 'logistic (older checkpoint)'}")
 
