@@ -49,7 +49,7 @@ rule's ``PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off)
 and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) and ``START_DECAY``, to
 measure its parts alone; ``--off`` switches off the parts that have no constant to set:
 ``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
-settles), ``margin`` (music by the detector's margin alone clears the count), ``resume`` (the
+settles), ``fresh`` (the statistics keep their time constant after a silence), ``resume`` (the
 voice-over start's count starts from 0 when a voice stops the dance). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, or through a reader
 after a recording, instead of the tables (which network or rule said what).
@@ -97,7 +97,7 @@ SETTLE_TARGET_OTHER_S: float = 2.5
 
 
 #: Parts of the gate ``--off`` switches off: name -> (``IdleGate`` or its ``MusicGate``, attribute).
-SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_only"), "margin": ("presence", "margin_hold"),
+SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_only"), "fresh": ("presence", "fresh_rule"),
                                         "resume": ("presence", "resume_rule")}
 #: The switches ``--off`` named (set by main).
 OFF: set[str] = set()
@@ -333,7 +333,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="the voice-over start's START_EVIDENCE, frames (inf: an idle performer starts on its detector alone)")
     p.add_argument("--start-decay", type=float, help="the voice-over start's START_DECAY (frames a frame without evidence takes off)")
     p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
-                   "through voids the whole stop count), margin (music by the margin alone clears the count), resume (the "
+                   "through voids the whole stop count), fresh (the statistics keep their time constant after a silence), resume (the "
                    "voice-over start's count starts from 0 at a stop)")
     p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
