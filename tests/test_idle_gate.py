@@ -13,6 +13,7 @@ import pytest
 
 from models.networks.dance_stream import FADE_FRAMES, DanceStream
 from models.networks.idle_gate import BREAK_DB, BREAK_HOLD, BREAK_HOLD_SILENT
+from models.networks.music_gate import FRESH_SILENCE
 from test_dance_vq import music, tiny_model
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -82,12 +83,13 @@ def test_a_one_frame_pause_voids_only_what_it_counted_towards_the_stop() -> None
     one frame 25 dB under the music between two words (a break frame). A break danced through
     voids what the break counted, not what the words before it counted: the performer stops one
     frame later than without the pause (the break's own frame). With ``void_breaks_only`` off the
-    pause restarted the count (reader 5703 after nutcracker: idle in 2.50 s before, 1.63 s now)."""
-    def voice(pause_at: int | None) -> np.ndarray:
+    pause restarted the count. A break of FRESH_SILENCE frames or more voids the whole count, as
+    before (a song's stop-time break after a fill: DANCE_R_5 at 30 s)."""
+    def voice(pause_at: int | None, frames: int = 1) -> np.ndarray:
         x = music(500)
         x[300:, 1] = -10.0  # no music to the detector (its running mean under -6)
         if pause_at is not None:
-            x[pause_at, 0] = -10.0 - BREAK_DB - 5.0  # a frame 25 dB under the music: a break frame
+            x[pause_at: pause_at + frames, 0] = -10.0 - BREAK_DB - 5.0  # 25 dB under the music: break frames
         return x
 
     def stop(x: np.ndarray, void_breaks_only: bool = True) -> int:
@@ -102,6 +104,9 @@ def test_a_one_frame_pause_voids_only_what_it_counted_towards_the_stop() -> None
     pause = plain - 5  # inside the count towards the stop
     assert stop(voice(pause)) == plain + 1
     assert stop(voice(pause), void_breaks_only=False) > plain + 5
+    # a break of FRESH_SILENCE frames or more (a song's stop-time break) still voids the whole count
+    long = voice(pause, FRESH_SILENCE)
+    assert stop(long) == stop(long, void_breaks_only=False) > plain + FRESH_SILENCE + 5
 
 
 # -- a voice over the music, on the shipped checkpoint --------------------------------------------
