@@ -47,7 +47,12 @@ features as the engine computes them):
 that cue always holds; ``--floor-db 0``: the voice network's part off), ``--pause-steady`` its pause
 rule's ``PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off), ``--start-evidence``
 and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) and ``START_DECAY``, to
-measure its parts alone.
+measure its parts alone; ``--off`` switches off the parts that have no constant to set:
+``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
+settles), ``fresh`` (the statistics keep their time constant after a silence), ``resume`` (the
+voice-over start's count starts from 0 when a voice stops the dance). ``--trace`` prints the gate's
+state frame by frame at each stop of a recording with the readers over it, or through a reader
+after a recording, instead of the tables (which network or rule said what).
 
 It also prints the gate's own cost per frame (median and 99th percentile, microseconds).
 
@@ -76,6 +81,8 @@ GAPS: tuple[tuple[str, str, float | None], ...] = (
     ("room -60", "room", -60.0), ("pink -30", "pink", -30.0))
 SR = 22050
 HOP = 735
+#: The log energy's feature column (dB).
+ENERGY = 13
 #: Levels (dB relative to the recording's RMS) of the speech laid over each recording.
 MIX_DB: tuple[float, ...] = (0.0, -6.0)
 #: Lengths (s) of the silences cut into each recording, one every :data:`BREAK_EVERY_S`.
@@ -87,6 +94,58 @@ ESPEAK_SEED: int = 4343
 #: Most seconds to fully idle per kind of gap (issue 43): silence 3, speech 2, the rest 2.5.
 SETTLE_TARGET_S: dict[str, float] = {"silence": 3.0, "speech": 2.0}
 SETTLE_TARGET_OTHER_S: float = 2.5
+
+
+#: Parts of the gate ``--off`` switches off: name -> (``IdleGate`` or its ``MusicGate``, attribute).
+SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_only"), "fresh": ("presence", "fresh_rule"),
+                                        "resume": ("presence", "resume_rule")}
+#: The switches ``--off`` named (set by main).
+OFF: set[str] = set()
+
+
+def new_stream(lm, seed: int):
+    """A fresh :class:`DanceStream` of ``lm`` with the gate's parts named in :data:`OFF` switched off."""
+    from models.networks.dance_stream import DanceStream
+
+    stream = DanceStream(lm.model, seed=seed)
+    for name in OFF:
+        where, attr = SWITCHES[name]
+        part = stream._idle if where == "idle" else stream._idle.presence
+        if part is not None:
+            setattr(part, attr, False)
+    return stream
+
+
+def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
+    """The gate's state frame by frame (a fresh stream on ``feats`` (T, D), :data:`OFF` applied) over
+    each (first, last) frame window: time (s), idle weight, music (the gate's state), heard (the
+    detector's verdict), the stop or start logit (running mean), the voice network's logit, the
+    floor (dB range over 1 s), the pauses' steadiness, kept by the voice-over (V) or pause (P) rule,
+    the stop count, the break's frames, the log energy (dB). An empty window: every stop of the
+    dance after 3 s, from 1.5 s before it to its return."""
+    from models.networks.music_gate import presence_logit
+
+    stream = new_stream(lm, 7)
+    ig, pg = stream._idle, stream._idle.presence
+    if pg is None:
+        return ["(no presence detector: nothing to trace)"]
+    rows, music = [], []
+    for t in range(len(feats)):
+        kv, kp = pg.voice_frames, pg.pause_frames
+        w = ig.step(np.asarray(feats[t], np.float32))
+        vz = presence_logit(pg.stats, *pg._voice) if pg.has_voice else float("nan")
+        kept = "V" if pg.voice_frames > kv else "P" if pg.pause_frames > kp else "-"
+        music.append(ig.music)
+        rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
+                    f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f}")
+    if windows == [(0, 0)]:
+        windows = []
+        for t in range(91, len(music)):
+            if music[t - 1] and not music[t]:
+                back = next((u for u in range(t, len(music)) if music[u]), len(music) - 1)
+                windows.append((max(0, t - 45), min(len(music) - 1, back + 6)))
+    head = "      s    w m h  logit  voice floor pause k count brk    dB"
+    return [line for a, b in windows for line in [f"-- frames {a}-{b}", head, *rows[a: b + 1]]]
 
 
 def rms_dbfs(x: np.ndarray) -> float:
@@ -128,9 +187,8 @@ def idle_sounding(lm, audio: np.ndarray, end: int, seed: int) -> float:
     """Share of frames after the first 3 s up to frame ``end`` (the end of the recording's music)
     in which the gate of a fresh stream on ``audio`` (n,) is not fully dancing."""
     from models.features.spectral import extract_features
-    from models.networks.dance_stream import DanceStream
 
-    w = DanceStream(lm.model, seed=seed).listen(extract_features(audio, lm.features))
+    w = new_stream(lm, seed).listen(extract_features(audio, lm.features))
     return float((w[90:end] > 0).mean()) if end > 90 else 0.0
 
 
@@ -147,12 +205,11 @@ def excerpt(data: Path, name: str, seconds: float) -> np.ndarray:
 def run_gap(lm, a: np.ndarray, gap: np.ndarray, b: np.ndarray, seed: int) -> dict:
     """Song ``a``, ``gap``, song ``b`` through a fresh stream: the gap's settle, held, back, fade steps."""
     from models.features.spectral import extract_features
-    from models.networks.dance_stream import DanceStream
 
     gap = gap[: len(gap) // HOP * HOP]
     audio = np.concatenate([a, gap, b]).astype(np.float32)
     feats = extract_features(audio, lm.features)
-    stream = DanceStream(lm.model, seed=seed)
+    stream = new_stream(lm, seed)
     poses = np.empty((len(feats), lm.model.config.pose_dim), np.float32)
     w = np.empty(len(feats))
     for t in range(len(feats)):
@@ -206,6 +263,47 @@ def espeak_rows(lm, data: Path, seed: int) -> tuple[list[dict], list[dict]]:
     return mixes, hosts
 
 
+def print_trace(lm, args, recordings: list, speech: list) -> int:
+    """``--trace``: the gate's state frame by frame (:func:`trace`) on a shared recording with the
+    readers over it, or on a reader after one; 2 on a name that matches nothing."""
+    from models.evaluation.listening import music_end
+    from models.features.spectral import extract_features
+
+    name, _, what = args.trace.partition("@")
+    shared = [(n, a) for n, a in recordings if n in {f.name for f in args.music.glob("*.ogg")}]
+    rec = [(i, n, a) for i, (n, a) in enumerate(shared) if n.startswith(name)]
+    reader = [(n, x) for n, x in speech if n.removeprefix("librispeech_").startswith(what) or n.startswith(what)]
+    if not rec or not what:
+        print(f"idle_gate: --trace {args.trace!r}: no shared recording starts with {name!r} (RECORDING@DB or RECORDING@READER)",
+              file=sys.stderr)
+        return 2
+    i, rname, audio = rec[0]
+    audio = audio[: len(audio) // HOP * HOP]
+    if reader:
+        cut = lambda x: x[int(len(x) * args.reader_at): int(len(x) * args.reader_at) + int(args.song_s * SR)]  # noqa: E731
+        a, b = cut(audio), cut(shared[(i + 1) % len(shared)][1])
+        a, b = a[: len(a) // HOP * HOP], b[: len(b) // HOP * HOP]
+        talk = reader[0][1] * 10 ** ((rms_dbfs(a) - rms_dbfs(reader[0][1])) / 20)
+        talk = talk[: len(talk) // HOP * HOP]
+        feats = extract_features(np.concatenate([a, talk, b]).astype(np.float32), lm.features)
+        g0 = len(a) // HOP
+        print(f"{reader[0][0]} after {rname} (the gap starts at {g0 / 30:.2f} s)")
+        lines = trace(lm, feats, [(g0 - 3, g0 + 75)])
+    else:
+        try:
+            db = float(what)
+        except ValueError:
+            print(f"idle_gate: --trace {args.trace!r}: {what!r} is neither a level (dB) nor a reader", file=sys.stderr)
+            return 2
+        sound, _ = music_end(lm, extract_features(audio, lm.features), Path(rname).stem)
+        talk = np.concatenate([x for _, x in speech])
+        feats = extract_features(with_speech(audio, talk, db, sound), lm.features)
+        print(f"{rname} with the readers over it at {db:g} dB: every stop after 3 s")
+        lines = trace(lm, feats, [(0, 0)])
+    print("\n".join(lines))
+    return 0
+
+
 def settle_target(gap: str) -> float:
     """Most seconds to fully idle on gap ``gap`` (its label): :data:`SETTLE_TARGET_S`."""
     return SETTLE_TARGET_S.get(gap.split()[0], SETTLE_TARGET_OTHER_S)
@@ -234,8 +332,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--start-evidence", type=float,
                    help="the voice-over start's START_EVIDENCE, frames (inf: an idle performer starts on its detector alone)")
     p.add_argument("--start-decay", type=float, help="the voice-over start's START_DECAY (frames a frame without evidence takes off)")
+    p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
+                   "through voids the whole stop count), fresh (the statistics keep their time constant after a silence), resume (the "
+                   "voice-over start's count starts from 0 at a stop)")
+    p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
+                   "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
+                   "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "
+                   "the gap's first 2.5 s)")
     args = p.parse_args(argv)
     parts = set(args.parts.split(","))
+    off = {o for o in args.off.split(",") if o}
+    if off - set(SWITCHES):
+        p.error(f"--off: unknown part(s) {sorted(off - set(SWITCHES))}; known: {', '.join(SWITCHES)}")
+    OFF.update(off)
     known = {"recordings", "mixes", "gaps", "readers", "espeak"}
     if parts - known:
         p.error(f"--parts: unknown part(s) {sorted(parts - known)}")
@@ -244,7 +353,6 @@ def main(argv: list[str] | None = None) -> int:
     from models.features.audio_io import load_audio
     from models.features.spectral import extract_features
     from models.generate import load_model
-    from models.networks.dance_stream import DanceStream
     from models.networks import music_gate as gate
     from models.training import music_gate as mg
 
@@ -270,6 +378,8 @@ def main(argv: list[str] | None = None) -> int:
     except (PerformerError, OSError) as e:
         print(f"idle_gate: {e}", file=sys.stderr)
         return 2
+    if args.trace:
+        return print_trace(lm, args, recordings, speech)
     fitted = bool(lm.model.presence.abs().sum() > 0)
     print(f"{lm.path}: detector {'presence network (models/networks/music_gate.py)' if fitted else 'logistic (older checkpoint)'}")
 
@@ -278,7 +388,7 @@ def main(argv: list[str] | None = None) -> int:
     rec_rows, cost = [], []
     for name, audio in (recordings if "recordings" in parts else []):
         feats = extract_features(audio, lm.features)
-        stream = DanceStream(lm.model, seed=args.seed)
+        stream = new_stream(lm, args.seed)
         w = np.empty(len(feats))
         for t in range(len(feats)):  # one frame at a time, as the engine pushes them
             t0 = time.perf_counter()

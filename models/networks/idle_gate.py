@@ -22,7 +22,13 @@ reader's pauses between words still tell speech from music), but a dancing perfo
 only once the break has lasted :data:`BREAK_HOLD_SILENT` frames (silence: idle within 3 s of
 its start) or :data:`BREAK_HOLD` (an audible quiet, crowd or room after a song: idle within
 2.5 s). The stop-time breaks and breakdowns of a song (up to 2 s) are danced through, and
-what a break danced through counted towards the stop is void when it ends.
+what a break danced through counted towards the stop is void when it ends. A break shorter than
+``music_gate.FRESH_SILENCE`` frames (a pause between two words) voids only what it counted: the
+count goes back to what it was before the break (``break_count``), so the words before it still
+count (issue 43: an espeak-ng host after a song idle in 1.23 s instead of 1.40, applause at -35
+dBFS after a song in 1.67 s instead of 1.87); a longer one voids the whole count (after it the
+detector listens afresh: a song's stop-time break, DANCE_R_5 at 30 s, must not stop the dance on
+the count of the fill before it). ``void_breaks_only=False``: every break voids the whole count.
 
 After :data:`ABSENT_FRAMES` frames without music (a sure detector's frame counting up to
 twice, ``music_gate.SURE_COUNT``) the performer fades over :data:`FADE_FRAMES` into the idle;
@@ -39,7 +45,7 @@ import numpy as np
 
 from models.networks.dance_jit import gate_ema
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ
-from models.networks.music_gate import ENERGY_COL, START_FRAMES, MusicGate
+from models.networks.music_gate import ENERGY_COL, FRESH_SILENCE, START_FRAMES, MusicGate
 
 #: Frames without music before the performer starts to settle (0.5 s; with the presence
 #: detector a frame it is sure of counts up to twice, ``music_gate.SURE_COUNT``: 0.27 s).
@@ -79,17 +85,20 @@ class IdleGate:
     hold_breaks: False judges break frames by the detector like any other (as before breaks
     were held: silence stopped after :data:`ABSENT_FRAMES`); voice_rule: False hears a voice
     over the music as the stop network does (``music_gate.MusicGate``'s voice-over rule off;
-    ``presence.voice_rule`` switches it on a running gate).
+    ``presence.voice_rule`` switches it on a running gate); void_breaks_only: False voids the
+    whole count when any break is danced through (module docstring).
 
     State (``reset``): ``music`` (bool), ``run`` (frames of disagreement, weighted),
     ``w_idle`` (0..1), ``level`` (dB), ``break_frames`` (the current break's length),
-    ``break_silent`` (every frame of it silent), ``forced_idle``.
+    ``break_silent`` (every frame of it silent), ``break_count`` (``run`` as the break began),
+    ``forced_idle``.
     """
 
     def __init__(self, model: DanceVQ, feat_mean: np.ndarray, feat_std: np.ndarray, hold_breaks: bool = True,
-                 voice_rule: bool = True) -> None:
+                 voice_rule: bool = True, void_breaks_only: bool = True) -> None:
         c = model.config
         self.hold_breaks = bool(hold_breaks)
+        self.void_breaks_only = bool(void_breaks_only)
         self.energy_min, self._gate_b = (float(v) for v in model.gate)
         self._ecol = c.energy_col if 0 <= c.energy_col < c.feature_dim else None
         self._gcols = [*GATE_MFCC, c.clarity_col] if 0 <= c.clarity_col < c.feature_dim else []
@@ -115,6 +124,7 @@ class IdleGate:
         self.level = math.nan  # the music's running level, dB (NaN: nothing heard yet)
         self.break_frames = 0
         self.break_silent = True
+        self.break_count = 0.0  # ``run`` as the current break began
         self.present = False  # the detector's verdict on the last frame
         self._ema = np.zeros(len(self._gcols))  # the logistic detector's running mean
         if self.presence is not None:
@@ -160,10 +170,12 @@ class IdleGate:
         held = False
         if self.hold_breaks and self._ecol is not None:
             was = self.break_frames
+            if not was:
+                self.break_count = self.run
             if self._is_break(float(row[self._ecol])):
                 held = self.music and self.break_frames < (BREAK_HOLD_SILENT if self.break_silent else BREAK_HOLD)
-            elif was and self.music:
-                self.run = 0.0  # a break danced through: what it counted towards the stop is void
+            elif was and self.music:  # a break danced through: what it counted towards the stop is void
+                self.run = self.break_count if self.void_breaks_only and was < FRESH_SILENCE else 0.0
         present = self._detector(row)
         self.present = present
         count = 1.0  # a sure detector counts a frame as more than one (music_gate.SURE_COUNT)

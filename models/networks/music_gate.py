@@ -60,7 +60,19 @@ song that starts under a host; a band that drops under the voice). An idle perfo
 also counts as music once both cues have held for long enough: a count of the frames where the
 voice network hears music and the floor holds, up 1 a frame, down :data:`START_DECAY` a frame
 without, reaches :data:`START_EVIDENCE` (1.5 s). ``start_rule=False`` (or ``voice_rule=False``)
-switches it off.
+switches it off. **The resume** (part of the start): while the performer dances, the same count
+goes up 1 a frame that the voice-over or the pause rule keeps as music and down :data:`START_DECAY`
+a frame that they do not keep, so a performer that a voice over the music stopped after all starts
+again from what it had heard (a band that stays under a host restarts the dance sooner; a host
+after a song has no voice over the music before it). ``resume_rule=False`` switches it off (the
+count starts from 0 at the stop).
+
+**After a silence the statistics listen afresh** (issue 43, the slow settles). In silence they
+wait, so after a song that ends in silence they still hold the song when a voice begins (a
+reader's first 0.4 s of silence after a confident song: the stop network's logit +10 to +13,
+0.9 s to fall under ``-``:data:`MARGIN_STOP`). The first :data:`FRESH_FRAMES` sounding frames
+after :data:`FRESH_SILENCE` or more silent ones run at the idle time constant whatever the state.
+``fresh_rule=False`` switches it off.
 
 **The music heard in the voice's pauses** (the pause rule, part of the voice-over rule; with
 the steadiness column only). Between a voice's words the music under it is heard alone, and
@@ -132,6 +144,11 @@ PAUSE_STEADY: float = 0.25
 #: host held 0.93; docs/history.md, issue 43).
 START_EVIDENCE: float = 45.0
 START_DECAY: float = 0.25
+#: After a silence (module docstring): FRESH_FRAMES sounding frames (0.5 s, as ABSENT_FRAMES) after
+#: FRESH_SILENCE silent ones or more (0.2 s, as TAU_IDLE) run at the idle time constant. Not tuned on
+#: the readers: 30 frames took trance with 1-s breaks to 2.1 % idle (docs/presence.md).
+FRESH_SILENCE: int = 6
+FRESH_FRAMES: int = 15
 #: Feature columns read: MFCC 1-2, log energy, MFCC 1-12 differences, energy difference, onset
 #: (and the beat columns: the model's ``clarity_col`` and its neighbours).
 MFCC_COLS: tuple[int, ...] = (1, 2)
@@ -305,13 +322,16 @@ class MusicGate:
     ``presence_voice``; None or all zeros: no voice-over rule); voice_rule: False switches the
     voice-over rule off, the pause rule and the start with it; pause_rule: False switches the pause
     rule off (module docstring; without a steadiness column there is none); start_rule: False
-    switches the voice-over start off (an idle performer starts on its detector alone).
+    switches the voice-over start off (an idle performer starts on its detector alone), the resume
+    with it; resume_rule: False switches the resume off; fresh_rule: False keeps the statistics'
+    time constant after a silence (module docstring).
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
                  clarity_col: int, steadiness_col: int = -1, tau_music: float = TAU_MUSIC,
                  stop_params: np.ndarray | None = None, voice_params: np.ndarray | None = None,
-                 voice_rule: bool = True, pause_rule: bool = True, start_rule: bool = True) -> None:
+                 voice_rule: bool = True, pause_rule: bool = True, start_rule: bool = True, resume_rule: bool = True,
+                 fresh_rule: bool = True) -> None:
         self._ccol = int(clarity_col)
         self._scol = int(steadiness_col)
         self._mfcc_mean = np.asarray(feat_mean, np.float64)[list(MFCC_COLS)]
@@ -325,6 +345,8 @@ class MusicGate:
         self.voice_rule = bool(voice_rule)
         self.pause_rule = bool(pause_rule)
         self.start_rule = bool(start_rule)
+        self.resume_rule = bool(resume_rule)
+        self.fresh_rule = bool(fresh_rule)
         self._pause_e = np.zeros(PAUSE_FRAMES)  # the last sounding frames' log energy (dB) and steadiness
         self._pause_s = np.zeros(PAUSE_FRAMES)
         self._pause_at = np.zeros(2)  # next slot, slots filled
@@ -356,13 +378,21 @@ class MusicGate:
         self.pause_frames = 0  # frames the pause rule kept as music
         self.evidence = 0.0  # the voice-over start's count (frames, START_EVIDENCE starts)
         self.start_frames = 0  # frames the voice-over start heard as music
+        self.silent = 0  # silent frames in a row
+        self.fresh = 0  # sounding frames left at the idle time constant (after a silence)
 
     def step(self, row: np.ndarray, dancing: bool) -> bool:
         """True when frame ``row`` (D,) sounds like music to a performer that is ``dancing``."""
         if float(row[ENERGY_COL]) <= self.energy_min:
+            self.silent += 1
             return False  # silence: the statistics wait for sound
+        if self.silent >= FRESH_SILENCE and self.fresh_rule:
+            self.fresh = FRESH_FRAMES  # after a silence: listen afresh
+        self.silent = 0
+        fast = not dancing or self.fresh > 0
+        self.fresh = max(0, self.fresh - 1)
         presence_step(row, self._mfcc_mean, self._mfcc_std, self._dmfcc_std, self._ccol, self._scol, self._state,
-                      self.stats, self._a_music if dancing else self._a_idle)
+                      self.stats, self._a_idle if fast else self._a_music)
         z = presence_logit(self.stats, *(self._stop if dancing else self._start))
         a = self._a_logit if dancing else 0.0  # idle: the music's return is heard at once
         self.logit = a * self.logit + (1.0 - a) * z
@@ -373,16 +403,29 @@ class MusicGate:
             if self.logit > MARGIN_START:
                 return True
             return self.voice_rule and self.start_rule and self._voice_start()
-        self.evidence = 0.0
         if self.logit > -MARGIN_STOP:
+            if self.evidence > 0.0:  # the resume's count runs down (most frames of a song skip the call)
+                self._resume(False)
             return True
         if self.voice_rule and self.pause_rule and self.pause_steady > PAUSE_STEADY:
             self.pause_frames += 1  # the music heard in the voice's pauses: still music
-            return True
-        if self.voice_rule and self._voice_over():
+        elif self.voice_rule and self._voice_over():
             self.voice_frames += 1  # a voice over the music: still music
-            return True
-        return False
+        else:
+            self._resume(False)
+            return False
+        self._resume(True)
+        return True
+
+    def _resume(self, kept: bool) -> None:
+        """The resume on a dancing frame: the voice-over start's count up 1 where a rule ``kept`` the
+        frame as music, down START_DECAY where not (module docstring; 0 with the resume off)."""
+        if not (self.voice_rule and self.start_rule and self.resume_rule):
+            self.evidence = 0.0
+        elif kept:
+            self.evidence = min(START_EVIDENCE, self.evidence + 1.0)
+        else:
+            self.evidence = max(0.0, self.evidence - START_DECAY)
 
     def _voice_over(self) -> bool:
         """Both cues of the voice-over rule on this frame: the voice network hears music and the
