@@ -91,11 +91,14 @@ def compile_unreached_kernels() -> None:
     """Compile the kernels a live path may use that a warm-up of the shipped default does not
     reach: the logistic music gate's, which checkpoints without a presence detector run on
     every frame of sound (the default's detector does not call it), with the argument types
-    ``DanceStream._gate`` passes. Milliseconds when numba's cache holds it."""
+    ``DanceStream._gate`` passes; the lead's beat forecast, which only ``--lead`` calls (the
+    warm-up runs at lead 0). Milliseconds when numba's cache holds them."""
     from models.networks.dance_jit import gate_ema
+    from models.networks.lead import PhaseForecast
 
     cols = np.arange(3, dtype=np.int64)
     gate_ema(np.zeros(8, np.float32), cols, np.zeros(3), np.ones(3), np.zeros(3), 0.9)
+    PhaseForecast().phase(4, 15.0)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
