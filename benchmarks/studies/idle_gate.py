@@ -402,11 +402,12 @@ def main(argv: list[str] | None = None) -> int:
                          "silent_tail_s": (len(feats) - sound) / 30, "after_music_s": (sound - end) / 30,
                          "idle_sounding": float((w[90:end] > 0).mean()) if end > 90 else 0.0})
     cost_us = np.array(cost) * 1e6 if cost else np.zeros(1)
-    print(f"the gate's cost per frame (DanceStream.listen of one frame): median {np.median(cost_us):.1f} us, "
-          f"p99 {np.percentile(cost_us, 99):.1f} us over {len(cost_us)} frames")
-    print("\n| recording | s | idle after 3 s, to the file's end | longest idle (s) | silent end (s) | applause before it (s) "
-          "| idle to the end of the music ≤ 0.02 |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+    if rec_rows:  # each table only for a part that ran (--parts)
+        print(f"the gate's cost per frame (DanceStream.listen of one frame): median {np.median(cost_us):.1f} us, "
+              f"p99 {np.percentile(cost_us, 99):.1f} us over {len(cost_us)} frames")
+        print("\n| recording | s | idle after 3 s, to the file's end | longest idle (s) | silent end (s) | applause before it (s) "
+              "| idle to the end of the music ≤ 0.02 |")
+        print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     for r in rec_rows:
         print(f"| {r['recording']} | {r['s']:.0f} | {r['idle']:.3f} | {r['longest_idle_s']:.1f} | {r['silent_tail_s']:.1f} | "
               f"{r['after_music_s']:.1f} | {r['idle_sounding']:.3f} |")
@@ -474,8 +475,10 @@ def main(argv: list[str] | None = None) -> int:
             gap = gap * 10 ** ((rms_dbfs(a) - rms_dbfs(gap)) / 20)  # at the level of the music
         row = run_gap(lm, a, gap, b, args.seed)
         gap_rows.append({"gap": lab, "dbfs": rms_dbfs(gap) if lab != "silence" else None, **row})
-    print(f"\n| between songs | gap dBFS | settle (s) | ≤ | held | back (s) ≤ 1 | largest step in the fades (deg) | largest step while idle (deg) | dance p99 (deg) |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    if gap_rows:
+        print("\n| between songs | gap dBFS | settle (s) | ≤ | held | back (s) ≤ 1 | largest step in the fades (deg) | "
+              "largest step while idle (deg) | dance p99 (deg) |")
+        print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     f = lambda v, d=2: "never" if v is None else f"{v:.{d}f}"  # noqa: E731
     for r in gap_rows:
         print(f"| {r['gap']} | {f(r['dbfs'], 1) if r['dbfs'] is not None else '-'} | {f(r['settle_s'])} | "
@@ -485,7 +488,9 @@ def main(argv: list[str] | None = None) -> int:
         args.json.write_text(json.dumps({"mixes": mix_rows, "readers": reader_rows, "espeak": es_mix, "espeak_hosts": es_hosts, "gate_us_median": float(np.median(cost_us)),
                                          "gate_us_p99": float(np.percentile(cost_us, 99)), "recordings": rec_rows, "gaps": [{k: v for k, v in r.items() if k != "idle_w"}
                                                                              for r in gap_rows]}, indent=1))
-    if args.plot:
+    if args.plot and not gap_rows:
+        print(f"idle_gate.py: --plot {args.plot}: the plot draws the gaps between songs; add gaps to --parts", file=sys.stderr)
+    if args.plot and gap_rows:  # the plot draws the gaps between songs
         import matplotlib
 
         matplotlib.use("Agg")
