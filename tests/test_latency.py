@@ -310,9 +310,9 @@ def test_run_queue_clock_counts_the_time_another_thread_held_the_cpu():
     import os
     import threading
 
-    from realtime.engine import _hop_wait, _RunQueueClock
+    from realtime.runqueue_clock import RunQueueClock, hop_wait
 
-    assert _hop_wait(wall=10.0, waited=9.0, on_cpu=3.0) == 7.0 and _hop_wait(10.0, 2.0, 3.0) == 2.0
+    assert hop_wait(wall=10.0, waited=9.0, on_cpu=3.0) == 7.0 and hop_wait(10.0, 2.0, 3.0) == 2.0
     if not os.path.exists("/proc/thread-self/schedstat") or not hasattr(os, "sched_setaffinity"):
         pytest.skip("no /proc/thread-self/schedstat here")
     cpu = min(os.sched_getaffinity(0))
@@ -321,7 +321,7 @@ def test_run_queue_clock_counts_the_time_another_thread_held_the_cpu():
 
     def spin(key: str) -> None:
         os.sched_setaffinity(0, {cpu})  # this thread only
-        clock = _RunQueueClock()
+        clock = RunQueueClock()
         both.wait()
         (w0, c0), t0 = clock(), time.perf_counter()
         while time.perf_counter() - t0 < 0.6:
@@ -345,11 +345,11 @@ def test_run_queue_clock_reads_open_files_and_follows_the_threads():
     import os
     import threading
 
-    from realtime.engine import _RunQueueClock
+    from realtime.runqueue_clock import RunQueueClock
 
     if not os.path.exists("/proc/thread-self/schedstat"):
         pytest.skip("no /proc/thread-self/schedstat here")
-    clock = _RunQueueClock()
+    clock = RunQueueClock()
     clock()
     assert set(clock._fds) == set(os.listdir("/proc/self/task"))
     fds = dict(clock._fds)

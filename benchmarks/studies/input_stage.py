@@ -5,7 +5,7 @@ The shipped default's extractor is fed the bundled clip at 44.1 kHz in 512-sampl
 (as ``performer run`` and ``performer bench`` push them), sleeping one block's duration
 (11.6 ms) before each push, in one thread; printed: the thread's CPU time per frame of the
 pushes (all blocks up to and including the one that completes the frame: p50, p99), and of
-one read of ``realtime.engine._RunQueueClock`` (the bench's own-time clock, read around
+one read of ``realtime.runqueue_clock.RunQueueClock`` (the bench's own-time clock, read around
 every block when ``EngineConfig(runqueue_wait=True)``) made just before each push (p50).
 The first 30 frames are left out (warm-up).
 
@@ -36,13 +36,17 @@ def main(argv: list[str] | None = None) -> int:
     import numpy as np
 
     from models.features.audio_io import bundled_clip_path, load_audio
-    from realtime.engine import _RunQueueClock
     from realtime.pipeline import build_pipeline
+
+    try:
+        from realtime.runqueue_clock import RunQueueClock
+    except ImportError:  # a checkout before the clock had its own module (--tree)
+        from realtime.engine import _RunQueueClock as RunQueueClock
 
     sr, block = 44100, 512
     audio, _ = load_audio(bundled_clip_path(), sr, mono=False)
     ext = build_pipeline(None).extractor_factory(sr)
-    clock = _RunQueueClock()
+    clock = RunQueueClock()
     per_frame, reads, acc = [], [], 0
     for lo in range(0, int(args.seconds * sr), block):
         chunk = audio[lo:lo + block].copy()
