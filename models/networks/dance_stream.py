@@ -793,7 +793,8 @@ class DanceStream:
                 logits = logits + bias
             tilt = self._tempo_tilt()
             if tilt != 0.0:  # livelier codes at a faster tempo, calmer at a slower one (TEMPO_ENERGY)
-                logits = logits + np.float32(tilt) * np.clip(self._tempo_z, -TILT_Z_CAP, TILT_Z_CAP)
+                z = self._tempo_z if TILT_Z_CAP == math.inf else np.clip(self._tempo_z, -TILT_Z_CAP, TILT_Z_CAP)
+                logits = logits + np.float32(tilt) * z
             if REPEAT_PENALTY > 0.0 and len(self.codes_drawn) >= REPEAT_FREE:
                 logits = self._repeat_penalty(logits)
             self._tokens.append(token)

@@ -73,7 +73,6 @@ class FolderChoice:
             self.moves += 1
         return self.folder
 
-
     def follow(self, folder: int) -> None:
         """A requested style plays ``folder`` (index) this code step: ``auto`` takes over from it, after
         :data:`FOLDER_DWELL` code steps at the earliest."""
