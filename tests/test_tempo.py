@@ -216,6 +216,30 @@ def test_a_settled_octave_is_held_through_a_busier_passage(hold_on, monkeypatch)
         assert periods[-1] == pytest.approx(slow / 2.0, rel=0.02)
 
 
+@pytest.mark.parametrize("hold_on", [True, False])
+def test_a_tempo_drifting_over_the_top_of_the_range_keeps_its_octave(hold_on, monkeypatch):
+    """vibeace_kevinmacleod at 1.25x (issue 43): danced at 162 bpm, its last seconds read 4:5
+    of that, moved by 4:3 to 172, over the range's 170-bpm top. With the fold's hold
+    (FOLD_HOLD) the danced octave stays, at the top; without it the tempo halves to 86 for
+    those seconds. A tempo well over the top (200 bpm) is still danced at half time (100)."""
+    if not hold_on:
+        monkeypatch.setattr(tempo, "FOLD_HOLD", 0.0)
+    f = TempoFollower()
+    danced = []
+    for t in range(30 * FPS):
+        bpm = 160.0 if t < 10 * FPS else min(178.0, 160.0 + (t - 10 * FPS) * 18.0 / (10 * FPS))  # 160 -> 178 bpm
+        f.update(math.log2(60.0 * FPS / bpm / 15.0), 0.5, 2.0 * bpm / 60.0)  # two onsets a beat
+        danced.append(60.0 * FPS / f.period)
+    assert danced[10 * FPS] == pytest.approx(160.0, rel=0.02)
+    if hold_on:
+        assert min(danced[10 * FPS:]) > 155.0 and max(danced) <= TEMPO_RANGE[1] + 1e-6
+    else:
+        assert min(danced[10 * FPS:]) < 95.0
+    for _ in range(20 * FPS):  # then 200 bpm, over FOLD_HOLD: half time
+        f.update(math.log2(60.0 * FPS / 200.0 / 15.0), 0.5, 2.0 * 200.0 / 60.0)
+    assert 60.0 * FPS / f.period == pytest.approx(100.0, rel=0.04)
+
+
 def test_the_warp_aims_at_the_danced_beats():
     """The tracker at half the danced tempo (vibeace_kevinmacleod: 65 bpm against 129): its
     phase doubled, so the beats between its beats are warped to as well; a 3:2 or a slower

@@ -12,7 +12,8 @@ by whole octaves to the nearest of the running one; an estimate still another le
 estimates hold for seconds (:data:`AWAY_FRAMES`). The first level is the one most of the
 first 3 s read (:data:`VOTE_WIDTH`). So a change of tempo is followed within
 about a second and a level jump of the tracker is not. The danced period is the octave of it
-in :data:`TEMPO_RANGE` (faster music is danced at half time, slower at double time); where
+in :data:`TEMPO_RANGE` (faster music is danced at half time, slower at double time; a tempo
+drifting over the range's edge keeps its octave for :data:`FOLD_HOLD`); where
 two octaves are in the range, the faster when its beat is subdivided (:data:`SUBDIVIDED`
 onsets a beat, :func:`onset_density`, a count stretching does not change) or when the
 tracker itself reads the faster one most of the time (:data:`FAST_SHARE`), else the slower;
@@ -98,6 +99,15 @@ FAST_HOLD: float = 0.95
 FAST_TOLERANCE: float = 0.1
 FAST_SHARE: float = 0.8
 FAST_MEAN: float = 240.0
+#: The fold keeps its octave: where the running level drifts over the range's top (170 bpm),
+#: its fastest octave stays where it was (danced at the top, 170) until it lies FOLD_HOLD octave
+#: over it (about 188 bpm); only then, or on a level taken or voted, is it halved again (and the
+#: same under 85 bpm, the fastest octave's bottom: kept down to 77). Before the first level is
+#: voted (SETTLE_FRAMES) it is folded afresh every frame. A tempo read near the top no longer
+#: flips between T and T / 2 with the tracker's wobble: vibeace_kevinmacleod at 1.25x (162 bpm)
+#: read 4:5 of it for its last 6 s (129), moved by 4:3 to 172 bpm, and was danced at 86; the
+#: waltz DANCE_W_28 (85 bpm) flipped to 165 for 4-8 s at a time (docs/listening.md "Tempo"). 0: none.
+FOLD_HOLD: float = 0.15
 #: The lead: a tempo that keeps changing is read late, the tracker's 6-s window reading the
 #: tempo of about 1.8 s ago and the running mean adding 1.4 s (the listening ramp: 3.2 s in
 #: all, docs/listening.md "Tempo"). So the followed period is moved on by its own drift: the
@@ -142,7 +152,8 @@ class TempoFollower:
     ``confidence`` in [0, 1] (the running mean of the clarity over :data:`FULL_CLARITY`).
     """
 
-    __slots__ = ("log_p", "conf", "score", "slow", "heard", "away", "votes", "fast_num", "fast_den", "drift", "_a")
+    __slots__ = ("log_p", "conf", "score", "slow", "heard", "away", "votes", "fast_num", "fast_den", "drift", "fold",
+                 "_a")
 
     def __init__(self) -> None:
         self._a = 1.0 / TEMPO_TAU
@@ -159,6 +170,7 @@ class TempoFollower:
         self.fast_num = 0.0  # running (FAST_MEAN) clarity weight of the frames read at the faster octave
         self.fast_den = 0.0  # ... and of all clear frames
         self.drift = 0.0  # running mean (DRIFT_TAU) of the running log period's step a frame
+        self.fold = math.nan  # whole octaves from the running log period to its fastest danced octave (FOLD_HOLD)
 
     def update(self, logp: float, clarity: float, density: float = 0.0) -> None:
         w = min(1.0, max(clarity, 0.0) / FULL_CLARITY)
@@ -195,6 +207,8 @@ class TempoFollower:
             self.drift += (self.log_p - before - self.drift) / DRIFT_TAU
         else:
             self.drift = 0.0
+            self.fold = math.nan  # a level taken or voted: folded afresh
+        self._refold()
         fast = self._fast()
         at_fast = abs(logp - math.log2(fast / 15.0)) <= FAST_TOLERANCE
         self.fast_num += (w * at_fast - self.fast_num) / FAST_MEAN
@@ -223,22 +237,34 @@ class TempoFollower:
         self.log_p += r - math.floor(r + 0.5)  # the voted level, at the octave nearest the running one
         self.away = 0.0
 
-    def _fast(self) -> float:
-        """The fastest octave of the running period in :data:`TEMPO_RANGE` (frames)."""
+    def _refold(self) -> None:
+        """Set :attr:`fold` so that the fastest octave lies in (85, 170] bpm, or keep it while that
+        octave lies at most :data:`FOLD_HOLD` octave outside (77-188 bpm: the fold keeps its octave)."""
+        lo = 60.0 * FPS / TEMPO_RANGE[1]  # frames a beat at the top
+        if self.fold == self.fold and self.heard > SETTLE_FRAMES:  # before the vote: folded afresh
+            q = 15.0 * 2.0 ** (self.log_p + self.fold)
+            if lo * 2.0 ** -FOLD_HOLD <= q < 2.0 * lo * 2.0 ** FOLD_HOLD:
+                return
         p = fold_period(15.0 * 2.0 ** self.log_p)
-        return 0.5 * p if 0.5 * p >= 60.0 * FPS / TEMPO_RANGE[1] else p
+        p = 0.5 * p if 0.5 * p >= lo else p
+        self.fold = float(round(math.log2(p / 15.0) - self.log_p))
+
+    def _fast(self) -> float:
+        """The fastest octave of the running period in :data:`TEMPO_RANGE` (frames; up to
+        :data:`FOLD_HOLD` octave outside while the fold holds its octave)."""
+        return 15.0 * 2.0 ** (self.log_p + self.fold)
 
     @property
     def period(self) -> float:
         if self.log_p != self.log_p:
             return 0.0
         p = self._fast()
-        hi = 60.0 * FPS / TEMPO_RANGE[0]
-        p = 2.0 * p if self.slow and 2.0 * p <= hi else p
+        lo, hi = 60.0 * FPS / TEMPO_RANGE[1], 60.0 * FPS / TEMPO_RANGE[0]
+        p = 2.0 * p if self.slow and 2.0 * p <= hi else max(p, lo)  # held at the top: danced at 170 bpm
         if DRIFT_LEAD == 0.0:
             return p
         lead = min(max(DRIFT_LEAD * self.drift, -DRIFT_CAP), DRIFT_CAP)  # the drift carried on (DRIFT_LEAD)
-        return min(max(p * 2.0 ** lead, 60.0 * FPS / TEMPO_RANGE[1]), hi)
+        return min(max(p * 2.0 ** lead, lo), hi)
 
     @property
     def confidence(self) -> float:
