@@ -19,10 +19,14 @@ target's (which stays the measured ratio). A second table splits each centroid r
 into the followed tempo's ratio, the playback rate's (what the stream plays, after its caps)
 and the chosen movements' own speed (the choice). ``--force SONG BPM BPM BPM`` also dances
 SONG with the followed tempo fixed at those three tempi (0.8x, 1.0x, 1.25x; the follower's
-confidence kept): what a reading would give, without a rule that reads it. Run::
+confidence kept): what a reading would give, without a rule that reads it. ``--jumps`` also
+counts, off and on, the followed tempo's jumps of more than half an octave from one frame to
+the next (after 6 s) over every whole recording of ``music/`` and every validation dance (as
+``performer evaluate`` feeds it), no motion generated. Run::
 
-    nice -n 5 .venv/bin/python benchmarks/studies/tempo_fold.py --data ../shared/data --jobs 2 \
-        --force trance_mechatribe_assault_kommisar 72 90 112.5 --force trance_mechatribe_assault_kommisar 144 180 225
+    nice -n 5 .venv/bin/python benchmarks/studies/tempo_fold.py --data ../shared/data --jobs 2 --jumps \
+        --force trance_mechatribe_assault_kommisar 72 90 112.5 --force trance_mechatribe_assault_kommisar 96 120 150 \
+        --force trance_mechatribe_assault_kommisar 144 180 225
 """
 
 from __future__ import annotations
@@ -93,6 +97,36 @@ def _job(args: tuple) -> tuple:
     return song, rate, seed, variant, got, trace["tempo_bpm"].tolist(), rep
 
 
+def octave_jumps(lm, data: Path, cache, shipped: float) -> dict[str, list[int]]:
+    """Per whole recording of ``data/music`` and validation dance: the followed tempo's jumps of over
+    half an octave between frames after 6 s, [FOLD_HOLD 0, shipped]; printed as they come."""
+    import models.networks.tempo as tempo
+    from models.data.corpus import build_corpus
+    from models.data.split import VAL_DANCES
+    from models.evaluation import listening as L
+    from models.features.spectral import extract_features
+
+    cfg = lm.model.config
+    items = [(f.stem, extract_features(np.asarray(cache.audio(f), np.float32), lm.features))
+             for f in L.music_files(data / "music")]
+    items += [(c.name, c.features) for c in build_corpus(data / "dwm", list(VAL_DANCES), lm.features, (1.0,),
+                                                          ".cache/corpus", False)]
+    got = {}
+    for name, f in items:
+        got[name] = []
+        for hold in (0.0, shipped):
+            tempo.FOLD_HOLD = hold
+            per = tempo.track_periods(f[:, cfg.clarity_col + 1], f[:, cfg.clarity_col], f[:, cfg.onset_col])
+            per = per[int(6 * L.FPS):]
+            per = per[per > 0]
+            got[name].append(int((np.abs(np.diff(np.log2(per))) > 0.5).sum()))
+        tempo.FOLD_HOLD = shipped
+        print(f"{name}: octave jumps of the followed tempo, hold off / on: {got[name][0]} / {got[name][1]}")
+    tot = np.sum(list(got.values()), axis=0)
+    print(f"all {len(got)}: {tot[0]} / {tot[1]}")
+    return got
+
+
 def _row(res: dict, song: str, variant: str, seeds: list[int], L) -> dict:
     """A song's ratios 1.25x over 0.8x (of the means over ``seeds``) for one variant (off's where it is the same)."""
     get = {r: [res.get((song, r, s, variant)) or res[(song, r, s, "off")] for s in seeds] for r in L.STRETCH_RATES}
@@ -120,6 +154,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     p.add_argument("--force", nargs=4, action="append", default=[], metavar=("SONG", "BPM_0.8", "BPM_1.0", "BPM_1.25"),
                    help="also dance SONG with the followed tempo fixed at three tempi (0.8x, 1.0x, 1.25x)")
+    p.add_argument("--jumps", action="store_true",
+                   help="also count the followed tempo's octave jumps over the whole recordings and validation dances")
     p.add_argument("--json", metavar="FILE", help="write every figure here")
     a = p.parse_args(argv)
     data = Path(a.data)
@@ -201,6 +237,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{v}: centroid ratio mean {np.mean(c):.2f} (least {min(c):.2f}), speed ratio mean {np.mean(sp):.2f} "
               f"(least {min(sp):.2f}), amplitude ratio {min(am):.2f}-{max(am):.2f}, "
               f"songs within 0.8-1.2: {sum(0.8 <= x <= 1.2 for x in am)} of {len(am)}")
+    if a.jumps:
+        out["_jumps"] = octave_jumps(lm, data, cache, shipped)
     if a.json:
         Path(a.json).write_text(json.dumps({"seeds": a.seeds, "changed": [f"{s} {r:g}" for (s, r), v in same.items()
                                                                          if not v], "songs": out}, indent=1) + "\n")
