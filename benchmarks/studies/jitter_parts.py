@@ -6,9 +6,11 @@ The validation dances, the shipped checkpoint's live stream (seeds ``--seeds``) 
 every song left out, the FFT over the whole song). For every seed and stage the variants run one
 after the other in the same process (same load), each a set of constants (``--part NAME=SETS``,
 SETS ``part.CONST=VALUE`` joined by ``,``; part ``stream`` (models/networks/dance_stream.py),
-``stage``, ``feet`` or ``tables`` (member_tables.py); ``nofeet`` as a SET: the feet step off). Default parts:
+``stage``, ``feet`` or ``tables`` (member_tables.py, e.g. ``tables.WARP_QUICK_FLOOR=1``: the beat warp at full
+depth on every code, as before issue 39's fix); ``nofeet`` as a SET: the feet step off). Default parts:
 
 - ``shipped``: as shipped;
+- ``quick``: the beat warp at full depth on the quickest codes too (``tables.WARP_QUICK_FLOOR=1``);
 - ``warp``: the beat warp off (``BEAT_WARP=0``);
 - ``tempo``: every movement at its own pace and chosen regardless of the tempo (``FOLLOW_TEMPO=0``);
 - ``tilt``: the tempo's tilt of the choice off, the rate still following (``TEMPO_ENERGY=0``);
@@ -26,7 +28,9 @@ the share of the hands' energy within 2 frames of such a frame. ``--songs``: per
 hands' interior RMS above 6 Hz (mm, summed over the hand points) against the dancer's, its share of
 the run's hand energy, and the mean tempo z (``DanceStream._tempo_z``) of the codes drawn, above each run's row.
 ``--fd`` (in place only): ``performer evaluate``'s FD and beat hit rate too. A SET ``tail=Z:SIGMA`` plays
-the exemplars of the codes whose tempo z is above Z low-passed by a further Gaussian of SIGMA frames::
+the exemplars of the codes whose tempo z is above Z low-passed by a further Gaussian of SIGMA frames,
+``lowpass=Z:HZ`` by a zero-phase Butterworth at HZ (:func:`lowpass_windows`; Z -99: every code); the
+draw reads the tables as shipped::
 
     .venv/bin/python benchmarks/studies/jitter_parts.py --data ../shared/data/dwm --seeds 0 1 2 3
 
@@ -46,7 +50,7 @@ if str(Path(__file__).resolve().parent) not in sys.path:
 
 import numpy as np  # noqa: E402
 
-DEFAULT_PARTS = ("shipped=", "warp=stream.BEAT_WARP=0", "tempo=stream.FOLLOW_TEMPO=0", "tilt=stream.TEMPO_ENERGY=0",
+DEFAULT_PARTS = ("shipped=", "quick=tables.WARP_QUICK_FLOOR=1", "warp=stream.BEAT_WARP=0", "tempo=stream.FOLLOW_TEMPO=0", "tilt=stream.TEMPO_ENERGY=0",
                  "match=stream.SPEED_MATCH=0", "carry=stream.VEL_CAP=0", "feet=nofeet")
 
 
@@ -64,12 +68,12 @@ def parse_part(text: str) -> tuple[str, list[tuple[str, str, str]], bool, tuple[
             feet_on = False
             continue
         key, _, value = item.partition("=")
-        if key == "tail":  # tail=Z:SIGMA
+        if key in ("tail", "lowpass"):  # tail=Z:SIGMA, lowpass=Z:HZ
             try:
                 z, sigma = (float(v) for v in value.split(":"))
             except ValueError:
-                raise ValueError(f"--part {name}: tail wants Z:SIGMA, got {value!r}") from None
-            tail = (z, sigma)
+                raise ValueError(f"--part {name}: {key} wants Z:{'SIGMA' if key == 'tail' else 'HZ'}, got {value!r}") from None
+            tail = (z, sigma, key)
             continue
         part, _, const = key.partition(".")
         mod = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables}.get(part)
@@ -77,6 +81,19 @@ def parse_part(text: str) -> tuple[str, list[tuple[str, str, str]], bool, tuple[
             raise ValueError(f"--part {name}: wants stream.|stage.|feet.|tables.CONST=VALUE of an existing constant, got {item!r}")
         out.append((part, const, value))
     return name, out, feet_on, tail
+
+
+def lowpass_windows(windows: np.ndarray, hz: float) -> np.ndarray:
+    """Exemplar windows (N, F, P: root position m, then unit quaternions) at 30 fps low-passed
+    along F at ``hz`` (zero-phase: 4th-order Butterworth forwards and back, odd extension at the
+    ends), the quaternions renormalised; float32."""
+    from scipy.signal import butter, filtfilt
+
+    b, a = butter(4, hz / 15.0)
+    x = filtfilt(b, a, windows.astype(np.float64), axis=1, padtype="odd", padlen=min(windows.shape[1] - 1, 15))
+    q = x[..., 3:].reshape(*x.shape[:2], -1, 4)
+    x[..., 3:] = (q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-9)).reshape(*x.shape[:2], -1)
+    return x.astype(np.float32)
 
 
 def _apply(sets: list[tuple[str, str, str]]) -> dict:
@@ -148,6 +165,9 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                     mem = self._members.copy()
                     for c in np.where((self._tempo_z > tail[0]) & (self._counts > 0))[0]:
                         n = int(self._counts[c])
+                        if tail[2] == "lowpass":  # zero-phase Butterworth
+                            mem[c, :n] = lowpass_windows(mem[c, :n], tail[1])
+                            continue
                         mem[c, :n] = dance_stream._unit(gaussian_filter1d(mem[c, :n], tail[1], axis=1,
                                                                           mode="nearest").astype(np.float32))
                     tails[tail] = mem
