@@ -402,8 +402,8 @@ def test_a_faster_tempo_chooses_quicker_movements(clip_stretched, freq_on, monke
 def test_a_fast_tempo_leans_towards_lively_codes_without_drawing_only_the_extremes(clip_stretched, cap_on,
                                                                                   monkeypatch):
     """TILT_Z_CAP (not shipped: inf; set to 1.5 here): at 150 bpm the tempo's tilt still favours
-    livelier, quicker codes, but the memory's extreme tail (z > 2: 13 % of the codes, whose exemplars
-    tremble, docs/stage.md) is 35-40 % of the drawn codes, not 70-80 % as with the z unclipped
+    livelier, quicker codes, but the memory's extreme tail (z > 2: 13 % of the codes, the quickest,
+    docs/stage.md) is 35-40 % of the drawn codes, not 70-80 % as with the z unclipped
     (seeds 0 and 1, the bundled clip at 1.25x)."""
     monkeypatch.setattr(ds, "TILT_Z_CAP", 1.5 if cap_on else float("inf"))
     lm, feats = clip_stretched

@@ -26,7 +26,8 @@ share within one frame of a handover (3 of every 8 frames), ``clamp`` the share 
 whose beat-warp lag sits at a bound (0 or 2 ``WARP_LAG``: its read-out speed jumps there) and
 the share of the hands' energy within 2 frames of such a frame. ``--songs``: per song too, the
 hands' interior RMS above 6 Hz (mm, summed over the hand points) against the dancer's, its share of
-the run's hand energy, and the mean tempo z (``DanceStream._tempo_z``) of the codes drawn, above each run's row.
+the run's hand energy, and the mean tempo z (``DanceStream._tempo_z``) of the codes drawn, above each run's row;
+then by the drawn code's tempo z (:func:`by_z`) the movements' share and their share of the hands' energy.
 ``--fd`` (in place only): ``performer evaluate``'s FD and beat hit rate too. A SET ``tail=Z:SIGMA`` plays
 the exemplars of the codes whose tempo z is above Z low-passed by a further Gaussian of SIGMA frames,
 ``lowpass=Z:HZ`` by a zero-phase Butterworth at HZ (:func:`lowpass_windows`; Z -99: every code); the
@@ -208,7 +209,7 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                 old = _apply(sets)
                 try:
                     kw = {} if stage in ("0", "") else {"stage": stage}
-                    pos, world, clamp, drawn = {}, [], {}, {}
+                    pos, world, clamp, drawn, zs = {}, [], {}, {}, {}
                     for c in clips:
                         s = Probe(lm.model, seed=seed, feet=feet_on, tail=tail, **kw)
                         with torch.no_grad():
@@ -216,7 +217,8 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                         world.append(positions(poses))
                         pos[c.name] = in_place(world[-1])
                         clamp[c.name] = np.array(s.clamped)
-                        drawn[c.name] = float(s._tempo_z[np.array(s.codes_drawn)].mean())
+                        zs[c.name] = s._tempo_z[np.array(s.codes_drawn)]  # movement i: frames 8i .. 8i + 7
+                        drawn[c.name] = float(zs[c.name].mean())
                 finally:
                     _restore(old)
                 gs = summary(pos, cut)
@@ -249,9 +251,31 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                         print(f"  {cname:<11} hands {np.sqrt(he) * 1000:6.2f} mm (dancer {np.sqrt(hr) * 1000:6.2f}), "
                               f"{he * (len(e) - 2 * cut) / e_h:6.1%} of the run's hand energy; drawn codes' "
                               f"tempo z {drawn[cname]:+.2f}")
+                    by_z(gs["frames"], zs, hands, cut, s.seg)
                 print(f"{stage:<6} {seed:>4} {name:<10} {bands['jitter']:>6.3f} {inner:>8.3f} {part['hands']:>6.2f} "
                       f"{part['feet']:>6.2f} {bands['band_amp']:>6.3f} {jerk(world) / jerk(list(real.values())):>6.3f} "
                       f"{np.sqrt((gh / gn) / (rh / rn)):>6.3f} {e_ho / e_h:>7.1%} {n_cl / n_all:>6.1%} {e_near / e_h:>6.1%}" + extra, flush=True)
+
+
+def by_z(frames: dict[str, np.ndarray], zs: dict[str, np.ndarray], hands: list[int], cut: int, seg: int) -> None:
+    """Print, for the movements whose drawn code's tempo z lies in each of (-inf, 1], (1, 2], (2, 3],
+    (3, inf), their share of the interior movements, of the hands' interior energy above 6 Hz,
+    and their energy per movement against the calmest bin's (``frames``: per song (T, J) band
+    energy per frame and point; ``zs``: per song the drawn codes' tempo z, movement i on frames seg i ..)."""
+    edges = (1.0, 2.0, 3.0)
+    n, e = np.zeros(4), np.zeros(4)
+    for name, f in frames.items():
+        he = f[:, hands].sum(axis=1)
+        for i, z in enumerate(zs[name]):
+            a = seg * i
+            if cut <= a and a + seg <= len(he) - cut:
+                b = int(np.searchsorted(edges, z))
+                n[b] += 1
+                e[b] += he[a: a + seg].sum()
+    per = e / np.maximum(n, 1)
+    print("  tempo z " + ", ".join(f"{lab}: {n[b] / n.sum():.0%} of the movements, {e[b] / e.sum():.0%} of the "
+                                   f"hands' energy, {per[b] / max(per[0], 1e-30):.1f}x" for b, lab in
+                                   enumerate(("<= 1", "1-2", "2-3", "> 3"))))
 
 
 def main(argv: list[str] | None = None) -> int:
