@@ -9,7 +9,8 @@ Each was its own FK of the whole memory (float64, ~200 MB of points and rotation
 :func:`member_tables` runs the FK once, :data:`CHUNK_FRAMES` exemplar frames at a time, and keeps
 only each chunk's small per-exemplar results; every table is bit for bit what the function of
 its own computes (FK, gradients and filters work per window; the z-scores and the floor are
-taken over the whole memory at the end).
+taken over the whole memory at the end). :func:`warp_scale` turns the tempo z the tables give
+into the beat warp's depth per code (issue 39: the quickest movements warped less).
 """
 
 from __future__ import annotations
@@ -99,13 +100,14 @@ def code_energy(members: np.ndarray, counts: np.ndarray, seg: int, speed: np.nda
     exemplars, of the log mean joint speed (:func:`member_speed`) of its exemplars' movements
     (their first seg frames). ``members`` (K, M, >= seg, P), ``counts`` (K,) exemplars per
     code; ``speed`` (K, M): those mean speeds, if already computed. A code without exemplars
-    gets 0 (the mean)."""
+    gets 0 (the mean). Read on points low-passed at :data:`TILT_LOWPASS_HZ` (shipped 0: as they are)."""
     k, m = members.shape[:2]
     has = counts > 0
     if has.sum() < 2:
         return np.zeros(k, np.float32)
     if speed is None:
-        speed = _speed(_lowpass(member_positions(members), TILT_LOWPASS_HZ)[:, :, :seg]).mean(-1)  # (K, M)
+        pos = member_positions(members if TILT_LOWPASS_HZ > 0.0 else members[:, :, :seg])  # the filter wants the window
+        speed = _speed(_lowpass(pos, TILT_LOWPASS_HZ)[:, :, :seg]).mean(-1)  # (K, M)
     mask = np.arange(m)[None, :] < counts[:, None]
     return _code_z(np.log(np.maximum((speed * mask).sum(1)[has] / counts[has], 1e-9)), has)
 
@@ -148,8 +150,8 @@ def code_frequency(members: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """How quick each code's movements are: z-scores (K,) float32, over the codes with
     exemplars, of the mean over its exemplars of ln(mean joint acceleration / mean joint speed)
     (for a sinusoid 2 pi f a frame) over their whole windows, positions relative to the root
-    (the dance, not its travel). ``members`` (K, M, F, P), ``counts`` (K,). A code without
-    exemplars gets 0."""
+    (the dance, not its travel), low-passed at :data:`TILT_LOWPASS_HZ` (shipped 0: as they are).
+    ``members`` (K, M, F, P), ``counts`` (K,). A code without exemplars gets 0."""
     if (counts > 0).sum() < 2:
         return np.zeros(members.shape[0], np.float32)
     return _frequency_z(_log_frequency(_lowpass(member_positions(members), TILT_LOWPASS_HZ)), counts)
