@@ -426,8 +426,8 @@ def test_a_faster_tempo_chooses_quicker_movements(clip_stretched, freq_on, monke
 def test_a_fast_tempo_leans_towards_lively_codes_without_drawing_only_the_extremes(clip_stretched, cap_on,
                                                                                   monkeypatch):
     """TILT_Z_CAP (not shipped: inf; set to 1.5 here): at 150 bpm the tempo's tilt still favours
-    livelier, quicker codes, but the memory's extreme tail (z > 2: 13 % of the codes, whose exemplars
-    tremble, docs/stage.md) is 35-40 % of the drawn codes, not 70-80 % as with the z unclipped
+    livelier, quicker codes, but the memory's extreme tail (z > 2: 13 % of the codes, the quickest,
+    docs/stage.md) is 35-40 % of the drawn codes, not 70-80 % as with the z unclipped
     (seeds 0 and 1, the bundled clip at 1.25x)."""
     monkeypatch.setattr(ds, "TILT_Z_CAP", 1.5 if cap_on else float("inf"))
     lm, feats = clip_stretched
@@ -437,6 +437,49 @@ def test_a_fast_tempo_leans_towards_lively_codes_without_drawing_only_the_extrem
         assert tail < 0.5, tail
     else:
         assert tail > 0.6, tail
+
+
+def _hands_tremble(lm, feats: np.ndarray, bpm: float, seed: int) -> float:
+    """RMS (m) above 6 Hz of the hand points a stream dances on ``feats`` at a held tempo, put in
+    place, the first and last 0.5 s left out (one FFT over the whole dance, as the jitter ratio)."""
+    from models.evaluation.evaluate import positions
+    from models.evaluation.metrics import JITTER_BAND, in_place
+    from models.rig.skeleton import POINT_INDEX
+
+    s = ds.DanceStream(lm.model, seed=seed)
+    s._tempo = _HeldTempo(bpm)
+    pos = in_place(positions(s.push(feats)))
+    hands = [POINT_INDEX[n] for n in ("LeftLowerArm", "RightLowerArm", "LeftHand", "RightHand", "LeftHandTip",
+                                      "RightHandTip")]
+    p = pos[:, hands] - pos[:, hands].mean(axis=0)
+    spec = np.fft.rfft(p, axis=0)
+    spec[np.fft.rfftfreq(len(p), 1.0 / FPS) < JITTER_BAND[0]] = 0.0
+    return float(np.sqrt((np.fft.irfft(spec, n=len(p), axis=0)[15:-15] ** 2).sum(-1).mean()))
+
+
+@pytest.mark.parametrize("quick_on", [True, False])
+def test_the_quickest_movements_are_warped_less_so_a_fast_tempo_does_not_make_the_hands_tremble(
+        clip_stretched, quick_on, monkeypatch):
+    """WARP_QUICK_FLOOR (member_tables.py): at 150 bpm the tempo's tilt draws the memory's
+    quickest codes, and the beat warp's swing of their read-out speed carried their 3-6 Hz motion
+    above 6 Hz. With the warp's depth scaled down on them the hands' RMS above 6 Hz is 0.69
+    of what it is with the warp at full depth on every code (the same codes drawn; seeds 0
+    and 1, the bundled clip at 1.25x); switched off (floor 1) the two are the same dance."""
+    from models.networks import member_tables as mt
+
+    lm, feats = clip_stretched
+    shipped = mt.WARP_QUICK_FLOOR if quick_on else 1.0  # off: the behaviour switched off
+    full, ours = [], []
+    for seed in (0, 1):
+        monkeypatch.setattr(mt, "WARP_QUICK_FLOOR", 1.0)
+        full.append(_hands_tremble(lm, feats[1.25], 150.0, seed))
+        monkeypatch.setattr(mt, "WARP_QUICK_FLOOR", shipped)
+        ours.append(_hands_tremble(lm, feats[1.25], 150.0, seed))
+    ratio = sum(ours) / sum(full)
+    if quick_on:
+        assert ratio < 0.85, (ours, full)
+    else:
+        assert ratio == pytest.approx(1.0), (ours, full)
 
 
 def test_joint_speed_is_member_speed():

@@ -6,9 +6,11 @@ The validation dances, the shipped checkpoint's live stream (seeds ``--seeds``) 
 every song left out, the FFT over the whole song). For every seed and stage the variants run one
 after the other in the same process (same load), each a set of constants (``--part NAME=SETS``,
 SETS ``part.CONST=VALUE`` joined by ``,``; part ``stream`` (models/networks/dance_stream.py),
-``stage``, ``feet`` or ``tables`` (member_tables.py); ``nofeet`` as a SET: the feet step off). Default parts:
+``stage``, ``feet`` or ``tables`` (member_tables.py, e.g. ``tables.WARP_QUICK_FLOOR=1``: the beat warp at full
+depth on every code, as before issue 39's fix); ``nofeet`` as a SET: the feet step off). Default parts:
 
 - ``shipped``: as shipped;
+- ``quick``: the beat warp at full depth on the quickest codes too (``tables.WARP_QUICK_FLOOR=1``);
 - ``warp``: the beat warp off (``BEAT_WARP=0``);
 - ``tempo``: every movement at its own pace and chosen regardless of the tempo (``FOLLOW_TEMPO=0``);
 - ``tilt``: the tempo's tilt of the choice off, the rate still following (``TEMPO_ENERGY=0``);
@@ -24,9 +26,12 @@ share within one frame of a handover (3 of every 8 frames), ``clamp`` the share 
 whose beat-warp lag sits at a bound (0 or 2 ``WARP_LAG``: its read-out speed jumps there) and
 the share of the hands' energy within 2 frames of such a frame. ``--songs``: per song too, the
 hands' interior RMS above 6 Hz (mm, summed over the hand points) against the dancer's, its share of
-the run's hand energy, and the mean tempo z (``DanceStream._tempo_z``) of the codes drawn, above each run's row.
+the run's hand energy, and the mean tempo z (``DanceStream._tempo_z``) of the codes drawn, above each run's row;
+then by the drawn code's tempo z (:func:`by_z`) the movements' share and their share of the hands' energy.
 ``--fd`` (in place only): ``performer evaluate``'s FD and beat hit rate too. A SET ``tail=Z:SIGMA`` plays
-the exemplars of the codes whose tempo z is above Z low-passed by a further Gaussian of SIGMA frames::
+the exemplars of the codes whose tempo z is above Z low-passed by a further Gaussian of SIGMA frames,
+``lowpass=Z:HZ`` by a zero-phase Butterworth at HZ (:func:`lowpass_windows`; Z -99: every code); the
+draw reads the tables as shipped::
 
     .venv/bin/python benchmarks/studies/jitter_parts.py --data ../shared/data/dwm --seeds 0 1 2 3
 
@@ -46,7 +51,7 @@ if str(Path(__file__).resolve().parent) not in sys.path:
 
 import numpy as np  # noqa: E402
 
-DEFAULT_PARTS = ("shipped=", "warp=stream.BEAT_WARP=0", "tempo=stream.FOLLOW_TEMPO=0", "tilt=stream.TEMPO_ENERGY=0",
+DEFAULT_PARTS = ("shipped=", "quick=tables.WARP_QUICK_FLOOR=1", "warp=stream.BEAT_WARP=0", "tempo=stream.FOLLOW_TEMPO=0", "tilt=stream.TEMPO_ENERGY=0",
                  "match=stream.SPEED_MATCH=0", "carry=stream.VEL_CAP=0", "feet=nofeet")
 
 
@@ -64,12 +69,12 @@ def parse_part(text: str) -> tuple[str, list[tuple[str, str, str]], bool, tuple[
             feet_on = False
             continue
         key, _, value = item.partition("=")
-        if key == "tail":  # tail=Z:SIGMA
+        if key in ("tail", "lowpass"):  # tail=Z:SIGMA, lowpass=Z:HZ
             try:
                 z, sigma = (float(v) for v in value.split(":"))
             except ValueError:
-                raise ValueError(f"--part {name}: tail wants Z:SIGMA, got {value!r}") from None
-            tail = (z, sigma)
+                raise ValueError(f"--part {name}: {key} wants Z:{'SIGMA' if key == 'tail' else 'HZ'}, got {value!r}") from None
+            tail = (z, sigma, key)
             continue
         part, _, const = key.partition(".")
         mod = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables}.get(part)
@@ -77,6 +82,19 @@ def parse_part(text: str) -> tuple[str, list[tuple[str, str, str]], bool, tuple[
             raise ValueError(f"--part {name}: wants stream.|stage.|feet.|tables.CONST=VALUE of an existing constant, got {item!r}")
         out.append((part, const, value))
     return name, out, feet_on, tail
+
+
+def lowpass_windows(windows: np.ndarray, hz: float) -> np.ndarray:
+    """Exemplar windows (N, F, P: root position m, then unit quaternions) at 30 fps low-passed
+    along F at ``hz`` (zero-phase: 4th-order Butterworth forwards and back, odd extension at the
+    ends), the quaternions renormalised; float32."""
+    from scipy.signal import butter, filtfilt
+
+    b, a = butter(4, hz / 15.0)
+    x = filtfilt(b, a, windows.astype(np.float64), axis=1, padtype="odd", padlen=min(windows.shape[1] - 1, 15))
+    q = x[..., 3:].reshape(*x.shape[:2], -1, 4)
+    x[..., 3:] = (q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-9)).reshape(*x.shape[:2], -1)
+    return x.astype(np.float32)
 
 
 def _apply(sets: list[tuple[str, str, str]]) -> dict:
@@ -148,6 +166,9 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                     mem = self._members.copy()
                     for c in np.where((self._tempo_z > tail[0]) & (self._counts > 0))[0]:
                         n = int(self._counts[c])
+                        if tail[2] == "lowpass":  # zero-phase Butterworth
+                            mem[c, :n] = lowpass_windows(mem[c, :n], tail[1])
+                            continue
                         mem[c, :n] = dance_stream._unit(gaussian_filter1d(mem[c, :n], tail[1], axis=1,
                                                                           mode="nearest").astype(np.float32))
                     tails[tail] = mem
@@ -188,7 +209,7 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                 old = _apply(sets)
                 try:
                     kw = {} if stage in ("0", "") else {"stage": stage}
-                    pos, world, clamp, drawn = {}, [], {}, {}
+                    pos, world, clamp, drawn, zs = {}, [], {}, {}, {}
                     for c in clips:
                         s = Probe(lm.model, seed=seed, feet=feet_on, tail=tail, **kw)
                         with torch.no_grad():
@@ -196,7 +217,8 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                         world.append(positions(poses))
                         pos[c.name] = in_place(world[-1])
                         clamp[c.name] = np.array(s.clamped)
-                        drawn[c.name] = float(s._tempo_z[np.array(s.codes_drawn)].mean())
+                        zs[c.name] = s._tempo_z[np.array(s.codes_drawn)]  # movement i: frames 8i .. 8i + 7
+                        drawn[c.name] = float(zs[c.name].mean())
                 finally:
                     _restore(old)
                 gs = summary(pos, cut)
@@ -229,9 +251,31 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                         print(f"  {cname:<11} hands {np.sqrt(he) * 1000:6.2f} mm (dancer {np.sqrt(hr) * 1000:6.2f}), "
                               f"{he * (len(e) - 2 * cut) / e_h:6.1%} of the run's hand energy; drawn codes' "
                               f"tempo z {drawn[cname]:+.2f}")
+                    by_z(gs["frames"], zs, hands, cut, s.seg)
                 print(f"{stage:<6} {seed:>4} {name:<10} {bands['jitter']:>6.3f} {inner:>8.3f} {part['hands']:>6.2f} "
                       f"{part['feet']:>6.2f} {bands['band_amp']:>6.3f} {jerk(world) / jerk(list(real.values())):>6.3f} "
                       f"{np.sqrt((gh / gn) / (rh / rn)):>6.3f} {e_ho / e_h:>7.1%} {n_cl / n_all:>6.1%} {e_near / e_h:>6.1%}" + extra, flush=True)
+
+
+def by_z(frames: dict[str, np.ndarray], zs: dict[str, np.ndarray], hands: list[int], cut: int, seg: int) -> None:
+    """Print, for the movements whose drawn code's tempo z lies in each of (-inf, 1], (1, 2], (2, 3],
+    (3, inf), their share of the interior movements, of the hands' interior energy above 6 Hz,
+    and their energy per movement against the calmest bin's (``frames``: per song (T, J) band
+    energy per frame and point; ``zs``: per song the drawn codes' tempo z, movement i on frames seg i ..)."""
+    edges = (1.0, 2.0, 3.0)
+    n, e = np.zeros(4), np.zeros(4)
+    for name, f in frames.items():
+        he = f[:, hands].sum(axis=1)
+        for i, z in enumerate(zs[name]):
+            a = seg * i
+            if cut <= a and a + seg <= len(he) - cut:
+                b = int(np.searchsorted(edges, z))
+                n[b] += 1
+                e[b] += he[a: a + seg].sum()
+    per = e / np.maximum(n, 1)
+    print("  tempo z " + ", ".join(f"{lab}: {n[b] / n.sum():.0%} of the movements, {e[b] / e.sum():.0%} of the "
+                                   f"hands' energy, {per[b] / max(per[0], 1e-30):.1f}x" for b, lab in
+                                   enumerate(("<= 1", "1-2", "2-3", "> 3"))))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -45,6 +45,7 @@ from models.networks.dance_jit import (joint_speed, match_exemplar, push_history
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 from models.networks.dance_vq import DanceVQ
 from models.networks import feet as feet_part
+from models.networks import member_tables as member_tables_part
 from models.networks.feet import FeetLock
 from models.networks.stage import SpotStage, Stage, cached_travel
 from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate
@@ -80,6 +81,7 @@ BEAT_WEIGHT: float = 1.0
 #: :data:`WARP_CLARITY` (at most 1), so the motion slows into every expected beat and
 #: catches up between them: speed dips (kinematic beats) move onto the music's beats, as
 #: Dancing to Music warps its dance units to the beat. 0 plays every movement at its own pace.
+#: The memory's quickest codes are warped less (``member_tables.WARP_QUICK_FLOOR``: their tremble).
 BEAT_WARP: float = 0.45
 #: Frames after the tracker's beat that the warp slows into and the motion matching places a
 #: movement's speed dip on. The whole chain (the tracker's phase, the warp, the movements'
@@ -174,10 +176,10 @@ ENERGY_GAIN: float = 3.0
 TEMPO_ENERGY: float = 4.0
 #: The tempo's tilt reads each code's z (:data:`TEMPO_ENERGY`'s liveliness plus quickness) clipped to
 #: +-TILT_Z_CAP. Unclipped, a fast song draws mostly the memory's top tail (DANCE_C_2 at 126 bpm:
-#: drawn z +2.85; 13 % of the codes have z > 2), whose exemplars tremble: most of the hands' jitter
-#: between the songs' ends (1.5-1.9x the dancers'). 1.5 takes the interior jitter in place from
-#: 1.38-1.61 to 1.03-1.17 but FD from 3.69 to 9.45, so not shipped (docs/stage.md,
-#: benchmarks/studies/jitter_parts.py). inf: the z as it is.
+#: drawn z +2.85; 13 % of the codes have z > 2), quick movements the beat warp made tremble: most of
+#: the hands' jitter between the songs' ends (1.5-1.9x the dancers', before ``member_tables.WARP_QUICK_FLOOR``). 1.5 took the
+#: interior jitter in place from 1.38-1.61 to 1.03-1.17 but FD from 3.69 to 9.45, so not shipped
+#: (docs/history.md, "The hands' tremble"). inf: the z as it is.
 TILT_Z_CAP: float = float("inf")
 #: Tempo and frequency: the tempo's logit tilt (:data:`TEMPO_ENERGY`) reads each code's liveliness
 #: plus this times its movements' frequency (:func:`code_frequency`'s z-score: mean joint
@@ -388,12 +390,17 @@ def smooth_members(members: np.ndarray, counts: np.ndarray, sigma: float) -> np.
     return out
 
 
+def _members_key(model: DanceVQ) -> tuple:
+    """What :func:`_cached_members` and the tables read from it depend on: the memory's tensors and its filters."""
+    return _weights_key([model.member_poses, model.member_count]), MEMBER_SMOOTH
+
+
 def _cached_members(model: DanceVQ) -> np.ndarray:
     """``model``'s exemplars as :func:`sign_continuous` makes them, low-passed by
     :func:`smooth_members` (:data:`MEMBER_SMOOTH`), (K, M, 2 seg, P), kept on the model like
     :func:`_cached_predictor`; streams only read it. (Not flagged read-only: the compiled
     :func:`match_exemplar` would compile again, in the audio path, for read-only slices.)"""
-    key = (_weights_key([model.member_poses, model.member_count]), MEMBER_SMOOTH)
+    key = _members_key(model)
     cached = getattr(model, "_members_cache", None)
     if cached is None or cached[0] != key:
         model._members_cache = None  # the old copy goes before the new one is built
@@ -414,8 +421,8 @@ def _cached_tables(model: DanceVQ, members: np.ndarray) -> MemberTables:
     pass, kept on the model like :func:`_cached_members` (the FK of every exemplar took
     0.4-0.6 s a table, paid by every new stream otherwise). Recomputed when ``member_poses`` or
     ``member_count`` changes (another tensor, or the same one written in place) or a feet constant does."""
-    key = (_weights_key([model.member_poses, model.member_count]), model.config.seg, feet_part.CONTACT_HEIGHT,
-           feet_part.CONTACT_SPEED, feet_part.FLOOR_PERCENTILE)
+    key = (_members_key(model), model.config.seg, feet_part.CONTACT_HEIGHT, feet_part.CONTACT_SPEED,
+           feet_part.FLOOR_PERCENTILE, member_tables_part.TILT_LOWPASS_HZ)
     cached = getattr(model, "_tables_cache", None)
     if cached is None or cached[0] != key:
         model._tables_cache = None  # the old tables go before the new ones are built
@@ -452,7 +459,7 @@ def _cached_bone_cap(model: DanceVQ, members: np.ndarray, counts: np.ndarray) ->
     """The :data:`BONE_CAP` quantile (degrees a frame) of every exemplar frame's largest bone
     rotation (:func:`models.rig.kinematics.rotation_jumps_deg`) in ``model``'s memory (inf
     without exemplars), kept on the model like :func:`_cached_members`."""
-    key = (_weights_key([model.member_poses, model.member_count]), BONE_CAP)
+    key = (_members_key(model), BONE_CAP)
     cached = getattr(model, "_bone_cap_cache", None)
     if cached is None or cached[0] != key:
         steps = [rotation_jumps_deg(w[:, 3:].reshape(len(w), -1, 4)).max(axis=1)
@@ -543,6 +550,7 @@ class DanceStream:
         # what the tempo's tilt reads (TEMPO_ENERGY, TEMPO_FREQ): liveliness and quickness
         self._tempo_z = (self._code_energy + np.float32(TEMPO_FREQ) * _cached_frequency(model, self._members)
                          if TEMPO_FREQ != 0.0 else self._code_energy)
+        self._warp_scale = member_tables_part.warp_scale(self._tempo_z)  # (K + 1,) the beat warp's depth by code
         # a library (library_player): codes drawn a step, the bend that draws the next, the tempo's tilt by exemplar
         self._draws, self._guard, self._member_tilt = member_choice(model, speed, real, DRAWS)
         where = np.argwhere(real)  # (n, 2) every exemplar's (code, slot); its first pose's quaternions (n, 4 J)
@@ -1019,7 +1027,7 @@ class DanceStream:
             self._at = x
             return warp_pose(self._played, x)
         ccos, csin, clarity, logp = (float(self._raw[c]) for c in self._beat_cols)
-        depth = BEAT_WARP * min(1.0, max(clarity, 0.0) / WARP_CLARITY)
+        depth = BEAT_WARP * float(self._warp_scale[self._last]) * min(1.0, max(clarity, 0.0) / WARP_CLARITY)
         theta, _ = self._danced_phase(ccos, csin, logp)  # 0 BEAT_DELAY frames after a danced beat
         cos = math.cos(theta) if clarity > 1e-9 else 0.0
         rate = self._advance(j + 1) - self._advance(j)  # exemplar frames this frame plays

@@ -9,7 +9,8 @@ Each was its own FK of the whole memory (float64, ~200 MB of points and rotation
 :func:`member_tables` runs the FK once, :data:`CHUNK_FRAMES` exemplar frames at a time, and keeps
 only each chunk's small per-exemplar results; every table is bit for bit what the function of
 its own computes (FK, gradients and filters work per window; the z-scores and the floor are
-taken over the whole memory at the end).
+taken over the whole memory at the end). :func:`warp_scale` turns the tempo z the tables give
+into the beat warp's depth per code (issue 39: the quickest movements warped less).
 """
 
 from __future__ import annotations
@@ -25,6 +26,20 @@ from models.timebase import FPS
 #: Exemplar frames (K x M x F rows) put through forward kinematics at once by :func:`member_tables`:
 #: ~6 MB of float64 points a chunk, ~15 MB transient with the rotations.
 CHUNK_FRAMES: int = 8192
+#: The tempo's tilt reads each code's liveliness (:func:`code_energy`) and quickness
+#: (:func:`code_frequency`) on its exemplars' points low-passed (zero-phase: 4th-order Butterworth
+#: forwards and back along the frames) at this many Hz first: the dance band's speed and
+#: quickness, not the tremble above it. 0: on the points as they are.
+TILT_LOWPASS_HZ: float = 0.0
+#: The beat warp (``dance_stream.BEAT_WARP``) swings a movement's read-out speed by up to +-45 %
+#: at the beat's frequency; on the memory's quickest movements that frequency modulation carries
+#: their 3-6 Hz motion above 6 Hz, where it reads as tremble (docs/stage.md, "Between the ends").
+#: So the warp's depth is scaled by :func:`warp_scale` of the playing code's tempo z
+#: (``DanceStream._tempo_z``: liveliness plus quickness): 1 up to :data:`WARP_QUICK_Z`, falling
+#: linearly over :data:`WARP_QUICK_SPAN` to this. 1: the same depth for every code.
+WARP_QUICK_FLOOR: float = 0.3
+WARP_QUICK_Z: float = 1.0
+WARP_QUICK_SPAN: float = 2.0
 
 
 def member_positions(windows: np.ndarray) -> np.ndarray:
@@ -85,15 +100,34 @@ def code_energy(members: np.ndarray, counts: np.ndarray, seg: int, speed: np.nda
     exemplars, of the log mean joint speed (:func:`member_speed`) of its exemplars' movements
     (their first seg frames). ``members`` (K, M, >= seg, P), ``counts`` (K,) exemplars per
     code; ``speed`` (K, M): those mean speeds, if already computed. A code without exemplars
-    gets 0 (the mean)."""
+    gets 0 (the mean). Read on points low-passed at :data:`TILT_LOWPASS_HZ` (shipped 0: as they are)."""
     k, m = members.shape[:2]
     has = counts > 0
     if has.sum() < 2:
         return np.zeros(k, np.float32)
     if speed is None:
-        speed = member_speed(members[:, :, :seg]).mean(-1)  # (K, M)
+        pos = member_positions(members if TILT_LOWPASS_HZ > 0.0 else members[:, :, :seg])  # the filter wants the window
+        speed = _speed(_lowpass(pos, TILT_LOWPASS_HZ)[:, :, :seg]).mean(-1)  # (K, M)
     mask = np.arange(m)[None, :] < counts[:, None]
     return _code_z(np.log(np.maximum((speed * mask).sum(1)[has] / counts[has], 1e-9)), has)
+
+
+def _lowpass(pos: np.ndarray, hz: float) -> np.ndarray:
+    """FK points ``pos`` (K, M, F, J + E, 3) at 30 fps, zero-phase low-passed along F at ``hz``
+    (4th-order Butterworth forwards and back, odd extension at the ends); 0: as they are."""
+    if hz <= 0.0:
+        return pos
+    from scipy.signal import butter, filtfilt
+
+    b, a = butter(4, hz / (FPS / 2.0))
+    return filtfilt(b, a, pos, axis=2, padtype="odd", padlen=min(pos.shape[2] - 1, 15))
+
+
+def warp_scale(tempo_z: np.ndarray) -> np.ndarray:
+    """(K + 1,) float32 factor on the beat warp's depth for codes of tempo z ``tempo_z`` (K,)
+    (:data:`WARP_QUICK_FLOOR`), then 1 for index K ("no code yet")."""
+    w = np.clip((np.asarray(tempo_z, np.float64) - WARP_QUICK_Z) / max(WARP_QUICK_SPAN, 1e-9), 0.0, 1.0)
+    return np.append(1.0 - w * (1.0 - WARP_QUICK_FLOOR), 1.0).astype(np.float32)
 
 
 def _log_frequency(positions: np.ndarray) -> np.ndarray:
@@ -116,11 +150,11 @@ def code_frequency(members: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """How quick each code's movements are: z-scores (K,) float32, over the codes with
     exemplars, of the mean over its exemplars of ln(mean joint acceleration / mean joint speed)
     (for a sinusoid 2 pi f a frame) over their whole windows, positions relative to the root
-    (the dance, not its travel). ``members`` (K, M, F, P), ``counts`` (K,). A code without
-    exemplars gets 0."""
+    (the dance, not its travel), low-passed at :data:`TILT_LOWPASS_HZ` (shipped 0: as they are).
+    ``members`` (K, M, F, P), ``counts`` (K,). A code without exemplars gets 0."""
     if (counts > 0).sum() < 2:
         return np.zeros(members.shape[0], np.float32)
-    return _frequency_z(_log_frequency(member_positions(members)), counts)
+    return _frequency_z(_log_frequency(_lowpass(member_positions(members), TILT_LOWPASS_HZ)), counts)
 
 
 @dataclasses.dataclass
@@ -148,17 +182,19 @@ def member_tables(members: np.ndarray, counts: np.ndarray, seg: int,
     k, m, f = members.shape[:3]
     counts = np.asarray(counts)
     step = max(1, chunk_frames // max(1, m * f))
-    dips, speed, lf, low, mid = [], [], [], [], []
+    dips, speed, band, lf, low, mid = [], [], [], [], [], []
     for a in range(0, k, step):
         pos = member_positions(members[a: a + step])  # (c, M, F, J + E, 3) float64
         dips.append(_dips(_speed(pos[:, :, : seg + 2]), seg))
         speed.append(_speed(pos[:, :, :seg]).mean(-1))
-        lf.append(_log_frequency(pos))
+        low_pos = _lowpass(pos, TILT_LOWPASS_HZ)  # what the tempo's tilt reads: the dance band
+        band.append(speed[-1] if low_pos is pos else _speed(low_pos[:, :, :seg]).mean(-1))
+        lf.append(_log_frequency(low_pos))
         lo, mi = feet_part.member_feet(pos)
         low.append(lo)
         mid.append(mi)
         del pos
     speed_all = np.concatenate(speed)
     contacts, floor = feet_part.feet_contacts(np.concatenate(low), np.concatenate(mid), counts)
-    return MemberTables(np.concatenate(dips), speed_all, code_energy(members, counts, seg, speed_all),
+    return MemberTables(np.concatenate(dips), speed_all, code_energy(members, counts, seg, np.concatenate(band)),
                         _frequency_z(np.concatenate(lf), counts), contacts, floor)
