@@ -39,7 +39,8 @@ features as the engine computes them):
   the material the voice-over rule's constants were chosen on, not the judging readers): 60 s of
   each of :data:`ESPEAK_SONGS` training songs (a third in) with an espeak-ng host
   (``models.training.music_gate.speech``: reverberation, a noise bed) over it at 0 and -6 dB,
-  idle as for the mixes; and each song's 20 s, 10 s of a host at its level, the next song:
+  idle as for the mixes, and over the song's first 30 s (its start under a host, ``from its start``);
+  and each song's 20 s, 10 s of a host at its level, the next song:
   settle, held and back as between songs, two hosts per song.
 
 * **The stretches a hold would have to bridge** (``--parts stretches``, not in the default; issue
@@ -55,8 +56,9 @@ features as the engine computes them):
 ``--voice-margin`` set the voice-over rule's ``music_gate.FLOOR_DB`` and ``VOICE_MARGIN`` (``inf``:
 that cue always holds; ``--floor-db 0``: the voice network's part off), ``--pause-steady`` its pause
 rule's ``PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off), ``--start-evidence``
-and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) and ``START_DECAY``, to
-measure its parts alone; ``--off`` switches off the parts that have no constant to set:
+and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) and ``START_DECAY``,
+``--song-dance`` the frames a song's start is danced (``idle_gate.SONG_DANCE``), to measure its parts
+alone; ``--off`` switches off the parts that have no constant to set:
 ``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
 settles), ``fresh`` (the statistics keep their time constant after a silence), ``resume`` (the
 voice-over start's count starts from 0 when a voice stops the dance), ``song-start`` (the detector may
@@ -291,6 +293,9 @@ def espeak_rows(lm, data: Path, seed: int) -> tuple[list[dict], list[dict]]:
         row = {"song": name}
         for db in MIX_DB:
             row[f"host {db:g} dB"] = idle_sounding(lm, with_speech(a, talk, db, len(a) // HOP), len(a) // HOP, seed)
+        a0 = cut(song[: 30 * SR])  # the song's start under the host: its first 30 s
+        for db in MIX_DB:
+            row[f"from its start {db:g} dB"] = idle_sounding(lm, with_speech(a0, talk, db, len(a0) // HOP), len(a0) // HOP, seed)
         mixes.append(row)
     for i, (name, song) in enumerate(zip(pick, songs)):
         a = cut(song[len(song) // 3: len(song) // 3 + 20 * SR])
@@ -373,6 +378,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--start-evidence", type=float,
                    help="the voice-over start's START_EVIDENCE, frames (inf: an idle performer starts on its detector alone)")
     p.add_argument("--start-decay", type=float, help="the voice-over start's START_DECAY (frames a frame without evidence takes off)")
+    p.add_argument("--song-dance", type=int, help="frames a song's start is danced (idle_gate.SONG_DANCE; 0: as --off song-start)")
     p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
                    "through voids the whole stop count), fresh (the statistics keep their time constant after a silence), resume (the "
                    "voice-over start's count starts from 0 at a stop), song-start (the detector may stop a song's start at once)")
@@ -407,6 +413,10 @@ def main(argv: list[str] | None = None) -> int:
         gate.START_EVIDENCE = args.start_evidence
     if args.start_decay is not None:
         gate.START_DECAY = args.start_decay
+    if args.song_dance is not None:
+        from models.networks import idle_gate
+
+        idle_gate.SONG_DANCE = args.song_dance
     try:
         lm = load_model(args.checkpoint)
         if not getattr(lm.model, "takes_style", False):

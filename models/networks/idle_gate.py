@@ -86,8 +86,8 @@ BREAK_HOLD: int = 58
 #: A song's start (module docstring): a start after this many idle frames or more (5 s, or the
 #: stream's start) dances at least SONG_DANCE frames (5 s) unless a break stops it. The idle: a
 #: host's false restarts come within 5 s of the stop (docs/history.md, issue 43); the dance: the
-#: longer the better on espeak-ng hosts over training songs from their start (3 s left half the
-#: gain), no figure of the gaps, readers or hosts after a song moved (docs/presence.md).
+#: same round 5 s, not tuned (3 s reads the same on the espeak-ng hosts over the songs' starts,
+#: the shared readers over nutcracker 3.1 / 1.6 % idle at 0 / -6 dB instead of 1.2 / 1.2: docs/presence.md).
 SONG_IDLE: int = 150
 SONG_DANCE: int = 150
 
