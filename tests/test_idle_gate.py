@@ -263,6 +263,28 @@ def test_a_song_that_starts_under_a_voice_is_danced_through_its_start_thanks_to_
     assert (off.listen(feats)[90:] > 0).mean() > 0.03
 
 
+def test_a_false_start_on_noise_at_a_streams_start_is_not_lengthened_by_the_songs_start() -> None:
+    """The song's start protects a dance only while the voice network still hears some music
+    (``MusicGate.voice_hears``): pink noise at -30 dBFS from a stream's start, on which the cold
+    detector starts the dance (not fully idle for 1.4 s; idle_gate.py --parts leadin), is danced no
+    longer with the song's start than without it (unguarded: 5.7 s)."""
+    from models.generate import load_model
+    from models.features.spectral import extract_features
+    from script_loader import load_script
+
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    lm = load_model(None)
+    if not lm.model.presence_voice.abs().sum() > 0:
+        pytest.skip(f"{lm.path} has no voice network: the song's start has no guard")
+    noise = ig.gap_audio("pink", 30.0, -30.0, np.random.default_rng(0), [])
+    feats = extract_features(noise[: len(noise) // 735 * 735], lm.features)
+    on, off = DanceStream(lm.model, seed=7), DanceStream(lm.model, seed=7)
+    off._idle.song_start = False
+    w_on, w_off = on.listen(feats), off.listen(feats)
+    assert (w_off < 1.0).any(), "no false start on this noise: nothing to guard"
+    assert (w_on < 1.0).mean() == (w_off < 1.0).mean()
+
+
 @needs_shared
 def test_a_performer_a_voice_stopped_over_the_music_resumes_sooner_thanks_to_the_resume() -> None:
     """Issue 43: vibeace with the shared readers over all of it at 0 dB stops near 53.5 s where the

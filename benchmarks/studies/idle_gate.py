@@ -52,6 +52,11 @@ features as the engine computes them):
   sure stop's count): a hold that keeps the dance through every run must outlast the longest,
   and it delays a voice alone after a song (``--parts readers``) by as much.
 
+* **No music from the stream's start** (``--parts leadin``, not in the default): each ``--speech``
+  recording and :data:`LEADIN_HOSTS` espeak-ng hosts of 30 s at -20 dBFS, and each kind of gap but
+  silence (30 s), through a fresh stream, nothing heard before: the share of frames not fully idle
+  (target 0; a false start the detector makes on them, which the song's start must not lengthen).
+
 ``--parts`` picks the parts (default ``recordings,mixes,gaps``). ``--floor-db`` and
 ``--voice-margin`` set the voice-over rule's ``music_gate.FLOOR_DB`` and ``VOICE_MARGIN`` (``inf``:
 that cue always holds; ``--floor-db 0``: the voice network's part off), ``--pause-steady`` its pause
@@ -103,6 +108,9 @@ BREAK_EVERY_S: float = 10.0
 #: Training songs (drawn with :data:`ESPEAK_SEED`) under and before the espeak-ng hosts of ``--parts espeak``.
 ESPEAK_SONGS: int = 8
 ESPEAK_SEED: int = 4343
+#: espeak-ng hosts and the seed of ``--parts leadin`` (the seed of its noises too).
+LEADIN_HOSTS: int = 6
+LEADIN_SEED: int = 99
 #: Frames of no music that can stop a dancing performer (``idle_gate.ABSENT_FRAMES`` 15 over
 #: ``music_gate.SURE_COUNT`` 2): ``--parts stretches`` counts the runs as long as this.
 STRETCH_MIN: int = 8
@@ -232,6 +240,29 @@ def stretches(lm, audio: np.ndarray, talk: np.ndarray, end: int, seed: int) -> d
     seg = slice(int(a[k]) * HOP, int(b[k]) * HOP)
     return {"longest_s": (b[k] - a[k]) / 30, "at_s": a[k] / 30, "music_dbfs": rms_dbfs(audio[seg]),
             "voice_dbfs": rms_dbfs(talk[seg]), "runs": int(((b - a) >= STRETCH_MIN).sum())}
+
+
+def leadin_rows(lm, speech: list, seed: int) -> list[dict]:
+    """``--parts leadin``: ``case``, ``not_idle`` (share of frames not fully idle) for each of
+    ``speech`` ((name, audio) pairs), :data:`LEADIN_HOSTS` espeak-ng hosts and the gaps' noises
+    but silence, 30 s each (speech at -20 dBFS) from a fresh stream's start."""
+    from models.features.spectral import extract_features
+    from models.training import music_gate as mg
+
+    rng = np.random.default_rng(LEADIN_SEED)
+    pool = [mg.utterance(rng) for _ in range(24)] if mg.espeak_available() else []
+    cases = [(n.removesuffix(".ogg"), x) for n, x in speech]
+    cases += [(lab, gap_audio(kind, 30.0, lvl, rng, pool)) for lab, kind, lvl in GAPS
+              if kind != "silence" and (pool or kind != "crowd")]
+    cases += [(f"espeak-ng host {i}", mg.speech(30.0, rng, pool)) for i in range(LEADIN_HOSTS if pool else 0)]
+    rows = []
+    for name, x in cases:
+        x = x[: len(x) // HOP * HOP]
+        if not name.startswith(tuple(k for k, _, _ in GAPS)):
+            x = x * 10 ** ((-20.0 - rms_dbfs(x)) / 20)  # a voice at -20 dBFS
+        w = new_stream(lm, seed).listen(extract_features(x.astype(np.float32), lm.features))
+        rows.append({"case": name, "not_idle": float((w < 1.0).mean())})
+    return rows
 
 
 def excerpt(data: Path, name: str, seconds: float) -> np.ndarray:
@@ -368,7 +399,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--parts", default="recordings,mixes,gaps",
                    help="comma-separated parts to run: recordings, mixes (voices and breaks), gaps, readers (after each "
                         "recording), espeak (espeak-ng hosts over and after training songs), stretches (the voices over the music with "
-                        "the stop undone: how long the gate hears no music) (default recordings,mixes,gaps)")
+                        "the stop undone: how long the gate hears no music), leadin (no music from the stream's start) "
+                        "(default recordings,mixes,gaps)")
     p.add_argument("--reader-at", type=float, default=1 / 3,
                    help="--parts readers: where the 20 s of each recording start, a share of its length (default 1/3)")
     p.add_argument("--floor-db", type=float, help="the voice-over rule's FLOOR_DB (models/networks/music_gate.py; "
@@ -392,7 +424,7 @@ def main(argv: list[str] | None = None) -> int:
     if off - set(SWITCHES):
         p.error(f"--off: unknown part(s) {sorted(off - set(SWITCHES))}; known: {', '.join(SWITCHES)}")
     OFF.update(off)
-    known = {"recordings", "mixes", "gaps", "readers", "espeak", "stretches"}
+    known = {"recordings", "mixes", "gaps", "readers", "espeak", "stretches", "leadin"}
     if parts - known:
         p.error(f"--parts: unknown part(s) {sorted(parts - known)}")
 
@@ -502,6 +534,12 @@ def main(argv: list[str] | None = None) -> int:
             at = "-" if r["at_s"] is None else f"{r['at_s']:.1f}"
             print(f"| {r['recording']} | {r['speech_db']:g} | {r['longest_s']:.2f} | {at} | {lv} | {r['runs']} |")
 
+    lead_rows = leadin_rows(lm, speech, args.seed) if "leadin" in parts else []
+    if lead_rows:
+        print("\n| no music from the stream's start, 30 s | not fully idle (0) |\n| --- | ---: |")
+        for r in lead_rows:
+            print(f"| {r['case']} | {r['not_idle']:.3f} |")
+
     reader_rows = []
     shared = [(n, a[int(len(a) * args.reader_at): int(len(a) * args.reader_at) + int(args.song_s * SR)]) for n, a in recordings
               if n in {f.name for f in args.music.glob("*.ogg")}] if "readers" in parts else []
@@ -554,7 +592,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{settle_target(r['gap']):g} | {f(r['held'])} | "
               f"{f(r['back_s'])} | {r['max_step_deg']:.1f} | {f(r['idle_step_deg'])} | {r['dance_step_p99_deg']:.1f} |")
     if args.json:
-        args.json.write_text(json.dumps({"mixes": mix_rows, "stretches": stretch_rows, "readers": reader_rows, "espeak": es_mix, "espeak_hosts": es_hosts, "gate_us_median": float(np.median(cost_us)),
+        args.json.write_text(json.dumps({"mixes": mix_rows, "stretches": stretch_rows, "leadin": lead_rows, "readers": reader_rows, "espeak": es_mix, "espeak_hosts": es_hosts, "gate_us_median": float(np.median(cost_us)),
                                          "gate_us_p99": float(np.percentile(cost_us, 99)), "recordings": rec_rows, "gaps": [{k: v for k, v in r.items() if k != "idle_w"}
                                                                              for r in gap_rows]}, indent=1))
     if args.plot and not gap_rows:

@@ -34,9 +34,11 @@ the count of the fill before it). ``void_breaks_only=False``: every break voids 
 the stop network hears as no music: sweetwaltz and nutcracker with the shared readers over them
 at -6 dB stopped 1.3-1.9 s after they started). A start after :data:`SONG_IDLE` idle frames or
 more (or at the stream's start) is a song's start: for :data:`SONG_DANCE` frames after it the
-detector's stop is void (the count starts again); a break still stops it (silence idles within 3
-s as ever). A restart sooner after a stop (a host the detector took for music a moment) stops as
-before. ``song_start=False`` switches it off.
+detector's stop is void (the count starts again) while the voice network still hears some music
+(its logit above ``-music_gate.MARGIN_STOP``, :meth:`MusicGate.voice_hears`; without one, always):
+a false start on applause, noise or a host alone, where it hears none, stops as before. A break
+still stops it (silence idles within 3 s as ever). A restart sooner after a stop (a host the
+detector took for music a moment) stops as before. ``song_start=False`` switches it off.
 
 After :data:`ABSENT_FRAMES` frames without music (a sure detector's frame counting up to
 twice, ``music_gate.SURE_COUNT``) the performer fades over :data:`FADE_FRAMES` into the idle;
@@ -53,7 +55,7 @@ import numpy as np
 
 from models.networks.dance_jit import gate_ema
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ
-from models.networks.music_gate import ENERGY_COL, FRESH_SILENCE, START_FRAMES, MusicGate
+from models.networks.music_gate import ENERGY_COL, FRESH_SILENCE, MARGIN_STOP, START_FRAMES, MusicGate
 
 #: Frames without music before the performer starts to settle (0.5 s; with the presence
 #: detector a frame it is sure of counts up to twice, ``music_gate.SURE_COUNT``: 0.27 s).
@@ -86,8 +88,7 @@ BREAK_HOLD: int = 58
 #: A song's start (module docstring): a start after this many idle frames or more (5 s, or the
 #: stream's start) dances at least SONG_DANCE frames (5 s) unless a break stops it. The idle: a
 #: host's false restarts come within 5 s of the stop (docs/history.md, issue 43); the dance: the
-#: same round 5 s, not tuned (3 s reads the same on the espeak-ng hosts over the songs' starts,
-#: the shared readers over nutcracker 3.1 / 1.6 % idle at 0 / -6 dB instead of 1.2 / 1.2: docs/presence.md).
+#: same round 5 s, not tuned (docs/presence.md, idle_gate.py --song-dance).
 SONG_IDLE: int = 150
 SONG_DANCE: int = 150
 
@@ -206,7 +207,8 @@ class IdleGate:
         self.idle_frames = 0 if self.music else self.idle_frames + 1
         self.danced = min(SONG_DANCE, self.danced + 1)
         if self.run >= (start if present else ABSENT_FRAMES) and not held:
-            if present or self.break_frames or self.danced >= SONG_DANCE or not self.song_start:
+            protect = self.song_start and self.danced < SONG_DANCE and not self.break_frames
+            if present or not (protect and (self.presence is None or self.presence.voice_hears(MARGIN_STOP))):
                 if present:  # a start after SONG_IDLE idle frames is a song's start: danced SONG_DANCE frames
                     self.danced = 0 if self.idle_frames >= SONG_IDLE else SONG_DANCE
                 self.music, self.run = present, 0.0
