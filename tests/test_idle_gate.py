@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from models.networks.dance_stream import FADE_FRAMES, DanceStream
-from models.networks.idle_gate import BREAK_DB, BREAK_HOLD, BREAK_HOLD_SILENT
+from models.networks.idle_gate import BREAK_DB, BREAK_HOLD, BREAK_HOLD_SILENT, SONG_DANCE, SONG_IDLE
 from models.networks.music_gate import FRESH_SILENCE
 from test_dance_vq import music, tiny_model
 
@@ -109,6 +109,48 @@ def test_a_one_frame_pause_voids_only_what_it_counted_towards_the_stop() -> None
     assert stop(long) == stop(long, void_breaks_only=False) > plain + FRESH_SILENCE + 5
 
 
+def _song(*spans: tuple[int, bool]) -> np.ndarray:
+    """Frames of music (True) or of no music to :func:`judging_stream`'s detector (False), in turn."""
+    x = music(sum(n for n, _ in spans))
+    at = 0
+    for n, is_music in spans:
+        if not is_music:
+            x[at: at + n, 1] = -10.0  # its running mean falls under -GATE_MARGIN
+        at += n
+    return x
+
+
+def test_a_songs_start_is_danced_before_the_detector_may_stop_it() -> None:
+    """Issue 43: a song that begins under a voice or with a quiet intro the detector hears as no
+    music 2 s after the dance started. A start after SONG_IDLE idle frames (here the stream's
+    start) dances SONG_DANCE frames before the detector may stop it; ``song_start`` off, it is
+    idle within 2 s."""
+    x = _song((60, True), (440, False))
+    w = weights(judging_stream(), x)
+    assert np.all(w[30:SONG_DANCE] == 0.0) and w[SONG_DANCE + 90:].min() == 1.0  # danced through its start, then idle
+    off = judging_stream()
+    off._idle.song_start = False
+    assert weights(off, x)[60:120].max() == 1.0
+
+
+def test_a_restart_soon_after_a_stop_is_not_a_songs_start_and_a_break_still_stops_one() -> None:
+    """A restart within SONG_IDLE frames of a stop (a host the detector took for music a moment)
+    stops as before: idle within 2 s of the music's end. After SONG_IDLE idle frames the same
+    restart is danced through. Silence inside a song's start stops it after BREAK_HOLD_SILENT."""
+    soon = _song((300, True), (SONG_IDLE - 60, False), (60, True), (300, False))
+    w = weights(judging_stream(), soon)
+    end = 300 + SONG_IDLE
+    assert w[end - 10] == 0.0 and w[end + 60:].min() == 1.0
+    late = _song((300, True), (SONG_IDLE + 30, False), (60, True), (300, False))
+    w = weights(judging_stream(), late)
+    end = 300 + SONG_IDLE + 90
+    assert w[end: end + 60].max() == 0.0
+    silent = _song((60, True), (300, True))
+    silent[60:, 0] = -100.0  # silence from 2 s: a break, stopped after BREAK_HOLD_SILENT as ever
+    w = weights(judging_stream(), silent)
+    assert w[60 + BREAK_HOLD_SILENT - 2] == 0.0 and w[60 + BREAK_HOLD_SILENT + FADE_FRAMES:].min() == 1.0
+
+
 # -- a voice over the music, on the shipped checkpoint --------------------------------------------
 
 needs_shared = pytest.mark.skipif(not (SHARED / "music").is_dir() or not (SHARED / "speech").is_dir(),
@@ -199,6 +241,48 @@ def test_a_song_that_starts_under_a_voice_starts_the_dance_thanks_to_the_voice_o
     on, off = _idle_with_and_without("sweetwaltz_setuniman.ogg", 60.0, 0.0, "start_rule")
     assert on <= 0.02
     assert off > 0.05
+
+
+@needs_shared
+def test_a_song_that_starts_under_a_voice_is_danced_through_its_start_thanks_to_the_song_start() -> None:
+    """Issue 43: sweetwaltz with the shared readers over all of it at -6 dB. The dance starts near
+    2 s and the stop network, hearing the voice over the quiet waltz, stopped it at 3.9 s until
+    5.5 s. A song's start is danced SONG_DANCE frames (``idle_gate.IdleGate.song_start``): idle at
+    most 2 % of its frames after the first 3 s (0.0 %) against 4.7 % with it off."""
+    from models.features.spectral import extract_features
+    from models.generate import load_model
+    from script_loader import load_script
+
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    lm = load_model(None)
+    song = _recording("sweetwaltz_setuniman.ogg", 60.0)
+    feats = extract_features(ig.with_speech(song, _speech(), -6.0, len(song) // 735), lm.features)
+    on, off = DanceStream(lm.model, seed=7), DanceStream(lm.model, seed=7)
+    off._idle.song_start = False
+    assert (on.listen(feats)[90:] > 0).mean() <= 0.02
+    assert (off.listen(feats)[90:] > 0).mean() > 0.03
+
+
+def test_a_false_start_on_noise_at_a_streams_start_is_not_lengthened_by_the_songs_start() -> None:
+    """The song's start protects a dance only while the voice network still hears some music
+    (``MusicGate.voice_hears``): pink noise at -30 dBFS from a stream's start, on which the cold
+    detector starts the dance (not fully idle for 1.4 s; idle_gate.py --parts leadin), is danced no
+    longer with the song's start than without it (unguarded: 5.7 s)."""
+    from models.generate import load_model
+    from models.features.spectral import extract_features
+    from script_loader import load_script
+
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    lm = load_model(None)
+    if not lm.model.presence_voice.abs().sum() > 0:
+        pytest.skip(f"{lm.path} has no voice network: the song's start has no guard")
+    noise = ig.gap_audio("pink", 30.0, -30.0, np.random.default_rng(0), [])
+    feats = extract_features(noise[: len(noise) // 735 * 735], lm.features)
+    on, off = DanceStream(lm.model, seed=7), DanceStream(lm.model, seed=7)
+    off._idle.song_start = False
+    w_on, w_off = on.listen(feats), off.listen(feats)
+    assert (w_off < 1.0).any(), "no false start on this noise: nothing to guard"
+    assert (w_on < 1.0).mean() == (w_off < 1.0).mean()
 
 
 @needs_shared

@@ -39,18 +39,35 @@ features as the engine computes them):
   the material the voice-over rule's constants were chosen on, not the judging readers): 60 s of
   each of :data:`ESPEAK_SONGS` training songs (a third in) with an espeak-ng host
   (``models.training.music_gate.speech``: reverberation, a noise bed) over it at 0 and -6 dB,
-  idle as for the mixes; and each song's 20 s, 10 s of a host at its level, the next song:
+  idle as for the mixes, and over the song's first 30 s (its start under a host, ``from its start``);
+  and each song's 20 s, 10 s of a host at its level, the next song:
   settle, held and back as between songs, two hosts per song.
+
+* **The stretches a hold would have to bridge** (``--parts stretches``, not in the default; issue
+  43's voices over the music): each mix of the voices part with the dancing performer never
+  stopping (a stop the gate decides is undone, the gate's state and statistics otherwise as they
+  run): the runs of frames in which its detector and the voice-over rule hear no music (break
+  frames count as heard). Per mix the longest run (s) and where it starts, the music's and the
+  voice's level over it (dBFS), and how many runs last :data:`STRETCH_MIN` frames or more (a
+  sure stop's count): a hold that keeps the dance through every run must outlast the longest,
+  and it delays a voice alone after a song (``--parts readers``) by as much.
+
+* **No music from the stream's start** (``--parts leadin``, not in the default): each ``--speech``
+  recording and :data:`LEADIN_HOSTS` espeak-ng hosts of 30 s at -20 dBFS, and each kind of gap but
+  silence (30 s), through a fresh stream, nothing heard before: the share of frames not fully idle
+  (target 0; a false start the detector makes on them, which the song's start must not lengthen).
 
 ``--parts`` picks the parts (default ``recordings,mixes,gaps``). ``--floor-db`` and
 ``--voice-margin`` set the voice-over rule's ``music_gate.FLOOR_DB`` and ``VOICE_MARGIN`` (``inf``:
 that cue always holds; ``--floor-db 0``: the voice network's part off), ``--pause-steady`` its pause
 rule's ``PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off), ``--start-evidence``
-and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) and ``START_DECAY``, to
-measure its parts alone; ``--off`` switches off the parts that have no constant to set:
+and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) and ``START_DECAY``,
+``--song-dance`` the frames a song's start is danced (``idle_gate.SONG_DANCE``), to measure its parts
+alone; ``--off`` switches off the parts that have no constant to set:
 ``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
 settles), ``fresh`` (the statistics keep their time constant after a silence), ``resume`` (the
-voice-over start's count starts from 0 when a voice stops the dance). ``--trace`` prints the gate's
+voice-over start's count starts from 0 when a voice stops the dance), ``song-start`` (the detector may
+stop a song's start at once: ``idle_gate.SONG_DANCE``). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, or through a reader
 after a recording, instead of the tables (which network or rule said what).
 
@@ -91,6 +108,12 @@ BREAK_EVERY_S: float = 10.0
 #: Training songs (drawn with :data:`ESPEAK_SEED`) under and before the espeak-ng hosts of ``--parts espeak``.
 ESPEAK_SONGS: int = 8
 ESPEAK_SEED: int = 4343
+#: espeak-ng hosts and the seed of ``--parts leadin`` (the seed of its noises too).
+LEADIN_HOSTS: int = 6
+LEADIN_SEED: int = 99
+#: Frames of no music that can stop a dancing performer (``idle_gate.ABSENT_FRAMES`` 15 over
+#: ``music_gate.SURE_COUNT`` 2): ``--parts stretches`` counts the runs as long as this.
+STRETCH_MIN: int = 8
 #: Most seconds to fully idle per kind of gap (issue 43): silence 3, speech 2, the rest 2.5.
 SETTLE_TARGET_S: dict[str, float] = {"silence": 3.0, "speech": 2.0}
 SETTLE_TARGET_OTHER_S: float = 2.5
@@ -98,7 +121,7 @@ SETTLE_TARGET_OTHER_S: float = 2.5
 
 #: Parts of the gate ``--off`` switches off: name -> (``IdleGate`` or its ``MusicGate``, attribute).
 SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_only"), "fresh": ("presence", "fresh_rule"),
-                                        "resume": ("presence", "resume_rule")}
+                                        "resume": ("presence", "resume_rule"), "song-start": ("idle", "song_start")}
 #: The switches ``--off`` named (set by main).
 OFF: set[str] = set()
 
@@ -192,6 +215,56 @@ def idle_sounding(lm, audio: np.ndarray, end: int, seed: int) -> float:
     return float((w[90:end] > 0).mean()) if end > 90 else 0.0
 
 
+def stretches(lm, audio: np.ndarray, talk: np.ndarray, end: int, seed: int) -> dict:
+    """``--parts stretches``: a fresh stream on ``audio`` + ``talk`` (n,) each, up to frame ``end``,
+    the performer never stopping once it dances: the runs of frames its detector and the voice-over
+    rule hear as no music (break frames heard), after the first 3 s. Returns ``longest_s``,
+    ``at_s`` (its start), ``music_dbfs`` / ``voice_dbfs`` (the levels over it) and ``runs`` (as
+    long as :data:`STRETCH_MIN` frames or more)."""
+    from models.features.spectral import extract_features
+
+    feats = extract_features((audio + talk).astype(np.float32), lm.features)
+    ig = new_stream(lm, seed)._idle
+    heard = np.ones(min(end, len(feats)), bool)
+    for t in range(len(heard)):
+        was = ig.music
+        ig.step(np.asarray(feats[t], np.float32))
+        if was and not ig.music:  # the stop undone: it dances on, its statistics as they run
+            ig.music, ig.run, ig.w_idle = True, 0.0, 0.0
+        heard[t] = not was or ig.present or ig.break_frames > 0
+    d = np.diff(np.r_[0, (~heard[90:]).astype(int), 0])
+    a, b = np.flatnonzero(d > 0) + 90, np.flatnonzero(d < 0) + 90
+    if not len(a):
+        return {"longest_s": 0.0, "at_s": None, "music_dbfs": None, "voice_dbfs": None, "runs": 0}
+    k = int(np.argmax(b - a))
+    seg = slice(int(a[k]) * HOP, int(b[k]) * HOP)
+    return {"longest_s": (b[k] - a[k]) / 30, "at_s": a[k] / 30, "music_dbfs": rms_dbfs(audio[seg]),
+            "voice_dbfs": rms_dbfs(talk[seg]), "runs": int(((b - a) >= STRETCH_MIN).sum())}
+
+
+def leadin_rows(lm, speech: list, seed: int) -> list[dict]:
+    """``--parts leadin``: ``case``, ``not_idle`` (share of frames not fully idle) for each of
+    ``speech`` ((name, audio) pairs), :data:`LEADIN_HOSTS` espeak-ng hosts and the gaps' noises
+    but silence, 30 s each (speech at -20 dBFS) from a fresh stream's start."""
+    from models.features.spectral import extract_features
+    from models.training import music_gate as mg
+
+    rng = np.random.default_rng(LEADIN_SEED)
+    pool = [mg.utterance(rng) for _ in range(24)] if mg.espeak_available() else []
+    cases = [(n.removesuffix(".ogg"), x) for n, x in speech]
+    cases += [(lab, gap_audio(kind, 30.0, lvl, rng, pool)) for lab, kind, lvl in GAPS
+              if kind != "silence" and (pool or kind != "crowd")]
+    cases += [(f"espeak-ng host {i}", mg.speech(30.0, rng, pool)) for i in range(LEADIN_HOSTS if pool else 0)]
+    rows = []
+    for name, x in cases:
+        x = x[: len(x) // HOP * HOP]
+        if not name.startswith(tuple(k for k, _, _ in GAPS)):
+            x = x * 10 ** ((-20.0 - rms_dbfs(x)) / 20)  # a voice at -20 dBFS
+        w = new_stream(lm, seed).listen(extract_features(x.astype(np.float32), lm.features))
+        rows.append({"case": name, "not_idle": float((w < 1.0).mean())})
+    return rows
+
+
 def excerpt(data: Path, name: str, seconds: float) -> np.ndarray:
     from models.data.dwm import load_dance
     from models.features.audio_io import load_audio
@@ -251,6 +324,9 @@ def espeak_rows(lm, data: Path, seed: int) -> tuple[list[dict], list[dict]]:
         row = {"song": name}
         for db in MIX_DB:
             row[f"host {db:g} dB"] = idle_sounding(lm, with_speech(a, talk, db, len(a) // HOP), len(a) // HOP, seed)
+        a0 = cut(song[: 30 * SR])  # the song's start under the host: its first 30 s
+        for db in MIX_DB:
+            row[f"from its start {db:g} dB"] = idle_sounding(lm, with_speech(a0, talk, db, len(a0) // HOP), len(a0) // HOP, seed)
         mixes.append(row)
     for i, (name, song) in enumerate(zip(pick, songs)):
         a = cut(song[len(song) // 3: len(song) // 3 + 20 * SR])
@@ -322,7 +398,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", type=Path, help="write the results as JSON")
     p.add_argument("--parts", default="recordings,mixes,gaps",
                    help="comma-separated parts to run: recordings, mixes (voices and breaks), gaps, readers (after each "
-                        "recording), espeak (espeak-ng hosts over and after training songs) (default recordings,mixes,gaps)")
+                        "recording), espeak (espeak-ng hosts over and after training songs), stretches (the voices over the music with "
+                        "the stop undone: how long the gate hears no music), leadin (no music from the stream's start) "
+                        "(default recordings,mixes,gaps)")
     p.add_argument("--reader-at", type=float, default=1 / 3,
                    help="--parts readers: where the 20 s of each recording start, a share of its length (default 1/3)")
     p.add_argument("--floor-db", type=float, help="the voice-over rule's FLOOR_DB (models/networks/music_gate.py; "
@@ -332,9 +410,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--start-evidence", type=float,
                    help="the voice-over start's START_EVIDENCE, frames (inf: an idle performer starts on its detector alone)")
     p.add_argument("--start-decay", type=float, help="the voice-over start's START_DECAY (frames a frame without evidence takes off)")
+    p.add_argument("--song-dance", type=int, help="frames a song's start is danced (idle_gate.SONG_DANCE; 0: as --off song-start)")
     p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
                    "through voids the whole stop count), fresh (the statistics keep their time constant after a silence), resume (the "
-                   "voice-over start's count starts from 0 at a stop)")
+                   "voice-over start's count starts from 0 at a stop), song-start (the detector may stop a song's start at once)")
     p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
                    "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "
@@ -345,7 +424,7 @@ def main(argv: list[str] | None = None) -> int:
     if off - set(SWITCHES):
         p.error(f"--off: unknown part(s) {sorted(off - set(SWITCHES))}; known: {', '.join(SWITCHES)}")
     OFF.update(off)
-    known = {"recordings", "mixes", "gaps", "readers", "espeak"}
+    known = {"recordings", "mixes", "gaps", "readers", "espeak", "stretches", "leadin"}
     if parts - known:
         p.error(f"--parts: unknown part(s) {sorted(parts - known)}")
 
@@ -366,6 +445,10 @@ def main(argv: list[str] | None = None) -> int:
         gate.START_EVIDENCE = args.start_evidence
     if args.start_decay is not None:
         gate.START_DECAY = args.start_decay
+    if args.song_dance is not None:
+        from models.networks import idle_gate
+
+        idle_gate.SONG_DANCE = args.song_dance
     try:
         lm = load_model(args.checkpoint)
         if not getattr(lm.model, "takes_style", False):
@@ -433,6 +516,30 @@ def main(argv: list[str] | None = None) -> int:
             print(f"| {r['recording']} | " + " | ".join(f"{r[c]:.3f}" for c in cols) + " |")
         print(f"| worst | " + " | ".join(f"{max(r[c] for r in mix_rows):.3f}" for c in cols) + " |")
 
+    stretch_rows = []
+    for name, audio in (recordings if "stretches" in parts and talk is not None else []):
+        if name not in {f.name for f in args.music.glob("*.ogg")}:
+            continue  # the shared recordings only
+        audio = audio[: len(audio) // HOP * HOP]
+        sound, end = music_end(lm, extract_features(audio, lm.features), Path(name).stem)
+        for db in MIX_DB:
+            voice = with_speech(audio, talk, db, sound) - audio
+            stretch_rows.append({"recording": name, "speech_db": db, **stretches(lm, audio, voice, end, args.seed)})
+    if stretch_rows:
+        print(f"\n| recording, the readers over it, the stop undone | speech dB | longest run heard as no music (s) | from (s) | "
+              f"music / voice over it (dBFS) | runs of {STRETCH_MIN} frames or more |")
+        print("| --- | ---: | ---: | ---: | ---: | ---: |")
+        for r in stretch_rows:
+            lv = "-" if r["at_s"] is None else f"{r['music_dbfs']:.1f} / {r['voice_dbfs']:.1f}"
+            at = "-" if r["at_s"] is None else f"{r['at_s']:.1f}"
+            print(f"| {r['recording']} | {r['speech_db']:g} | {r['longest_s']:.2f} | {at} | {lv} | {r['runs']} |")
+
+    lead_rows = leadin_rows(lm, speech, args.seed) if "leadin" in parts else []
+    if lead_rows:
+        print("\n| no music from the stream's start, 30 s | not fully idle (0) |\n| --- | ---: |")
+        for r in lead_rows:
+            print(f"| {r['case']} | {r['not_idle']:.3f} |")
+
     reader_rows = []
     shared = [(n, a[int(len(a) * args.reader_at): int(len(a) * args.reader_at) + int(args.song_s * SR)]) for n, a in recordings
               if n in {f.name for f in args.music.glob("*.ogg")}] if "readers" in parts else []
@@ -485,7 +592,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{settle_target(r['gap']):g} | {f(r['held'])} | "
               f"{f(r['back_s'])} | {r['max_step_deg']:.1f} | {f(r['idle_step_deg'])} | {r['dance_step_p99_deg']:.1f} |")
     if args.json:
-        args.json.write_text(json.dumps({"mixes": mix_rows, "readers": reader_rows, "espeak": es_mix, "espeak_hosts": es_hosts, "gate_us_median": float(np.median(cost_us)),
+        args.json.write_text(json.dumps({"mixes": mix_rows, "stretches": stretch_rows, "leadin": lead_rows, "readers": reader_rows, "espeak": es_mix, "espeak_hosts": es_hosts, "gate_us_median": float(np.median(cost_us)),
                                          "gate_us_p99": float(np.percentile(cost_us, 99)), "recordings": rec_rows, "gaps": [{k: v for k, v in r.items() if k != "idle_w"}
                                                                              for r in gap_rows]}, indent=1))
     if args.plot and not gap_rows:

@@ -442,6 +442,11 @@ class MusicGate:
             return True
         return False
 
+    def voice_hears(self, margin: float) -> bool:
+        """The voice network's logit on the statistics of the last sounding frame lies above ``-margin``
+        (it hears some music under a voice; True without a voice network)."""
+        return not self.has_voice or presence_logit(self.stats, *self._voice) > -margin
+
     def stop_count(self) -> float:
         """Frames a dancing performer's frame that :meth:`step` heard as no music counts towards
         the stop: ``-logit / MARGIN_STOP`` within [1, :data:`SURE_COUNT`]. In silence the logit
