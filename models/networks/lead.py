@@ -8,15 +8,19 @@ speed dips land, which a rotation never does (brahms in rubato: docs/listening.m
 :class:`PhaseForecast` instead runs the tracker's own arithmetic
 (:func:`models.features.context._beat_columns`) on its onset window as it will stand ``L``
 frames on: the onsets heard, then ``L`` more taken as those one tracker period ``P`` earlier
-(linearly between frames), so the onsets the pulse expects pull the phase as real ones would.
-What it earns on each shared recording: docs/listening.md, "Lead".
+(linearly between frames), so the onsets the pulse expects pull the phase as real ones would;
+where larger, those one runner-up period back (:data:`RUNNER_UP`: the tracker's next-best level,
+whose onsets flip the tracker to it where the two nearly tie), the forecast's phase then read
+with the period its window reads. What it earns on each shared recording: docs/listening.md, "Lead".
 
 State: the last :data:`TEMPO_WINDOW` onset strengths twice over (a ring, as
 :class:`models.features.context.ContextTracker` keeps them) and a scratch window of the same
-size; nothing is allocated per frame. Cost, a frame with a lead (the rotation: 0.4 µs)::
+size; nothing is allocated per frame outside the compiled arithmetic. Cost, a
+frame with a lead: 14 µs (10 µs with ``RUNNER_UP`` off, the rotation 0.4 µs; interleaved, a
+loaded machine)::
 
-    python -m timeit -s "from models.networks.lead import PhaseForecast; f = PhaseForecast(); \
-        [f.push(i % 7 / 7) for i in range(400)]; f.phase(4, 15.3)" "f.phase(4, 15.3)"
+    python -m timeit -s "from models.networks import lead; lead.RUNNER_UP = True; \
+        f = lead.PhaseForecast(); [f.push(i % 7 / 7) for i in range(400)]; f.phase(4, 15.3)" "f.phase(4, 15.3)"
 """
 
 from __future__ import annotations
@@ -32,6 +36,18 @@ from models.features.context import LAGS, TEMPO_WINDOW, ContextTracker, _beat_co
 #: ``2 pi L / P`` (the forecast before issue 43, kept to measure against: benchmarks/studies/lead.py
 #: ``--rotation``).
 ONSET_FORECAST: bool = True
+#: The onsets not heard yet are taken as the larger of those one tracker period back and one
+#: runner-up period back (the best-scoring lag of the tracker's at least :data:`APART` octave from
+#: its period), and the forecast's period is the one its window reads; False: one tracker period
+#: back only, the period as now (benchmarks/studies/lead.py ``--period-only``). The tracker's level
+#: changes where onsets arrive that another level expects (brahms: at 90 of its 995 frames one
+#: comes within 4 frames); lead 0 follows each change as the onsets arrive, and the runner-up's
+#: expected onsets let the forecast change with it (52 of the 90 caught; a wrong level forecast at
+#: 72 other frames). Measured: docs/listening.md, "Lead".
+RUNNER_UP: bool = True
+#: Octaves the runner-up period lies at least from the tracker's (its neighbouring lags are the
+#: same peak of the autocorrelation).
+APART: float = 0.2
 
 
 class PhaseForecast:
@@ -65,18 +81,59 @@ class PhaseForecast:
 
     def phase(self, lead: int, period: float) -> float:
         """The tracker's phase (radians) ``lead`` frames after the last pushed frame, the
-        ``lead`` onsets not yet heard taken as those ``period`` frames before each."""
+        ``lead`` onsets not yet heard taken as those ``period`` frames before each (and, with
+        :data:`RUNNER_UP`, the runner-up period's where larger)."""
+        return self.ahead(lead, period)[0]
+
+    def ahead(self, lead: int, period: float) -> tuple[float, float | None]:
+        """(phase in radians, ``log2(P / 15)`` of the period P in frames) the tracker would read
+        ``lead`` frames after the last pushed frame (see :meth:`phase`): with :data:`RUNNER_UP`
+        the period the forecast window reads, else None (the period as now)."""
         p = float(period)
         p = min(max(p, float(LAGS[0]) - 1.0), float(LAGS[-1]) + 1.0) if math.isfinite(p) else float(LAGS[0])
-        return _forecast_phase(self._ring, (self._frames - 1) % TEMPO_WINDOW, int(lead), p, self._buf,
-                               self._w, self._w_sum, self._two_pi_j, self._lag_prior, int(LAGS[0]), int(LAGS[-1]))
+        a, logp = _forecast_phase(self._ring, (self._frames - 1) % TEMPO_WINDOW, int(lead), p, self._buf,
+                                  self._w, self._w_sum, self._two_pi_j, self._lag_prior, int(LAGS[0]),
+                                  int(LAGS[-1]), APART if RUNNER_UP else -1.0)
+        return a, (logp if RUNNER_UP else None)
 
 
 @njit(cache=True, nogil=True)
-def _forecast_phase(ring, pos, lead, period, buf, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi):  # pragma: no cover - compiled
-    """Fill ``buf[n:]`` with the window ``lead`` frames on (the heard onsets ``ring[pos + 1 + lead:
-    pos + n + 1]``, then ``lead`` of them one ``period`` back) and return its phase."""
+def _runner_up(ring, pos, w, w_sum, lag_prior, lag_lo, lag_hi, apart):  # pragma: no cover - compiled
+    """The lag (frames) scoring best in the tracker's arithmetic (its weighted autocorrelation of
+    the window ``ring[pos + 1: pos + n + 1]`` times the tempo prior) among those at least ``apart``
+    octave from the best lag; 0.0 where none scores above zero."""
     n = w.shape[0]
+    mean = 0.0
+    for j in range(n):
+        mean += ring[pos + n - j] * w[j]
+    mean /= w_sum
+    xw = np.empty(n)
+    for j in range(n):
+        xw[j] = (ring[pos + n - j] - mean) * w[j]
+    score = np.empty(lag_hi - lag_lo + 1)
+    best = 0
+    for i in range(lag_hi - lag_lo + 1):
+        acc = 0.0
+        for j in range(n - lag_lo - i):
+            acc += xw[j] * xw[j + lag_lo + i]
+        score[i] = acc * lag_prior[i]
+        if score[i] > score[best]:
+            best = i
+    second, top = 0.0, 0.0
+    for i in range(lag_hi - lag_lo + 1):
+        if abs(math.log2((lag_lo + i) / (lag_lo + best))) > apart and score[i] > top:
+            second, top = float(lag_lo + i), score[i]
+    return second
+
+
+@njit(cache=True, nogil=True)
+def _forecast_phase(ring, pos, lead, period, buf, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi,
+                    apart):  # pragma: no cover - compiled
+    """Fill ``buf[n:]`` with the window ``lead`` frames on (the heard onsets ``ring[pos + 1 + lead:
+    pos + n + 1]``, then ``lead`` of them one ``period`` back, or where larger, with ``apart`` >= 0,
+    one :func:`_runner_up` period back) and return its (phase, log2 of its period / 15)."""
+    n = w.shape[0]
+    other = _runner_up(ring, pos, w, w_sum, lag_prior, lag_lo, lag_hi, apart) if apart >= 0.0 and lead > 0 else 0.0
     heard = n - lead
     for i in range(heard):
         buf[n + i] = ring[pos + 1 + lead + i]
@@ -84,6 +141,9 @@ def _forecast_phase(ring, pos, lead, period, buf, w, w_sum, two_pi_j, lag_prior,
         x = heard + k - period  # >= heard - 41 + k: already filled, a period is at least 10 frames
         i = int(math.floor(x))
         f = x - i
-        buf[n + heard + k] = (1.0 - f) * buf[n + i] + f * buf[n + i + 1]
-    ccos, csin, _, _ = _beat_columns(buf, n - 1, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi)
-    return math.atan2(csin, ccos)
+        v = (1.0 - f) * buf[n + i] + f * buf[n + i + 1]
+        if other > 0.0:  # a whole lag: the onset that many frames back
+            v = max(v, buf[n + heard + k - int(other)])
+        buf[n + heard + k] = v
+    ccos, csin, _, logp = _beat_columns(buf, n - 1, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi)
+    return math.atan2(csin, ccos), logp
