@@ -20,8 +20,11 @@ brahms' applause), against ``librosa.beat.beat_track`` on the recording; ``--max
 each to its first seconds. ``--spread`` adds, per song, 95 % bootstrap intervals of the last
 lead's ratio over the seeds and over the song's 5-s blocks (is a shortfall the draw, or the
 few beats of one song?); ``--oracle`` dances the leads with the tracker's true phase of the
-lead's frame (the ceiling of any forecast); ``--rotation`` with the forecast the lead read
-before issue 43 (the phase rotated by ``2 pi L / P``).
+lead's frame (the ceiling of any forecast; ``--oracle-changes`` only where the tracker's
+level changes within the lead); ``--rotation`` with the forecast the lead read
+before issue 43 (the phase rotated by ``2 pi L / P``), ``--period-only`` with the onset forecast
+before the runner-up period (``models.networks.lead.RUNNER_UP``); ``--levels`` counts, dancing
+nothing, how the forecast reads the tracker's changes of level (:func:`level_changes`).
 
 Each song is danced with seeds 0 to 5 (``--seeds``, as benchmarks/listening.py) at every lead. Hit rates are pooled
 over songs and seeds (every kinematic beat counts once), with the smallest and largest song
@@ -99,17 +102,22 @@ def spread(detail: dict[str, list[np.ndarray]], lead_ms: float, draws: int = 400
     return {"ratio": ratio(a, b), "seeds_lo": slo, "seeds_hi": shi, "blocks_lo": blo, "blocks_hi": bhi}
 
 
-def oracle_generate(model, features: np.ndarray, seed: int = 0, lead: float = 0.0) -> np.ndarray:
+def oracle_generate(model, features: np.ndarray, seed: int = 0, lead: float = 0.0,
+                    changes: bool = False) -> np.ndarray:
     """``dance_stream.generate`` with the lead's beat phase read from the features ``lead`` frames
-    on (the tracker's true phase there, its clarity as now): what no causal forecast can beat."""
+    on (the tracker's true phase there, its clarity as now): what no causal forecast can beat.
+    ``changes``: only at the frames whose next ``lead`` frames change the tracker's period by more
+    than 0.1 octave (a change of level), the stream's own forecast elsewhere."""
     import math
 
     from models.networks.dance_stream import DanceStream
 
     class Oracle(DanceStream):
         def _ahead(self, row: np.ndarray) -> np.ndarray:
-            ccos, csin = self._beat_cols[:2]
+            ccos, csin, _, logp = self._beat_cols
             j = min(self.frame + self._lead, len(features) - 1)
+            if changes and abs(float(features[j, logp]) - float(row[logp])) <= 0.1:
+                return super()._ahead(row)
             a, r = math.atan2(features[j, csin], features[j, ccos]), math.hypot(row[ccos], row[csin])
             out = row.copy()
             out[ccos], out[csin] = r * math.cos(a), r * math.sin(a)
@@ -120,13 +128,14 @@ def oracle_generate(model, features: np.ndarray, seed: int = 0, lead: float = 0.
 
 def measure_song(model, features: np.ndarray, mus: np.ndarray, leads: Sequence[float],
                  seeds: Sequence[int] = (0,), detail: dict | None = None,
-                 oracle: bool = False) -> dict[str, dict[str, list[int]]]:
+                 oracle: bool | str = False) -> dict[str, dict[str, list[int]]]:
     """``{str(lead_ms): {"seen": [hits, beats], "no_lead": [hits, beats], "undelayed": [hits, beats]},
     "chance": hit rate of beats at random frames}`` for one song, counts summed over ``seeds``: ``seen`` the lead's motion behind a display delay of
     the lead, ``no_lead`` lead 0's motion behind the same delay, ``undelayed`` the lead's
     motion with no delay. ``leads[0]`` must be 0. ``detail``, if given, gets per lead (``str(ms)``)
     one :func:`block_hits` array a seed of the lead's motion behind its delay (for :func:`spread`).
-    ``oracle``: the leads danced with :func:`oracle_generate` instead."""
+    ``oracle``: the leads danced with :func:`oracle_generate` instead (``"changes"``: its
+    ``changes=True``)."""
     from models.evaluation.beats import kinematic_beats
     from models.evaluation.evaluate import positions
     from models.networks.dance_stream import generate as stream_generate
@@ -136,7 +145,7 @@ def measure_song(model, features: np.ndarray, mus: np.ndarray, leads: Sequence[f
     out: dict = {f"{ms:g}": {"seen": [0, 0], "no_lead": [0, 0], "undelayed": [0, 0]} for ms in leads}
     out["chance"] = chance_hit_rate(mus, len(features))
     for seed in seeds:
-        gen = oracle_generate if oracle else stream_generate
+        gen = (lambda *a, **k: oracle_generate(*a, **k, changes=oracle == "changes")) if oracle else stream_generate
         kins = {ms: kinematic_beats(positions(gen(model, features, seed=seed, lead=ms))) for ms in leads}
         for ms in leads:
             d, row = lead_frames(ms), out[f"{ms:g}"]
@@ -145,6 +154,46 @@ def measure_song(model, features: np.ndarray, mus: np.ndarray, leads: Sequence[f
             if detail is not None:
                 blocks = max(1, -(-len(features) // int(round(BLOCK_S * 30))))
                 detail.setdefault(f"{ms:g}", []).append(block_hits(kins[ms] + d, mus, blocks))
+    return out
+
+
+def level_changes(model, features: np.ndarray, lead: int) -> dict[str, dict[str, float]]:
+    """How the lead's forecast (``PhaseForecast.ahead``) reads the beat tracker's changes of level
+    on one recording's features (T, D), ``lead`` frames on, with ``RUNNER_UP`` on and off:
+    ``{"on"|"off": {"frames", "changes", "caught", "wrong", "miss"}}``: of the frames after the
+    tracker's first window (6 s), those whose next ``lead`` frames change its period by more than
+    0.1 octave, how many of them the forecast's period matches the period ``lead`` frames on
+    (within 0.1 octave), at how many others it forecasts a period that is neither, and the mean
+    miss of its phase (frames of the period ``lead`` frames on)."""
+    import math
+
+    from models.features.context import TEMPO_WINDOW
+    from models.networks import lead as lead_part
+
+    on, cc = features[:, model.config.onset_col], model.config.clarity_col
+    period = 15.0 * 2.0 ** features[:, cc + 1].astype(np.float64)
+    theta = np.arctan2(features[:, cc - 1], features[:, cc - 2]).astype(np.float64)
+    octave = lambda a, b: abs(math.log2(a / b)) > 0.1  # noqa: E731
+    out, shipped = {}, lead_part.RUNNER_UP
+    try:
+        for key, runner_up in (("on", True), ("off", False)):
+            lead_part.RUNNER_UP = runner_up
+            f, row, miss = lead_part.PhaseForecast(), dict.fromkeys(("frames", "changes", "caught", "wrong"), 0), []
+            for t in range(len(features) - lead):
+                f.push(float(on[t]))
+                if t < TEMPO_WINDOW:
+                    continue
+                a, logp = f.ahead(lead, float(period[t]))
+                p = period[t] if logp is None else 15.0 * 2.0 ** logp
+                change, right = octave(period[t + lead], period[t]), not octave(p, period[t + lead])
+                row["frames"] += 1
+                row["changes"] += change
+                row["caught"] += change and right
+                row["wrong"] += octave(p, period[t]) and not right
+                miss.append(abs(math.remainder(a - theta[t + lead], 2 * math.pi)) / (2 * math.pi) * period[t + lead])
+            out[key] = {**row, "miss": float(np.mean(miss)) if miss else 0.0}
+    finally:
+        lead_part.RUNNER_UP = shipped
     return out
 
 
@@ -211,10 +260,11 @@ def run(checkpoint: str, data_root: str | Path, cache_dir: str | Path | None, le
 
 def run_music(checkpoint: str, music_dir: str | Path, leads: Sequence[float], seeds: Sequence[int] = (0,),
               songs: Sequence[str] | None = None, max_s: float | None = None, log=print,
-              details: dict | None = None, oracle: bool = False) -> dict[str, dict]:
+              details: dict | None = None, oracle: bool | str = False, levels: bool = False) -> dict[str, dict]:
     """:func:`run` on every recording of ``music_dir`` (or those whose stem is in ``songs``): the
     features of the recording up to the end of its music (at most ``max_s`` seconds), its beats
-    by ``librosa.beat.beat_track`` on the same span; ``{stem: measure_song(...)}``."""
+    by ``librosa.beat.beat_track`` on the same span; ``{stem: measure_song(...)}`` (``levels``:
+    ``{stem: level_changes(...)}`` at the last lead instead, nothing danced)."""
     import torch
 
     from models.errors import ConfigError
@@ -239,6 +289,9 @@ def run_music(checkpoint: str, music_dir: str | Path, leads: Sequence[float], se
             if max_s is not None:
                 end = min(end, int(round(max_s * FPS)))
             feats = feats[:end]
+            if levels:
+                out[f.stem] = level_changes(lm.model, feats, lead_frames(leads[-1]))
+                continue
             mus = music_beats(audio[: end * HOP], SAMPLE_RATE, FPS)  # frame t ends at sample (t + 1) HOP
             log(f"  [{i}/{len(files)}] {f.stem} ({end / FPS:.0f} s): lead {', '.join(f'{x:g}' for x in leads)} ms")
             out[f.stem] = measure_song(lm.model, feats, mus[mus < end], leads, seeds,
@@ -271,16 +324,24 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--spread", action="store_true",
                    help=f"also print each song's ratio at the last lead with 95 %% bootstrap intervals over the "
                         f"seeds and over its {BLOCK_S:g}-s blocks (how much of it is the draw, how much the song)")
-    p.add_argument("--oracle", action="store_true",
-                   help="with --music: dance each lead with the tracker's true phase of the lead's frame "
-                        "(read from the recording's future, the ceiling of any forecast) instead of the stream's forecast")
-    p.add_argument("--rotation", action="store_true",
-                   help="the lead's phase as the tracker's of now rotated by 2 pi L / P (the forecast before "
-                        "issue 43; models.networks.lead.ONSET_FORECAST off) instead of its forecast from the onsets")
+    for flag, what in (  # how the leads are danced or read, instead of the shipped forecast
+            ("--oracle", "with --music: dance each lead with the tracker's true phase of the lead's frame (read from "
+                         "the recording's future, the ceiling of any forecast) instead of the stream's forecast"),
+            ("--oracle-changes", "with --music: as --oracle, but only at the frames whose next lead frames change the "
+                                 "tracker's level (period by more than 0.1 octave), the stream's forecast elsewhere"),
+            ("--rotation", "the lead's phase as the tracker's of now rotated by 2 pi L / P (the forecast before issue 43; "
+                           "models.networks.lead.ONSET_FORECAST off) instead of its forecast from the onsets"),
+            ("--period-only", "the forecast taking the onsets not heard yet as those one tracker period back only, its "
+                              "period as now (before issue 43's runner-up; models.networks.lead.RUNNER_UP off)"),
+            ("--levels", "with --music: instead of dancing, count per recording the frames whose next lead frames (the "
+                         "last of --leads) change the beat tracker's level, how many of them the forecast catches and "
+                         "at how many others it forecasts a wrong level, with the runner-up and without")):
+        p.add_argument(flag, action="store_true", help=what)
     p.add_argument("--json", metavar="OUT", help="also write every song's counts as JSON")
     a = p.parse_args(argv)
-    if a.oracle and not a.music:
-        p.error("--oracle needs --music")
+    for flag, on in (("--oracle", a.oracle), ("--oracle-changes", a.oracle_changes), ("--levels", a.levels)):
+        if on and not a.music:
+            p.error(f"{flag} needs --music")
     if any(not 0.0 <= x <= 200.0 for x in a.leads) or a.leads[0] != 0.0:
         p.error("--leads must each be in [0, 200] ms, the first 0 (the reference)")
     import torch
@@ -288,20 +349,31 @@ def main(argv: list[str] | None = None) -> int:
     from models.errors import PerformerError
 
     torch.set_num_threads(1)
-    if a.rotation:
+    if a.rotation or a.period_only:
         from models.networks import lead as lead_part
 
-        lead_part.ONSET_FORECAST = False
+        lead_part.ONSET_FORECAST = not a.rotation
+        lead_part.RUNNER_UP = not a.period_only
     try:
         log = lambda m: print(m, file=sys.stderr)  # noqa: E731
         details: dict | None = {} if a.spread else None
         results = (run_music(a.checkpoint, a.music, a.leads, a.seeds, a.songs, a.max_s, log=log, details=details,
-                             oracle=a.oracle)
+                             oracle="changes" if a.oracle_changes else a.oracle, levels=a.levels)
                    if a.music else run(a.checkpoint, a.data, a.cache, a.leads, a.seeds, a.songs, log=log,
                                        details=details))
     except (PerformerError, OSError) as e:
         print(f"lead.py: {e}", file=sys.stderr)
         return 2
+    if a.levels:
+        print(f"The beat tracker's level changes within a {a.leads[-1]:g}-ms lead, frames after its first 6 s "
+              "(caught: the forecast's period is the one the tracker reads a lead on; wrong: a level it does not "
+              "read; miss: the forecast's mean phase miss, frames), with the runner-up / the period only\n")
+        print("| recording | frames | level changes | caught | wrong | miss |\n| --- | ---: | ---: | ---: | ---: | ---: |")
+        for song, r in results.items():
+            on, off = r["on"], r["off"]
+            print(f"| {song} | {on['frames']} | {on['changes']} | {on['caught']} / {off['caught']} | "
+                  f"{on['wrong']} / {off['wrong']} | {on['miss']:.2f} / {off['miss']:.2f} |")
+        return 0
     what = f"recordings of {a.music}" if a.music else "validation dances"
     print(f"The lead on {len(results)} {what} ({a.checkpoint}, seeds {' '.join(map(str, a.seeds))}): "
           "beat hit rate (+-2 frames), pooled over songs and seeds [smallest, largest song]\n")

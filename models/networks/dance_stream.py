@@ -503,8 +503,8 @@ class DanceStream:
     **Lead.** With a lead of L frames (``round(lead_ms * 30 / 1000)``, 0..6) the pose sent
     at audio frame t is the one the performer takes at t + L: every beat-tracker phase
     the stream reads (the predictor's audio tokens, the beat placement of the next
-    movement, the beat warp) is the tracker's own forecast for L frames on, its phase
-    advanced by ``2 pi L / period``; the rest of each frame is the audio heard so far. A
+    movement, the beat warp) is the tracker's own forecast for L frames on, phase and period
+    (models/networks/lead.py); the rest of each frame is the audio heard so far. A
     movement played from audio frame t (shown at t + L) is so decided with audio up to L
     frames before it is seen, and its speed dips aim at the beats expected at t + L.
     The code steps stay on frames ``t % seg == 0`` whatever the lead, so an ensemble's
@@ -704,14 +704,16 @@ class DanceStream:
 
     def _ahead(self, row: np.ndarray) -> np.ndarray:
         """``row`` (D,) with the beat tracker's phase as it will read ``self._lead`` frames on
-        (a copy; its clarity and period as now): :class:`PhaseForecast` on the onsets, or
-        without an onset column (or ``ONSET_FORECAST`` off) ``theta + 2 pi L / period``."""
+        (a copy; its clarity as now): :class:`PhaseForecast` on the onsets (and the period it
+        reads), or without an onset column (or ``ONSET_FORECAST`` off) ``theta + 2 pi L / period``."""
         ccos, csin, _, logp = self._beat_cols
         x, y, period = float(row[ccos]), float(row[csin]), 15.0 * 2.0 ** float(row[logp])
         out = row.copy()
         if self._onset_col is not None and lead_part.ONSET_FORECAST:
-            a, r = self._forecast.phase(self._lead, period), math.hypot(x, y)
+            (a, ahead_logp), r = self._forecast.ahead(self._lead, period), math.hypot(x, y)
             out[ccos], out[csin] = r * math.cos(a), r * math.sin(a)
+            if ahead_logp is not None:  # the period the forecast's phase is of (lead.RUNNER_UP)
+                out[logp] = ahead_logp
             return out
         a = 2.0 * math.pi * self._lead / period
         c, s = math.cos(a), math.sin(a)

@@ -4,19 +4,23 @@ With ``--lead`` the stream reads every beat-tracker phase as the tracker's forec
 frames (30 fps) later. Rotating the phase by ``2 pi L / P`` carries on the beats the
 tracker has settled on; but at lead 0 each new onset pulls the phase onto itself as it
 arrives (the newest frames weigh most in the tracker's window), and that is where lead 0's
-speed dips land, which a rotation never does (brahms in rubato: docs/listening.md, "Lead").
+speed dips land, which a rotation never does (brahms: docs/listening.md, "Lead").
 :class:`PhaseForecast` instead runs the tracker's own arithmetic
 (:func:`models.features.context._beat_columns`) on its onset window as it will stand ``L``
 frames on: the onsets heard, then ``L`` more taken as those one tracker period ``P`` earlier
-(linearly between frames), so the onsets the pulse expects pull the phase as real ones would.
-What it earns on each shared recording: docs/listening.md, "Lead".
+(linearly between frames), so the onsets the pulse expects pull the phase as real ones would;
+and where the tracker's level is unsteady and the onsets its next-best level expects (one
+runner-up period back, where larger) would change it, the changed level's phase and period
+(:data:`RUNNER_UP`). What it earns on each shared recording: docs/listening.md, "Lead".
 
 State: the last :data:`TEMPO_WINDOW` onset strengths twice over (a ring, as
 :class:`models.features.context.ContextTracker` keeps them) and a scratch window of the same
-size; nothing is allocated per frame. Cost, a frame with a lead (the rotation: 0.4 µs)::
+size; nothing is allocated per frame outside the compiled arithmetic. Cost, a frame with a
+lead: 6 µs on a steady level, 8 µs on an unsteady one (``f._since = 0`` in place of
+``1 << 30``; interleaved on a shared machine)::
 
-    python -m timeit -s "from models.networks.lead import PhaseForecast; f = PhaseForecast(); \
-        [f.push(i % 7 / 7) for i in range(400)]; f.phase(4, 15.3)" "f.phase(4, 15.3)"
+    python -m timeit -s "from models.networks import lead; f = lead.PhaseForecast(); \
+        [f.push(i % 7 / 7) for i in range(400)]; f.phase(4, 15.3); f._since = 1 << 30" "f.phase(4, 15.3)"
 """
 
 from __future__ import annotations
@@ -26,12 +30,29 @@ import math
 import numpy as np
 from numba import njit
 
-from models.features.context import LAGS, TEMPO_WINDOW, ContextTracker, _beat_columns
+from models.features.context import LAGS, PRIOR_PERIOD, TEMPO_WINDOW, ContextTracker, _beat_columns
 
 #: The stream's lead reads :class:`PhaseForecast`'s phase; False: the phase of now rotated by
 #: ``2 pi L / P`` (the forecast before issue 43, kept to measure against: benchmarks/studies/lead.py
 #: ``--rotation``).
 ONSET_FORECAST: bool = True
+#: Where the tracker's level is unsteady (it changed within :data:`UNSTEADY_FRAMES`), the forecast
+#: also takes the onsets not heard yet as the larger of those one tracker period back and one
+#: runner-up period back (the best-scoring lag of the tracker's at least :data:`APART` octave from
+#: its period); where that window reads another level, the forecast is that level's phase and
+#: period, else the period-only one. The tracker's level changes where onsets arrive that another
+#: level expects (brahms: within the lead of 90 of its 995 frames); lead 0 follows each change as
+#: the onsets arrive, the period-only forecast (False; benchmarks/studies/lead.py ``--period-only``)
+#: none. Measured: docs/listening.md, "Lead".
+RUNNER_UP: bool = True
+#: Octaves between two periods of the tracker that make a change of level.
+LEVEL_CHANGE: float = 0.1
+#: Octaves the runner-up period lies at least from the tracker's (its neighbouring lags are the
+#: same peak of the autocorrelation).
+APART: float = 0.2
+#: Frames (30 fps) since the tracker last changed level within which its level counts as
+#: unsteady, and the runner-up is read (3 s; on a steady level the forecast is the period's alone).
+UNSTEADY_FRAMES: int = 90
 
 
 class PhaseForecast:
@@ -40,22 +61,25 @@ class PhaseForecast:
     ``push(onset)`` once per frame (the feature frame's onset strength, the column the
     tracker reads); ``phase(lead, period)``: the phase (radians, 0 on a beat) the tracker
     would read ``lead`` frames (1..6) after the last pushed frame, its period ``period``
-    (frames, the tracker's now) carrying the onsets on. ``reset()`` starts a new stream.
+    (frames, the tracker's now) carrying the onsets on; ``ahead`` also its period where
+    that changes. ``reset()`` starts a new stream. State besides the onsets: the tracker's
+    period at the last call and the frames since it last changed level.
     """
 
-    __slots__ = ("_ring", "_buf", "_frames", "_w", "_w_sum", "_two_pi_j", "_lag_prior")
+    __slots__ = ("_ring", "_buf", "_frames", "_w", "_w_sum", "_two_pi_j", "_lag_prior", "_level", "_since", "_seen")
 
     def __init__(self) -> None:
         ct = ContextTracker(1, 0.0, True)  # the tracker's window, weights and tempo prior
         self._w, self._w_sum, self._two_pi_j, self._lag_prior = ct._w, ct._w_sum, ct._two_pi_j, ct._lag_prior
         self._ring = np.zeros(2 * TEMPO_WINDOW)
         self._buf = np.zeros(2 * TEMPO_WINDOW)
-        self._frames = 0
+        self.reset()
 
     def reset(self) -> None:
         """No onsets heard (zeros, as the tracker starts)."""
         self._ring[:] = 0.0
         self._frames = 0
+        self._level, self._since, self._seen = 0.0, 1 << 30, 0
 
     def push(self, onset: float) -> None:
         """Append one frame's onset strength."""
@@ -65,18 +89,68 @@ class PhaseForecast:
 
     def phase(self, lead: int, period: float) -> float:
         """The tracker's phase (radians) ``lead`` frames after the last pushed frame, the
-        ``lead`` onsets not yet heard taken as those ``period`` frames before each."""
+        ``lead`` onsets not yet heard taken as those ``period`` frames before each (or, with
+        :data:`RUNNER_UP` on an unsteady level, where the runner-up period's change the level,
+        as those too). Call it every frame: it keeps count of the level's steadiness."""
+        return self.ahead(lead, period)[0]
+
+    def ahead(self, lead: int, period: float) -> tuple[float, float | None]:
+        """(phase in radians, ``log2(P / 15)`` of the period P in frames) the tracker would read
+        ``lead`` frames after the last pushed frame (see :meth:`phase`): the period where the
+        runner-up changes the level (:data:`RUNNER_UP`), else None (the period as now)."""
         p = float(period)
         p = min(max(p, float(LAGS[0]) - 1.0), float(LAGS[-1]) + 1.0) if math.isfinite(p) else float(LAGS[0])
-        return _forecast_phase(self._ring, (self._frames - 1) % TEMPO_WINDOW, int(lead), p, self._buf,
-                               self._w, self._w_sum, self._two_pi_j, self._lag_prior, int(LAGS[0]), int(LAGS[-1]))
+        args = (self._ring, (self._frames - 1) % TEMPO_WINDOW, int(lead), p, self._buf,
+                self._w, self._w_sum, self._two_pi_j, self._lag_prior, int(LAGS[0]), int(LAGS[-1]))
+        if self._frames != self._seen:  # the tracker's level: frames since it last changed
+            self._since += self._frames - self._seen
+            if self._level > 0.0 and abs(math.log2(p / self._level)) > LEVEL_CHANGE:
+                self._since = 0
+            self._level, self._seen = p, self._frames
+        if RUNNER_UP and self._since <= UNSTEADY_FRAMES:
+            a, logp = _forecast_phase(*args, APART)
+            if abs(logp - math.log2(p / PRIOR_PERIOD)) > LEVEL_CHANGE:  # the runner-up changes the level
+                return a, logp
+        return _forecast_phase(*args, -1.0)[0], None
 
 
 @njit(cache=True, nogil=True)
-def _forecast_phase(ring, pos, lead, period, buf, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi):  # pragma: no cover - compiled
-    """Fill ``buf[n:]`` with the window ``lead`` frames on (the heard onsets ``ring[pos + 1 + lead:
-    pos + n + 1]``, then ``lead`` of them one ``period`` back) and return its phase."""
+def _runner_up(ring, pos, w, w_sum, lag_prior, lag_lo, lag_hi, apart):  # pragma: no cover - compiled
+    """The lag (frames) scoring best in the tracker's arithmetic (its weighted autocorrelation of
+    the window ``ring[pos + 1: pos + n + 1]`` times the tempo prior) among those at least ``apart``
+    octave from the best lag; 0.0 where none scores above zero."""
     n = w.shape[0]
+    mean = 0.0
+    for j in range(n):
+        mean += ring[pos + n - j] * w[j]
+    mean /= w_sum
+    xw = np.empty(n)
+    for j in range(n):
+        xw[j] = (ring[pos + n - j] - mean) * w[j]
+    score = np.empty(lag_hi - lag_lo + 1)
+    best = 0
+    for i in range(lag_hi - lag_lo + 1):
+        acc = 0.0
+        for j in range(n - lag_lo - i):
+            acc += xw[j] * xw[j + lag_lo + i]
+        score[i] = acc * lag_prior[i]
+        if score[i] > score[best]:
+            best = i
+    second, top = 0.0, 0.0
+    for i in range(lag_hi - lag_lo + 1):
+        if abs(math.log2((lag_lo + i) / (lag_lo + best))) > apart and score[i] > top:
+            second, top = float(lag_lo + i), score[i]
+    return second
+
+
+@njit(cache=True, nogil=True)
+def _forecast_phase(ring, pos, lead, period, buf, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi,
+                    apart):  # pragma: no cover - compiled
+    """Fill ``buf[n:]`` with the window ``lead`` frames on (the heard onsets ``ring[pos + 1 + lead:
+    pos + n + 1]``, then ``lead`` of them one ``period`` back, or where larger, with ``apart`` >= 0,
+    one :func:`_runner_up` period back) and return its (phase, log2 of its period / 15)."""
+    n = w.shape[0]
+    other = _runner_up(ring, pos, w, w_sum, lag_prior, lag_lo, lag_hi, apart) if apart >= 0.0 and lead > 0 else 0.0
     heard = n - lead
     for i in range(heard):
         buf[n + i] = ring[pos + 1 + lead + i]
@@ -84,6 +158,9 @@ def _forecast_phase(ring, pos, lead, period, buf, w, w_sum, two_pi_j, lag_prior,
         x = heard + k - period  # >= heard - 41 + k: already filled, a period is at least 10 frames
         i = int(math.floor(x))
         f = x - i
-        buf[n + heard + k] = (1.0 - f) * buf[n + i] + f * buf[n + i + 1]
-    ccos, csin, _, _ = _beat_columns(buf, n - 1, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi)
-    return math.atan2(csin, ccos)
+        v = (1.0 - f) * buf[n + i] + f * buf[n + i + 1]
+        if other > 0.0:  # a whole lag: the onset that many frames back
+            v = max(v, buf[n + heard + k - int(other)])
+        buf[n + heard + k] = v
+    ccos, csin, _, logp = _beat_columns(buf, n - 1, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi)
+    return math.atan2(csin, ccos), logp
