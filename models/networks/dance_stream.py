@@ -56,6 +56,7 @@ from models.networks.library_player import NEAREST, STYLE_BASE, bend_deg, member
 from models.networks.member_tables import (CHUNK_FRAMES, MemberTables, code_energy, code_frequency, member_dips,  # noqa: F401
                                           member_positions, member_speed, member_tables)
 from models.networks.streaming import FEATURE_LIMIT
+from models.networks import tempo as tempo_mod
 from models.networks.tempo import DENSITY_WINDOW, TEMPO_RANGE, TempoFollower, danced_beat, onset_density
 from models.rig.humanoid import BONE_INDEX
 from models.rig.kinematics import rotation_jumps_deg
@@ -615,7 +616,7 @@ class DanceStream:
         self._rate = 1.0  # exemplar frames per frame at the end of the current movement (tempo following)
         self._own_speed = 0.0  # the current movement's exemplar's own mean joint speed, m/frame (0: none)
         self._rate_from = 1.0  # ... and at its start
-        self._tempo = TempoFollower()
+        self._tempo = TempoFollower(self._fold_hold())
         self._onsets = np.zeros(DENSITY_WINDOW, np.float64)  # the last DENSITY_WINDOW onset strengths, a ring
         self._forecast.reset()
         self._density = 0.0  # their onset density (per s), taken at each code step
@@ -641,6 +642,13 @@ class DanceStream:
         """Dance this style from the next code on: None/"auto", "chacha", "rumba", "waltz", or a library
         folder (models/networks/library_player.py); ConfigError otherwise."""
         self.style, self._pstyle = resolve_style(self.model, style)
+        self._tempo.hold = self._fold_hold()
+
+    def _fold_hold(self) -> float:
+        """The tempo fold's hold (:data:`models.networks.tempo.FOLD_HOLD`) under auto; none for a requested
+        style or folder, whose dance kept its earlier tempo reading (a requested cha-cha on the waltz songs
+        at the held 170 bpm won 2 of 6 by 0.15, 3 or more without: tests/test_style_control_script.py)."""
+        return tempo_mod.FOLD_HOLD if self.style == 0 else 0.0
 
     def set_energy(self, energy: float) -> None:
         """How lively the movements are, from the next code on: 0 (the calmest the music

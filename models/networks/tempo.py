@@ -153,10 +153,11 @@ class TempoFollower:
     """
 
     __slots__ = ("log_p", "conf", "score", "slow", "heard", "away", "votes", "fast_num", "fast_den", "drift", "fold",
-                 "_a")
+                 "hold", "_a")
 
-    def __init__(self) -> None:
+    def __init__(self, hold: float | None = None) -> None:
         self._a = 1.0 / TEMPO_TAU
+        self.hold = FOLD_HOLD if hold is None else hold  # octaves the fold keeps its octave past the edges (0: none)
         self.reset()
 
     def reset(self) -> None:
@@ -239,11 +240,11 @@ class TempoFollower:
 
     def _refold(self) -> None:
         """Set :attr:`fold` so that the fastest octave lies in (85, 170] bpm, or keep it while that
-        octave lies at most :data:`FOLD_HOLD` octave outside (77-188 bpm: the fold keeps its octave)."""
+        octave lies at most :attr:`hold` octave outside (:data:`FOLD_HOLD`: 77-188 bpm)."""
         lo = 60.0 * FPS / TEMPO_RANGE[1]  # frames a beat at the top
         if self.fold == self.fold and self.heard > SETTLE_FRAMES:  # before the vote: folded afresh
             q = 15.0 * 2.0 ** (self.log_p + self.fold)
-            if lo * 2.0 ** -FOLD_HOLD <= q < 2.0 * lo * 2.0 ** FOLD_HOLD:
+            if lo * 2.0 ** -self.hold <= q < 2.0 * lo * 2.0 ** self.hold:
                 return
         p = fold_period(15.0 * 2.0 ** self.log_p)
         p = 0.5 * p if 0.5 * p >= lo else p
