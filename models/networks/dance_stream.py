@@ -82,7 +82,7 @@ BEAT_WEIGHT: float = 1.0
 #: :data:`WARP_CLARITY` (at most 1), so the motion slows into every expected beat and
 #: catches up between them: speed dips (kinematic beats) move onto the music's beats, as
 #: Dancing to Music warps its dance units to the beat. 0 plays every movement at its own pace.
-#: The memory's quickest codes are warped less (``member_tables.WARP_QUICK_FLOOR``: their tremble).
+#: ``member_tables.WARP_QUICK_FLOOR`` below 1 warps the memory's quickest codes less (an option, shipped off).
 BEAT_WARP: float = 0.45
 #: Frames after the tracker's beat that the warp slows into and the motion matching places a
 #: movement's speed dip on. The whole chain (the tracker's phase, the warp, the movements'
@@ -178,7 +178,7 @@ TEMPO_ENERGY: float = 4.0
 #: The tempo's tilt reads each code's z (:data:`TEMPO_ENERGY`'s liveliness plus quickness) clipped to
 #: +-TILT_Z_CAP. Unclipped, a fast song draws mostly the memory's top tail (DANCE_C_2 at 126 bpm:
 #: drawn z +2.85; 13 % of the codes have z > 2), quick movements the beat warp made tremble: most of
-#: the hands' jitter between the songs' ends (1.5-1.9x the dancers', before ``member_tables.WARP_QUICK_FLOOR``). 1.5 took the
+#: the hands' jitter between the songs' ends (1.5-1.9x the dancers'). 1.5 took the
 #: interior jitter in place from 1.38-1.61 to 1.03-1.17 but FD from 3.69 to 9.45, so not shipped
 #: (docs/history.md, "The hands' tremble"). inf: the z as it is.
 TILT_Z_CAP: float = float("inf")
