@@ -62,7 +62,11 @@ def test_a_desk_gets_status_and_no_frames_and_the_engine_sends_nothing_without_o
         json.dumps(last, allow_nan=False)
         p = last["performers"][0]
         assert p["name"] == "performer" and p["energy"] == 1.0 and p["style"] == "auto" and p["stage"] is not None
-        assert last["level_dbfs"] > -40 and last["fps"] > 20 and p["receivers"][0]["state"] == "2 clients"
+        assert last["level_dbfs"] > -40 and p["receivers"][0]["state"] == "2 clients"
+        # about 30 frames a second: the mean of the statuses' 0.2-s windows (one window alone swings with the
+        # source's block cadence on a busy machine)
+        fps = [s["fps"] for s in statuses if s["fps"] is not None]
+        assert len(fps) >= 5 and sum(fps) / len(fps) > 24, fps
         desk.close()
         frames.close()
     finally:

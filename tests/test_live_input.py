@@ -120,4 +120,9 @@ def test_performer_dances_to_the_live_song_and_idles_when_it_stops(live):
     assert len(tempi) > 3 and near.all(), tempi
     after = [s["performers"][0] for s in desk.between(t1 + 4.5, t1 + 6.0)]
     assert after and all(not p["music"] and p["idle_weight"] == 1 for p in after), after  # idle 2.9 s after silence
-    assert during[-1]["fps"] > 25
+    # the engine keeps up with the live input, over the whole song: one status's "fps" counts the frames
+    # of its own 0.2-s window, which the capture's block cadence on a loaded 2-core machine swings (24.9
+    # once in CI); the mean of consecutive windows is the song's frames over its time
+    fps = np.array([s["fps"] for s in desk.between(t0 + 1.0, t1)])
+    print(f"fps mean {fps.mean():.2f}, least window {fps.min():.1f}")
+    assert len(fps) > 20 and fps.mean() > 28.5, fps
