@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from models.networks.dance_stream import FADE_FRAMES, DanceStream
-from models.networks.idle_gate import BREAK_DB, BREAK_HOLD, BREAK_HOLD_SILENT, SONG_DANCE, SONG_IDLE
+from models.networks.idle_gate import BREAK_DB, BREAK_HOLD, BREAK_HOLD_SILENT, RETURN_DB, SONG_DANCE, SONG_IDLE
 from models.networks.music_gate import FRESH_SILENCE
 from test_dance_vq import music, tiny_model
 
@@ -107,6 +107,31 @@ def test_a_one_frame_pause_voids_only_what_it_counted_towards_the_stop() -> None
     # a break of FRESH_SILENCE frames or more (a song's stop-time break) still voids the whole count
     long = voice(pause, FRESH_SILENCE)
     assert stop(long) == stop(long, void_breaks_only=False) > plain + FRESH_SILENCE + 5
+
+
+def test_sound_flickering_across_the_break_threshold_stops_the_dance_thanks_to_the_quiet_return() -> None:
+    """Issue 43's applause at -35 dBFS after a song (30-s gaps): sound that the detector hears as no
+    music, lying about BREAK_DB under the music, so that breaks of 10 frames (more than
+    FRESH_SILENCE) alternate with 2 frames just above the break threshold. Each break's end voided
+    the count: the dance went on through all of it. A break that ends on a frame still RETURN_DB
+    under the music, heard as no music, voids only what its silent frames counted: the dance stops
+    as after any sound the detector hears as no music (idle within 2.5 s)."""
+    x = music(600)
+    x[300:, 1] = -10.0  # no music to the detector (its running mean under -6)
+    for at in range(300, 600, 12):
+        x[at: at + 10, 0] = -10.0 - BREAK_DB - 5.0  # a break frame
+        x[at + 10: at + 12, 0] = -10.0 - BREAK_DB + 2.0  # just over the break threshold, still quiet
+    assert -10.0 - BREAK_DB + 2.0 < -10.0 - RETURN_DB
+
+    def weights_with(quiet_return: bool) -> np.ndarray:
+        s = judging_stream()
+        s._idle.quiet_return = quiet_return
+        return weights(s, x)
+
+    on = weights_with(True)
+    assert np.all(on[60:300] == 0.0) and int(np.argmax(on[300:] >= 1.0)) + 1 <= 75 and np.all(on[375:] == 1.0)
+    off = weights_with(False)  # without it: danced through, until the quiet frames pull the music's level down
+    assert np.all(off[60:300 + 75] == 0.0)
 
 
 def _song(*spans: tuple[int, bool]) -> np.ndarray:

@@ -40,6 +40,13 @@ a false start on applause, noise or a host alone, where it hears none, stops as 
 still stops it (silence idles within 3 s as ever). A restart sooner after a stop (a host the
 detector took for music a moment) stops as before. ``song_start=False`` switches it off.
 
+**A quiet return is no return** (issue 43: applause around the break threshold after a song). A
+break that ends on a frame still :data:`RETURN_DB` or more under the music's level, which the
+detector hears as no music, is not the music's return: the count keeps what the sound before the
+break and the break's audible frames counted (only its silent frames are void), so sound that flickers across
+:data:`BREAK_DB` under the level (sparse applause at -35 dBFS: breaks of 0.2-1 s, each voiding
+the count) stops the dance as the detector says. ``quiet_return=False`` switches it off.
+
 After :data:`ABSENT_FRAMES` frames without music (a sure detector's frame counting up to
 twice, ``music_gate.SURE_COUNT``) the performer fades over :data:`FADE_FRAMES` into the idle;
 after ``music_gate.START_FRAMES`` (:data:`PRESENT_FRAMES` with the logistic detector) frames
@@ -91,6 +98,10 @@ BREAK_HOLD: int = 58
 #: same round 5 s, not tuned (docs/presence.md, idle_gate.py --song-dance).
 SONG_IDLE: int = 150
 SONG_DANCE: int = 150
+#: The quiet return (module docstring): a break that ends on a frame still this many dB or more
+#: under the music's level, heard as no music, voids only what its silent frames counted towards
+#: the stop. Half of BREAK_DB, a round figure, not tuned (docs/presence.md).
+RETURN_DB: float = 10.0
 
 
 class IdleGate:
@@ -103,18 +114,21 @@ class IdleGate:
     over the music as the stop network does (``music_gate.MusicGate``'s voice-over rule off;
     ``presence.voice_rule`` switches it on a running gate); void_breaks_only: False voids the
     whole count when any break is danced through; song_start: False lets the detector stop a song's
-    start at once (module docstring).
+    start at once; quiet_return: False voids a break's count on any frame that ends it (module docstring).
 
     State (``reset``): ``music`` (bool), ``run`` (frames of disagreement, weighted),
     ``w_idle`` (0..1), ``level`` (dB), ``break_frames`` (the current break's length),
     ``break_silent`` (every frame of it silent), ``break_count`` (``run`` as the break began),
+    ``break_heard`` (what its audible frames heard as no music counted),
     ``idle_frames`` (frames idle in a row), ``danced`` (frames since a song's start, capped at
     SONG_DANCE), ``forced_idle``.
     """
 
     def __init__(self, model: DanceVQ, feat_mean: np.ndarray, feat_std: np.ndarray, hold_breaks: bool = True,
-                 voice_rule: bool = True, void_breaks_only: bool = True, song_start: bool = True) -> None:
+                 voice_rule: bool = True, void_breaks_only: bool = True, song_start: bool = True,
+                 quiet_return: bool = True) -> None:
         c = model.config
+        self.quiet_return = bool(quiet_return)
         self.hold_breaks = bool(hold_breaks)
         self.song_start = bool(song_start)
         self.void_breaks_only = bool(void_breaks_only)
@@ -144,6 +158,7 @@ class IdleGate:
         self.break_frames = 0
         self.break_silent = True
         self.break_count = 0.0  # ``run`` as the current break began
+        self.break_heard = 0.0  # what the current break's audible frames counted towards the stop
         self.idle_frames = SONG_IDLE  # frames idle in a row: a stream's first start is a song's start
         self.danced = SONG_DANCE  # frames since a song's start (SONG_DANCE: none to protect)
         self.present = False  # the detector's verdict on the last frame
@@ -189,19 +204,24 @@ class IdleGate:
     def step(self, row: np.ndarray) -> float:
         """Advance by one feature frame ``row`` (D,); the idle weight after it (0 dancing, 1 idle)."""
         held = False
+        energy = float(row[self._ecol]) if self._ecol is not None else math.inf  # log frame energy, dB
         if self.hold_breaks and self._ecol is not None:
             was = self.break_frames
             if not was:
-                self.break_count = self.run
-            if self._is_break(float(row[self._ecol])):
+                self.break_count, self.break_heard = self.run, 0.0
+            if self._is_break(energy):
                 held = self.music and self.break_frames < (BREAK_HOLD_SILENT if self.break_silent else BREAK_HOLD)
             elif was and self.music:  # a break danced through: what it counted towards the stop is void
                 self.run = self.break_count if self.void_breaks_only and was < FRESH_SILENCE else 0.0
+                if self.quiet_return and energy < self.level - RETURN_DB:  # a quiet return: all but what its silent
+                    self.run = max(self.run, self.break_count + self.break_heard)  # frames counted stays
         present = self._detector(row)
         self.present = present
         count = 1.0  # a sure detector counts a frame as more than one (music_gate.SURE_COUNT)
         if self.music and not present and self.presence is not None:
             count = self.presence.stop_count()
+        if self.break_frames and self.music and not present and energy > self.energy_min:
+            self.break_heard += count  # an audible break frame heard as no music
         self.run = self.run + count if present != self.music else 0.0
         start = PRESENT_FRAMES if self.presence is None else START_FRAMES  # the presence detector's own
         self.idle_frames = 0 if self.music else self.idle_frames + 1
