@@ -67,6 +67,13 @@ again from what it had heard (a band that stays under a host restarts the dance 
 after a song has no voice over the music before it). ``resume_rule=False`` switches it off (the
 count starts from 0 at the stop).
 
+**The veto** (issue 43: a crowd after a song). The stop network may hear a crowd between
+``-``:data:`MARGIN_STOP` and 0 for as long as it lasts, neither music nor sure enough to stop. A
+dancing performer's frame in that band is no music when the voice network is sure there is none
+(logit at or below ``-``:data:`VOICE_NO`) and the floor holds (a crowd or a noise has no pauses;
+over a song's quiet passage with a voice, or a voice alone, the floor breaks).
+``veto_rule=False`` switches it off.
+
 **After a silence the statistics listen afresh** (issue 43, the slow settles). In silence they
 wait, so after a song that ends in silence they still hold the song when a voice begins (a
 reader's first 0.4 s of silence after a confident song: the stop network's logit +10 to +13,
@@ -136,6 +143,13 @@ FLOOR_DB: float = 18.0
 #: docs/history.md, issue 43).
 PAUSE_FRAMES: int = 20
 PAUSE_STEADY: float = 0.25
+#: The veto (module docstring): a dancing frame the stop network is unsure of (its logit between
+#: -MARGIN_STOP and 0) is no music when the voice network's logit lies at or below -VOICE_NO and the
+#: floor holds (under FLOOR_DB: no pauses, a crowd or a noise, not a voice over a song's quiet
+#: passage). Twice MARGIN_STOP (where a frame counts SURE_COUNT), not tuned: on idle_gate.py's eight
+#: espeak training songs, alone or with hosts over them, no unsure frame under the floor lies at or
+#: below it (docs/presence.md).
+VOICE_NO: float = 4.0
 #: The voice-over start (module docstring): an idle performer's frame is evidence of music under
 #: a voice when both cues of the voice-over rule hold (the voice network hears music, the floor
 #: holds); a count up by 1 a frame of evidence and down by START_DECAY a frame without (capped at
@@ -324,14 +338,15 @@ class MusicGate:
     rule off (module docstring; without a steadiness column there is none); start_rule: False
     switches the voice-over start off (an idle performer starts on its detector alone), the resume
     with it; resume_rule: False switches the resume off; fresh_rule: False keeps the statistics'
-    time constant after a silence (module docstring).
+    time constant after a silence; veto_rule: False lets an unsure stop network keep the dance
+    whatever the voice network hears (module docstring).
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
                  clarity_col: int, steadiness_col: int = -1, tau_music: float = TAU_MUSIC,
                  stop_params: np.ndarray | None = None, voice_params: np.ndarray | None = None,
                  voice_rule: bool = True, pause_rule: bool = True, start_rule: bool = True, resume_rule: bool = True,
-                 fresh_rule: bool = True) -> None:
+                 fresh_rule: bool = True, veto_rule: bool = True) -> None:
         self._ccol = int(clarity_col)
         self._scol = int(steadiness_col)
         self._mfcc_mean = np.asarray(feat_mean, np.float64)[list(MFCC_COLS)]
@@ -347,6 +362,7 @@ class MusicGate:
         self.start_rule = bool(start_rule)
         self.resume_rule = bool(resume_rule)
         self.fresh_rule = bool(fresh_rule)
+        self.veto_rule = bool(veto_rule)
         self._pause_e = np.zeros(PAUSE_FRAMES)  # the last sounding frames' log energy (dB) and steadiness
         self._pause_s = np.zeros(PAUSE_FRAMES)
         self._pause_at = np.zeros(2)  # next slot, slots filled
@@ -404,6 +420,9 @@ class MusicGate:
                 return True
             return self.voice_rule and self.start_rule and self._voice_start()
         if self.logit > -MARGIN_STOP:
+            if self.logit <= 0.0 and self._vetoed():
+                self._resume(False)
+                return False  # the stop network unsure, the voice network sure of no music: the veto
             if self.evidence > 0.0:  # the resume's count runs down (most frames of a song skip the call)
                 self._resume(False)
             return True
@@ -431,6 +450,12 @@ class MusicGate:
         """Both cues of the voice-over rule on this frame: the voice network hears music and the
         energy floor holds (module docstring)."""
         return self.has_voice and self.floor_db < FLOOR_DB and presence_logit(self.stats, *self._voice) > -VOICE_MARGIN
+
+    def _vetoed(self) -> bool:
+        """The veto on this frame (the stop network unsure, its logit in (-MARGIN_STOP, 0]): the voice
+        network sure of no music, its logit at or below -VOICE_NO, and the floor held (module docstring)."""
+        return (self.veto_rule and self.has_voice and self.floor_db < FLOOR_DB
+                and presence_logit(self.stats, *self._voice) <= -VOICE_NO)
 
     def _voice_start(self) -> bool:
         """The voice-over start on this idle frame: the evidence count, and whether it has reached
