@@ -218,6 +218,59 @@ def test_loud_applause_after_a_song_idles_within_2_s_thanks_to_the_sure_count(lm
     assert settle_once is not None and settle_once > 2.0, settle_once
 
 
+def _gap_after_a_song(lm, dwm_root, label: str, **off: bool) -> tuple[float | None, float]:
+    """``idle_gate.py --parts gaps --gap-s 30``'s case ``label`` (its seed, songs and 30-s gap): (settle
+    s, held) with the gate's parts named in ``off`` (IdleGate or MusicGate flags) switched off."""
+    from models.data.split import VAL_DANCES
+    from models.features.spectral import extract_features
+    from models.networks.dance_stream import DanceStream
+
+    needs_espeak()
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    rng = np.random.default_rng(1000 + 7)
+    pool = [tm.utterance(rng) for _ in range(24)]
+    for i, (lab, kind, dbfs) in enumerate(ig.GAPS):  # drawn in turn, as the study draws them
+        gap = ig.gap_audio(kind, 30.0, dbfs, rng, pool)
+        if lab == label:
+            break
+    a, b = (ig.excerpt(dwm_root, VAL_DANCES[k % len(VAL_DANCES)], 20.0) for k in (i, i + 1))
+    gap = gap[: len(gap) // HOP * HOP]
+    feats = extract_features(np.concatenate([a, gap, b]).astype(np.float32), lm.features)
+    stream = DanceStream(lm.model, seed=0)
+    for name, value in off.items():
+        setattr(stream._idle if hasattr(stream._idle, name) else stream._idle.presence, name, value)
+    w = stream.listen(feats)
+    g0, g1 = len(a) // HOP, (len(a) + len(gap)) // HOP
+    if not (w[g0:g1] >= 1).any():
+        return None, 0.0
+    at = g0 + int(np.argmax(w[g0:g1] >= 1))
+    return (at - g0 + 1) / 30, float((w[at:g1] >= 1).mean())
+
+
+def test_sparse_applause_after_a_song_idles_within_2_5_s_thanks_to_the_quiet_return(lm, dwm_root) -> None:
+    """Issue 43: applause at -35 dBFS for 30 s after a song, lying about BREAK_DB under the music:
+    breaks of 0.2-1 s each ended on a frame just over the threshold that voided the stop's count
+    (fully idle at 3.20 s). A break that ends on a frame still RETURN_DB under the music, heard as
+    no music, voids only what its silent frames counted (``IdleGate.quiet_return``): within 2.5 s."""
+    settle, held = _gap_after_a_song(lm, dwm_root, "applause -35")
+    assert settle is not None and settle <= 2.5 and held >= 0.98, (settle, held)
+    settle_off, _ = _gap_after_a_song(lm, dwm_root, "applause -35", quiet_return=False)
+    assert settle_off is None or settle_off > 2.5, settle_off
+
+
+def test_a_crowd_after_a_song_idles_within_2_5_s_thanks_to_the_veto(lm, dwm_root) -> None:
+    """Issue 43: crowd babble at -30 dBFS for 30 s after a song. The stop network hears it between
+    -2 and 0 for seconds (fully idle at 3.63 s; at the study's seed 8 never); the voice network is
+    sure there is no music (-6 to -9), the floor holds: the veto (``MusicGate.veto_rule``) counts
+    those frames towards the stop: within 2.5 s."""
+    if float(lm.model.presence_voice.abs().sum()) == 0:
+        pytest.skip(f"{lm.path} has no voice network (refit: {REFIT} --voice-network)")
+    settle, held = _gap_after_a_song(lm, dwm_root, "crowd -30")
+    assert settle is not None and settle <= 2.5 and held >= 0.98, (settle, held)
+    settle_off, _ = _gap_after_a_song(lm, dwm_root, "crowd -30", veto_rule=False)
+    assert settle_off is None or settle_off > 2.5, settle_off
+
+
 def constant_network(logit: float) -> np.ndarray:
     """Packed parameters of a network whose logit is ``logit`` whatever it hears."""
     zeros = np.zeros((mg.HIDDEN, mg.N_STATS))
@@ -267,6 +320,37 @@ def test_a_voice_over_the_music_is_music_while_the_music_keeps_a_floor() -> None
     assert not any(hears(rows, never))  # the voice network hears no music: a crowd, noise
 
 
+def steady_and_pausing(n: int, d: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` copies of one random feature row (d,) at a steady -20 dB (the floor holds), and the same
+    with the level falling FLOOR_DB + 7 dB every other frame (a voice alone, pausing)."""
+    rows = np.repeat(np.random.default_rng(0).normal(size=d).astype(np.float32)[None], n, 0)
+    rows[:, mg.ENERGY_COL] = -20.0  # above the silence threshold
+    pausing = rows.copy()
+    pausing[1::2, mg.ENERGY_COL] = -20.0 - mg.FLOOR_DB - 7.0  # still above it
+    return rows, pausing
+
+
+def test_an_unsure_stop_network_is_overruled_by_a_sure_voice_network_thanks_to_the_veto() -> None:
+    """The veto (issue 43: a crowd after a song that the stop network hears between -2 and 0 for as
+    long as it lasts): a stop network unsure of the music (logit -1) and a voice network sure there
+    is none (logit at -VOICE_NO - 1), the level steady (the floor holds). A dancing performer's
+    frames are no music; music with the veto off, with the voice network less sure (-VOICE_NO + 1),
+    with the floor broken (the level falling 25 dB every other frame) or without a voice network."""
+    d = 64
+    music, unsure = constant_network(10.0), constant_network(-1.0)
+    sure_none, doubt = constant_network(-mg.VOICE_NO - 1.0), constant_network(-mg.VOICE_NO + 1.0)
+    rows, pausing = steady_and_pausing(40, d)
+
+    def hears(x: np.ndarray, voice: np.ndarray, **rule: bool) -> list[bool]:  # dancing throughout
+        g = mg.MusicGate(np.zeros(d), np.ones(d), music, -60.0, clarity_col=60, stop_params=unsure,
+                         voice_params=voice, **rule)
+        return [g.step(r, True) for r in x]
+
+    assert not any(hears(rows, sure_none)[1:])
+    assert all(hears(rows, sure_none, veto_rule=False)) and all(hears(rows, doubt))
+    assert all(hears(pausing, sure_none)[mg.FLOOR_FRAMES:]) and all(hears(rows, np.zeros(mg.N_PARAMS)))
+
+
 def test_a_voice_over_the_music_starts_an_idle_performer_after_its_evidence() -> None:
     """The voice-over start: an idle performer whose detector never hears music, a voice network
     that does, the level steady (the floor holds): its frames count as music from the
@@ -274,13 +358,8 @@ def test_a_voice_over_the_music_starts_an_idle_performer_after_its_evidence() ->
     pausing) never do, nor with the start switched off (or the whole voice-over rule), nor
     without a voice network, nor when it hears no music (a crowd, noise)."""
     d = 64
-    rng = np.random.default_rng(0)
     music, never = constant_network(10.0), constant_network(-10.0)
-    n = int(mg.START_EVIDENCE) + 20
-    rows = np.repeat(rng.normal(size=d).astype(np.float32)[None], n, 0)
-    rows[:, mg.ENERGY_COL] = -20.0
-    pausing = rows.copy()
-    pausing[1::2, mg.ENERGY_COL] = -20.0 - mg.FLOOR_DB - 7.0
+    rows, pausing = steady_and_pausing(int(mg.START_EVIDENCE) + 20, d)
 
     def hears(x: np.ndarray, voice: np.ndarray, **rule: bool) -> list[bool]:  # idle throughout
         g = mg.MusicGate(np.zeros(d), np.ones(d), never, -60.0, clarity_col=60, stop_params=never,
