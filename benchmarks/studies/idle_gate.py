@@ -67,9 +67,12 @@ alone; ``--off`` switches off the parts that have no constant to set:
 ``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
 settles), ``fresh`` (the statistics keep their time constant after a silence), ``resume`` (the
 voice-over start's count starts from 0 when a voice stops the dance), ``song-start`` (the detector may
-stop a song's start at once: ``idle_gate.SONG_DANCE``). ``--trace`` prints the gate's
-state frame by frame at each stop of a recording with the readers over it, or through a reader
-after a recording, instead of the tables (which network or rule said what).
+stop a song's start at once: ``idle_gate.SONG_DANCE``), ``quiet-return`` (a break's end voids its count
+even on a frame still ``idle_gate.RETURN_DB`` under the music, heard as no music), ``veto`` (the voice
+network no longer overrules an unsure stop network: ``music_gate.VOICE_NO``). ``--trace`` prints the gate's
+state frame by frame at each stop of a recording with the readers over it, through a reader
+after a recording and the next recording's start, or through a gap between songs and the music's
+return (``gap:LABEL``), instead of the tables (which network or rule said what).
 
 It also prints the gate's own cost per frame (median and 99th percentile, microseconds).
 
@@ -121,7 +124,8 @@ SETTLE_TARGET_OTHER_S: float = 2.5
 
 #: Parts of the gate ``--off`` switches off: name -> (``IdleGate`` or its ``MusicGate``, attribute).
 SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_only"), "fresh": ("presence", "fresh_rule"),
-                                        "resume": ("presence", "resume_rule"), "song-start": ("idle", "song_start")}
+                                        "resume": ("presence", "resume_rule"), "song-start": ("idle", "song_start"),
+                                        "quiet-return": ("idle", "quiet_return"), "veto": ("presence", "veto_rule")}
 #: The switches ``--off`` named (set by main).
 OFF: set[str] = set()
 
@@ -339,12 +343,33 @@ def espeak_rows(lm, data: Path, seed: int) -> tuple[list[dict], list[dict]]:
     return mixes, hosts
 
 
-def print_trace(lm, args, recordings: list, speech: list) -> int:
+def print_trace(lm, args, recordings: list, speech: list, songs: list) -> int:
     """``--trace``: the gate's state frame by frame (:func:`trace`) on a shared recording with the
-    readers over it, or on a reader after one; 2 on a name that matches nothing."""
+    readers over it, on a reader after one, or on a gap between songs (``gap:LABEL``, as the gaps
+    part draws it at ``--gap-s`` and ``--seed``); 2 on a name that matches nothing."""
     from models.evaluation.listening import music_end
     from models.features.spectral import extract_features
 
+    if args.trace.startswith("gap:"):
+        from models.training import music_gate as mg
+
+        rng = np.random.default_rng(1000 + args.seed)  # drawn as main() draws them
+        pool = [mg.utterance(rng) for _ in range(24)] if mg.espeak_available() else []
+        cases = [(lab, gap_audio(kind, args.gap_s, lvl, rng, pool)) for lab, kind, lvl in GAPS if pool or kind != "crowd"]
+        at = [i for i, (lab, _) in enumerate(cases) if lab == args.trace[4:]]
+        if not at:
+            print(f"idle_gate: --trace {args.trace!r}: no gap {args.trace[4:]!r}; known: {', '.join(g for g, _ in cases)}",
+                  file=sys.stderr)
+            return 2
+        i = at[0]
+        a, gap, b = songs[i % len(songs)], cases[i][1], songs[(i + 1) % len(songs)]
+        gap = gap[: len(gap) // HOP * HOP]
+        feats = extract_features(np.concatenate([a, gap, b]).astype(np.float32), lm.features)
+        g0, g1 = len(a) // HOP, (len(a) + len(gap)) // HOP
+        print(f"{cases[i][0]} ({args.gap_s:g} s, seed {args.seed}) between songs: the gap's first 3 s from {g0 / 30:.2f} s, "
+              f"the music's return at {g1 / 30:.2f} s")
+        print("\n".join(trace(lm, feats, [(g0 - 3, g0 + 90), (g1 - 3, g1 + 45)])))
+        return 0
     name, _, what = args.trace.partition("@")
     shared = [(n, a) for n, a in recordings if n in {f.name for f in args.music.glob("*.ogg")}]
     rec = [(i, n, a) for i, (n, a) in enumerate(shared) if n.startswith(name)]
@@ -363,8 +388,9 @@ def print_trace(lm, args, recordings: list, speech: list) -> int:
         talk = talk[: len(talk) // HOP * HOP]
         feats = extract_features(np.concatenate([a, talk, b]).astype(np.float32), lm.features)
         g0 = len(a) // HOP
-        print(f"{reader[0][0]} after {rname} (the gap starts at {g0 / 30:.2f} s)")
-        lines = trace(lm, feats, [(g0 - 3, g0 + 75)])
+        g1 = g0 + len(talk) // HOP
+        print(f"{reader[0][0]} after {rname} (the gap starts at {g0 / 30:.2f} s, the next recording at {g1 / 30:.2f} s)")
+        lines = trace(lm, feats, [(g0 - 3, g0 + 75), (g1 - 3, g1 + 45)])
     else:
         try:
             db = float(what)
@@ -413,11 +439,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--song-dance", type=int, help="frames a song's start is danced (idle_gate.SONG_DANCE; 0: as --off song-start)")
     p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
                    "through voids the whole stop count), fresh (the statistics keep their time constant after a silence), resume (the "
-                   "voice-over start's count starts from 0 at a stop), song-start (the detector may stop a song's start at once)")
+                   "voice-over start's count starts from 0 at a stop), song-start (the detector may stop a song's start at once), quiet-return (a break's end "
+                   "voids its count even on a quiet frame heard as no music), veto (an unsure stop network is not "
+                   "overruled by a sure voice network)")
     p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
                    "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "
-                   "the gap's first 2.5 s)")
+                   "the gap's first 2.5 s and the next recording's first 1.5 s) or gap:LABEL (a gap between songs as the gaps part "
+                   "draws it at --gap-s and --seed, e.g. 'gap:crowd -30': its first 3 s and the music's return)")
     args = p.parse_args(argv)
     parts = set(args.parts.split(","))
     off = {o for o in args.off.split(",") if o}
@@ -462,7 +491,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"idle_gate: {e}", file=sys.stderr)
         return 2
     if args.trace:
-        return print_trace(lm, args, recordings, speech)
+        return print_trace(lm, args, recordings, speech, songs)
     fitted = bool(lm.model.presence.abs().sum() > 0)
     print(f"{lm.path}: detector {'presence network (models/networks/music_gate.py)' if fitted else 'logistic (older checkpoint)'}")
 
