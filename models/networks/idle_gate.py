@@ -119,7 +119,8 @@ class IdleGate:
     State (``reset``): ``music`` (bool), ``run`` (frames of disagreement, weighted),
     ``w_idle`` (0..1), ``level`` (dB), ``break_frames`` (the current break's length),
     ``break_silent`` (every frame of it silent), ``break_count`` (``run`` as the break began),
-    ``break_heard`` (what its audible frames heard as no music counted),
+    ``break_kept`` (the count a quiet return keeps: ``run`` before the break and what its audible frames
+    heard as no music counted since a frame of it was last heard as music),
     ``idle_frames`` (frames idle in a row), ``danced`` (frames since a song's start, capped at
     SONG_DANCE), ``forced_idle``.
     """
@@ -158,7 +159,7 @@ class IdleGate:
         self.break_frames = 0
         self.break_silent = True
         self.break_count = 0.0  # ``run`` as the current break began
-        self.break_heard = 0.0  # what the current break's audible frames counted towards the stop
+        self.break_kept = 0.0  # the count a quiet return keeps (all but what the break's silent frames counted)
         self.idle_frames = SONG_IDLE  # frames idle in a row: a stream's first start is a song's start
         self.danced = SONG_DANCE  # frames since a song's start (SONG_DANCE: none to protect)
         self.present = False  # the detector's verdict on the last frame
@@ -208,20 +209,20 @@ class IdleGate:
         if self.hold_breaks and self._ecol is not None:
             was = self.break_frames
             if not was:
-                self.break_count, self.break_heard = self.run, 0.0
+                self.break_count = self.break_kept = self.run
             if self._is_break(energy):
                 held = self.music and self.break_frames < (BREAK_HOLD_SILENT if self.break_silent else BREAK_HOLD)
             elif was and self.music:  # a break danced through: what it counted towards the stop is void
                 self.run = self.break_count if self.void_breaks_only and was < FRESH_SILENCE else 0.0
                 if self.quiet_return and energy < self.level - RETURN_DB:  # a quiet return: all but what its silent
-                    self.run = max(self.run, self.break_count + self.break_heard)  # frames counted stays
+                    self.run = max(self.run, self.break_kept)  # frames counted stays
         present = self._detector(row)
         self.present = present
         count = 1.0  # a sure detector counts a frame as more than one (music_gate.SURE_COUNT)
         if self.music and not present and self.presence is not None:
             count = self.presence.stop_count()
-        if self.break_frames and self.music and not present and energy > self.energy_min:
-            self.break_heard += count  # an audible break frame heard as no music
+        if self.break_frames and self.music and energy > self.energy_min:  # an audible break frame: music clears,
+            self.break_kept = 0.0 if present else self.break_kept + count  # no music counts
         self.run = self.run + count if present != self.music else 0.0
         start = PRESENT_FRAMES if self.presence is None else START_FRAMES  # the presence detector's own
         self.idle_frames = 0 if self.music else self.idle_frames + 1
