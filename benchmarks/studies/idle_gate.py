@@ -72,7 +72,8 @@ even on a frame still ``idle_gate.RETURN_DB`` under the music, heard as no music
 network no longer overrules an unsure stop network: ``music_gate.VOICE_NO``). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, through a reader
 after a recording and the next recording's start, or through a gap between songs and the music's
-return (``gap:LABEL``), instead of the tables (which network or rule said what).
+return (``gap:LABEL``), or through an espeak-ng host after a training song (``espeak:SONG/K``),
+instead of the tables (which network or rule said what).
 
 It also prints the gate's own cost per frame (median and 99th percentile, microseconds).
 
@@ -370,6 +371,8 @@ def print_trace(lm, args, recordings: list, speech: list, songs: list) -> int:
               f"the music's return at {g1 / 30:.2f} s")
         print("\n".join(trace(lm, feats, [(g0 - 3, g0 + 90), (g1 - 3, g1 + 45)])))
         return 0
+    if args.trace.startswith("espeak:"):
+        return print_espeak_trace(lm, args)
     name, _, what = args.trace.partition("@")
     shared = [(n, a) for n, a in recordings if n in {f.name for f in args.music.glob("*.ogg")}]
     rec = [(i, n, a) for i, (n, a) in enumerate(shared) if n.startswith(name)]
@@ -404,6 +407,40 @@ def print_trace(lm, args, recordings: list, speech: list, songs: list) -> int:
         lines = trace(lm, feats, [(0, 0)])
     print("\n".join(lines))
     return 0
+
+
+def print_espeak_trace(lm, args) -> int:
+    """``--trace espeak:SONG/K``: the gate's state frame by frame through host K (0 or 1) after the
+    training song SONG of ``--parts espeak`` (drawn as :func:`espeak_rows` draws them): the gap's
+    first 2.5 s and the next song's first 1.5 s; 2 on a song or host that is not there."""
+    from models.features.spectral import extract_features
+    from models.training import music_gate as mg
+
+    song_k = args.trace.removeprefix("espeak:")
+    rng = np.random.default_rng(ESPEAK_SEED)
+    names = mg.training_songs(args.data)
+    pick = [names[i] for i in rng.choice(len(names), ESPEAK_SONGS, replace=False)]
+    songs = mg.song_audio(args.data, pick)
+    pool = [mg.utterance(rng) for _ in range(30)]
+    for _ in pick:
+        mg.speech(70.0, rng, pool)  # the mixes' voices, drawn first
+    cut = lambda x: x[: len(x) // HOP * HOP]  # noqa: E731
+    for i, (name, song) in enumerate(zip(pick, songs)):
+        a, b = cut(song[len(song) // 3: len(song) // 3 + 20 * SR]), songs[(i + 1) % len(songs)]
+        b = cut(b[len(b) // 2: len(b) // 2 + 20 * SR])
+        for k in range(2):
+            t = mg.speech(10.0, rng, pool)
+            if f"{name}/{k}" != song_k:
+                continue
+            t = cut(t * 10 ** ((rms_dbfs(a) - rms_dbfs(t)) / 20))
+            feats = extract_features(np.concatenate([a, t, b]).astype(np.float32), lm.features)
+            g0, g1 = len(a) // HOP, (len(a) + len(t)) // HOP
+            print(f"espeak-ng host {k} after {name} (the gap starts at {g0 / 30:.2f} s, the next song at {g1 / 30:.2f} s)")
+            print("\n".join(trace(lm, feats, [(g0 - 3, g0 + 75), (g1 - 3, g1 + 45)])))
+            return 0
+    print(f"idle_gate: --trace {args.trace!r}: no host {song_k!r}; known: "
+          + ", ".join(f"{n}/{k}" for n in pick for k in (0, 1)), file=sys.stderr)
+    return 2
 
 
 def settle_target(gap: str) -> float:
@@ -446,7 +483,8 @@ def main(argv: list[str] | None = None) -> int:
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
                    "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "
                    "the gap's first 2.5 s and the next recording's first 1.5 s) or gap:LABEL (a gap between songs as the gaps part "
-                   "draws it at --gap-s and --seed, e.g. 'gap:crowd -30': its first 3 s and the music's return)")
+                   "draws it at --gap-s and --seed, e.g. 'gap:crowd -30': its first 3 s and the music's return) or "
+                   "espeak:SONG/K (espeak-ng host K, 0 or 1, after training song SONG of --parts espeak)")
     args = p.parse_args(argv)
     parts = set(args.parts.split(","))
     off = {o for o in args.off.split(",") if o}
