@@ -146,9 +146,7 @@ PAUSE_STEADY: float = 0.25
 #: The veto (module docstring): a dancing frame the stop network is unsure of (its logit between
 #: -MARGIN_STOP and 0) is no music when the voice network's logit lies at or below -VOICE_NO and the
 #: floor holds (under FLOOR_DB: no pauses, a crowd or a noise, not a voice over a song's quiet
-#: passage). Twice MARGIN_STOP (where a frame counts SURE_COUNT), not tuned: on idle_gate.py's eight
-#: espeak training songs, alone or with hosts over them, no unsure frame under the floor lies at or
-#: below it (docs/presence.md).
+#: passage). Twice MARGIN_STOP (where a frame counts SURE_COUNT), not tuned (docs/presence.md).
 VOICE_NO: float = 4.0
 #: The voice-over start (module docstring): an idle performer's frame is evidence of music under
 #: a voice when both cues of the voice-over rule hold (the voice network hears music, the floor
