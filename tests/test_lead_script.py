@@ -46,6 +46,7 @@ def test_a_lead_keeps_the_beat_hits_behind_the_delay_and_lead_0_loses_them():
     (["--data", "x", "--leads", "0", "300"], "--leads must each be in [0, 200] ms"),
     (["--data", "x", "--leads", "67", "133"], "the first 0"),
     (["--data", "x", "--oracle"], "--oracle needs --music"),
+    (["--data", "x", "--runner-up-change", "-1"], "--runner-up-change must be in [0, 5] octaves"),
     (["--data", "x", "--checkpoint", "/nonexistent/model.pt"], "lead.py: "),
     (["--data", "x", "--checkpoint", str(REPO / "models" / "assets" / "dtm.pt")], "has no lead control"),
 ])

@@ -23,8 +23,9 @@ few beats of one song?); ``--oracle`` dances the leads with the tracker's true p
 lead's frame (the ceiling of any forecast; ``--oracle-changes`` only where the tracker's
 level changes within the lead); ``--rotation`` with the forecast the lead read
 before issue 43 (the phase rotated by ``2 pi L / P``), ``--period-only`` with the onset forecast
-before the runner-up period (``models.networks.lead.RUNNER_UP``), ``--any-change`` with the
-runner-up's level taken at any change of level (``RUNNER_UP_CHANGE`` 0); ``--levels`` counts, dancing
+before the runner-up period (``models.networks.lead.RUNNER_UP``), ``--runner-up-change OCT`` with
+the runner-up's level taken where it lies at least OCT octave off (``RUNNER_UP_CHANGE``; 0: at any
+change of level); ``--levels`` counts, dancing
 nothing, how the forecast reads the tracker's changes of level (:func:`level_changes`).
 
 Each song is danced with seeds 0 to 5 (``--seeds``, as benchmarks/listening.py) at every lead. Hit rates are pooled
@@ -338,12 +339,14 @@ def main(argv: list[str] | None = None) -> int:
                            "models.networks.lead.ONSET_FORECAST off) instead of its forecast from the onsets"),
             ("--period-only", "the forecast taking the onsets not heard yet as those one tracker period back only, its "
                               "period as now (before issue 43's runner-up; models.networks.lead.RUNNER_UP off)"),
-            ("--any-change", "the runner-up's level taken at any change of level, not only an octave or more "
-                             "(models.networks.lead.RUNNER_UP_CHANGE 0, the forecast before it)"),
+
             ("--levels", "instead of dancing, count per recording the frames whose next lead frames (the "
                          "last of --leads) change the beat tracker's level, how many of them the forecast catches and "
                          "at how many others it forecasts a wrong level, with the runner-up and without")):
         p.add_argument(flag, action="store_true", help=what)
+    p.add_argument("--runner-up-change", type=float, metavar="OCT",
+                   help="take the runner-up's level where it lies at least OCT octave from the tracker's (default "
+                        "models.networks.lead.RUNNER_UP_CHANGE; 0: at any change of level, the forecast before it)")
     p.add_argument("--json", metavar="OUT", help="also write every song's counts as JSON")
     a = p.parse_args(argv)
     for flag, on in (("--oracle", a.oracle), ("--oracle-changes", a.oracle_changes)):
@@ -356,12 +359,15 @@ def main(argv: list[str] | None = None) -> int:
     from models.errors import PerformerError
 
     torch.set_num_threads(1)
-    if a.rotation or a.period_only or a.any_change:
+    if a.runner_up_change is not None and not 0.0 <= a.runner_up_change <= 5.0:
+        p.error(f"--runner-up-change must be in [0, 5] octaves, got {a.runner_up_change:g}")
+    if a.rotation or a.period_only or a.runner_up_change is not None:
         from models.networks import lead as lead_part
 
         lead_part.ONSET_FORECAST = not a.rotation
         lead_part.RUNNER_UP = not a.period_only
-        lead_part.RUNNER_UP_CHANGE = 0.0 if a.any_change else lead_part.RUNNER_UP_CHANGE
+        if a.runner_up_change is not None:
+            lead_part.RUNNER_UP_CHANGE = a.runner_up_change
     try:
         log = lambda m: print(m, file=sys.stderr)  # noqa: E731
         details: dict | None = {} if a.spread else None
