@@ -17,12 +17,13 @@ runner-up period back, where larger) would change it, the changed level's phase 
 State: the last :data:`TEMPO_WINDOW` onset strengths twice over (a ring, as
 :class:`models.features.context.ContextTracker` keeps them) and a scratch window of the same
 size; nothing is allocated per frame outside the compiled arithmetic. Cost, a frame with a
-lead (one compiled call; the tracker's arithmetic once on a steady level, twice on an
-unsteady one, three times where the runner-up reads a level it does not take; ``f._since = 0``
-in place of ``1 << 30`` for an unsteady level; figures: docs/listening.md, "Lead")::
+lead (one compiled call: the tracker's arithmetic once, on an unsteady level the runner-up's
+autocorrelation besides, and the arithmetic once more where the runner-up's window reads a
+level not taken; below, an unsteady level where the runner-up changes nothing; figures:
+docs/listening.md, "Lead")::
 
     python -m timeit -s "from models.networks import lead; f = lead.PhaseForecast(); \
-        [f.push(i % 7 / 7) for i in range(400)]; f.phase(4, 15.3); f._since = 1 << 30" "f.phase(4, 15.3)"
+        [f.push(float(i % 15 == 0)) for i in range(400)]; f.phase(4, 15.0)" "f._since = 0; f.phase(4, 15.0)"
 """
 
 from __future__ import annotations
