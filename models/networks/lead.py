@@ -42,11 +42,11 @@ ONSET_FORECAST: bool = True
 #: Where the tracker's level is unsteady (it changed within :data:`UNSTEADY_FRAMES`), the forecast
 #: also takes the onsets not heard yet as the larger of those one tracker period back and one
 #: runner-up period back (the best-scoring lag of the tracker's at least :data:`APART` octave from
-#: its period); where that window reads another level (:data:`RUNNER_UP_CHANGE` off or more), the
-#: forecast is that level's phase and period, else the period-only one. The tracker's level changes where onsets arrive that another
-#: level expects (brahms: within the lead of 90 of its 995 frames); lead 0 follows each change as
-#: the onsets arrive, the period-only forecast (False; benchmarks/studies/lead.py ``--period-only``)
-#: none. Measured: docs/listening.md, "Lead".
+#: its period); where that window reads another level (at least :data:`RUNNER_UP_CHANGE` octave
+#: off), the forecast is that level's phase and period, else the period-only one. The tracker's
+#: level changes where onsets arrive that another level expects (brahms: within the lead of 90 of
+#: its 995 frames); lead 0 follows each change as the onsets arrive, the period-only forecast
+#: (False; benchmarks/studies/lead.py ``--period-only``) none. Measured: docs/listening.md, "Lead".
 RUNNER_UP: bool = True
 #: Octaves the runner-up's level must lie at least from the tracker's for the forecast to take
 #: it: about an octave or more (2:1, 3:1), not the tracker's hesitation between a beat and its 3:2 or
