@@ -23,7 +23,9 @@ few beats of one song?); ``--oracle`` dances the leads with the tracker's true p
 lead's frame (the ceiling of any forecast; ``--oracle-changes`` only where the tracker's
 level changes within the lead); ``--rotation`` with the forecast the lead read
 before issue 43 (the phase rotated by ``2 pi L / P``), ``--period-only`` with the onset forecast
-before the runner-up period (``models.networks.lead.RUNNER_UP``); ``--levels`` counts, dancing
+before the runner-up period (``models.networks.lead.RUNNER_UP``), ``--runner-up-change OCT`` with
+the runner-up's level taken where it lies at least OCT octave off (``RUNNER_UP_CHANGE``; 0: at any
+change of level); ``--levels`` counts, dancing
 nothing, how the forecast reads the tracker's changes of level (:func:`level_changes`).
 
 Each song is danced with seeds 0 to 5 (``--seeds``, as benchmarks/listening.py) at every lead. Hit rates are pooled
@@ -234,9 +236,10 @@ def song_table(results: dict[str, dict], leads: Sequence[float]) -> str:
 
 def run(checkpoint: str, data_root: str | Path, cache_dir: str | Path | None, leads: Sequence[float],
         seeds: Sequence[int] = (0,), songs: Sequence[str] | None = None, log=print,
-        details: dict | None = None) -> dict[str, dict]:
+        details: dict | None = None, levels: bool = False) -> dict[str, dict]:
     """Load, generate and score every validation dance (see the module docstring); ``{song: measure_song(...)}``
-    (``details``, if given: ``{song: measure_song's detail}``)."""
+    (``details``, if given: ``{song: measure_song's detail}``; ``levels``: ``{song: level_changes(...)}``
+    at the last lead instead, nothing danced)."""
     import torch
 
     from models.errors import ConfigError
@@ -252,6 +255,9 @@ def run(checkpoint: str, data_root: str | Path, cache_dir: str | Path | None, le
     out: dict[str, dict] = {}
     with torch.no_grad():
         for i, c in enumerate(load_clips(data_root, names, lm.features, opts), 1):
+            if levels:
+                out[c.name] = level_changes(lm.model, c.features, lead_frames(leads[-1]))
+                continue
             log(f"  [{i}/{len(names)}] {c.name}: lead {', '.join(f'{x:g}' for x in leads)} ms")
             out[c.name] = measure_song(lm.model, c.features, clip_music_beats(data_root, c), leads, seeds,
                                        None if details is None else details.setdefault(c.name, {}))
@@ -333,13 +339,17 @@ def main(argv: list[str] | None = None) -> int:
                            "models.networks.lead.ONSET_FORECAST off) instead of its forecast from the onsets"),
             ("--period-only", "the forecast taking the onsets not heard yet as those one tracker period back only, its "
                               "period as now (before issue 43's runner-up; models.networks.lead.RUNNER_UP off)"),
-            ("--levels", "with --music: instead of dancing, count per recording the frames whose next lead frames (the "
+
+            ("--levels", "instead of dancing, count per recording the frames whose next lead frames (the "
                          "last of --leads) change the beat tracker's level, how many of them the forecast catches and "
                          "at how many others it forecasts a wrong level, with the runner-up and without")):
         p.add_argument(flag, action="store_true", help=what)
+    p.add_argument("--runner-up-change", type=float, metavar="OCT",
+                   help="take the runner-up's level where it lies at least OCT octave from the tracker's (default "
+                        "models.networks.lead.RUNNER_UP_CHANGE; 0: at any change of level, the forecast before it)")
     p.add_argument("--json", metavar="OUT", help="also write every song's counts as JSON")
     a = p.parse_args(argv)
-    for flag, on in (("--oracle", a.oracle), ("--oracle-changes", a.oracle_changes), ("--levels", a.levels)):
+    for flag, on in (("--oracle", a.oracle), ("--oracle-changes", a.oracle_changes)):
         if on and not a.music:
             p.error(f"{flag} needs --music")
     if any(not 0.0 <= x <= 200.0 for x in a.leads) or a.leads[0] != 0.0:
@@ -349,18 +359,22 @@ def main(argv: list[str] | None = None) -> int:
     from models.errors import PerformerError
 
     torch.set_num_threads(1)
-    if a.rotation or a.period_only:
+    if a.runner_up_change is not None and not 0.0 <= a.runner_up_change <= 5.0:
+        p.error(f"--runner-up-change must be in [0, 5] octaves, got {a.runner_up_change:g}")
+    if a.rotation or a.period_only or a.runner_up_change is not None:
         from models.networks import lead as lead_part
 
         lead_part.ONSET_FORECAST = not a.rotation
         lead_part.RUNNER_UP = not a.period_only
+        if a.runner_up_change is not None:
+            lead_part.RUNNER_UP_CHANGE = a.runner_up_change
     try:
         log = lambda m: print(m, file=sys.stderr)  # noqa: E731
         details: dict | None = {} if a.spread else None
         results = (run_music(a.checkpoint, a.music, a.leads, a.seeds, a.songs, a.max_s, log=log, details=details,
                              oracle="changes" if a.oracle_changes else a.oracle, levels=a.levels)
                    if a.music else run(a.checkpoint, a.data, a.cache, a.leads, a.seeds, a.songs, log=log,
-                                       details=details))
+                                       details=details, levels=a.levels))
     except (PerformerError, OSError) as e:
         print(f"lead.py: {e}", file=sys.stderr)
         return 2

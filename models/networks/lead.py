@@ -11,16 +11,19 @@ frames on: the onsets heard, then ``L`` more taken as those one tracker period `
 (linearly between frames), so the onsets the pulse expects pull the phase as real ones would;
 and where the tracker's level is unsteady and the onsets its next-best level expects (one
 runner-up period back, where larger) would change it, the changed level's phase and period
-(:data:`RUNNER_UP`). What it earns on each shared recording: docs/listening.md, "Lead".
+(:data:`RUNNER_UP`), where that level lies an octave or more from the tracker's
+(:data:`RUNNER_UP_CHANGE`). What it earns on each shared recording: docs/listening.md, "Lead".
 
 State: the last :data:`TEMPO_WINDOW` onset strengths twice over (a ring, as
 :class:`models.features.context.ContextTracker` keeps them) and a scratch window of the same
 size; nothing is allocated per frame outside the compiled arithmetic. Cost, a frame with a
-lead: 6 µs on a steady level, 8 µs on an unsteady one (``f._since = 0`` in place of
-``1 << 30``; interleaved on a shared machine)::
+lead (one compiled call: the tracker's arithmetic once, on an unsteady level the runner-up's
+autocorrelation besides, and the arithmetic once more where the runner-up's window reads a
+level not taken; below, an unsteady level where the runner-up changes nothing; figures:
+docs/listening.md, "Lead")::
 
     python -m timeit -s "from models.networks import lead; f = lead.PhaseForecast(); \
-        [f.push(i % 7 / 7) for i in range(400)]; f.phase(4, 15.3); f._since = 1 << 30" "f.phase(4, 15.3)"
+        [f.push(float(i % 15 == 0)) for i in range(400)]; f.phase(4, 15.0)" "f._since = 0; f.phase(4, 15.0)"
 """
 
 from __future__ import annotations
@@ -39,12 +42,17 @@ ONSET_FORECAST: bool = True
 #: Where the tracker's level is unsteady (it changed within :data:`UNSTEADY_FRAMES`), the forecast
 #: also takes the onsets not heard yet as the larger of those one tracker period back and one
 #: runner-up period back (the best-scoring lag of the tracker's at least :data:`APART` octave from
-#: its period); where that window reads another level, the forecast is that level's phase and
-#: period, else the period-only one. The tracker's level changes where onsets arrive that another
-#: level expects (brahms: within the lead of 90 of its 995 frames); lead 0 follows each change as
-#: the onsets arrive, the period-only forecast (False; benchmarks/studies/lead.py ``--period-only``)
-#: none. Measured: docs/listening.md, "Lead".
+#: its period); where that window reads another level (at least :data:`RUNNER_UP_CHANGE` octave
+#: off), the forecast is that level's phase and period, else the period-only one. The tracker's
+#: level changes where onsets arrive that another level expects (brahms: within the lead of 90 of
+#: its 995 frames); lead 0 follows each change as the onsets arrive, the period-only forecast
+#: (False; benchmarks/studies/lead.py ``--period-only``) none. Measured: docs/listening.md, "Lead".
 RUNNER_UP: bool = True
+#: Octaves the runner-up's level must lie at least from the tracker's for the forecast to take
+#: it: about an octave or more (2:1, 3:1), not the tracker's hesitation between a beat and its 3:2 or
+#: 4:3 neighbour (0.58, 0.42 octave), where following lead 0's changes cost the lead hits
+#: (DANCE_R_5, flipping 17 <-> 11 frames; docs/listening.md, "Lead"); 0: any change of level.
+RUNNER_UP_CHANGE: float = 0.75
 #: Octaves between two periods of the tracker that make a change of level.
 LEVEL_CHANGE: float = 0.1
 #: Octaves the runner-up period lies at least from the tracker's (its neighbouring lags are the
@@ -97,7 +105,8 @@ class PhaseForecast:
     def ahead(self, lead: int, period: float) -> tuple[float, float | None]:
         """(phase in radians, ``log2(P / 15)`` of the period P in frames) the tracker would read
         ``lead`` frames after the last pushed frame (see :meth:`phase`): the period where the
-        runner-up changes the level (:data:`RUNNER_UP`), else None (the period as now)."""
+        runner-up changes the level by :data:`RUNNER_UP_CHANGE` or more (:data:`RUNNER_UP`), else
+        None (the period as now)."""
         p = float(period)
         p = min(max(p, float(LAGS[0]) - 1.0), float(LAGS[-1]) + 1.0) if math.isfinite(p) else float(LAGS[0])
         args = (self._ring, (self._frames - 1) % TEMPO_WINDOW, int(lead), p, self._buf,
@@ -107,11 +116,11 @@ class PhaseForecast:
             if self._level > 0.0 and abs(math.log2(p / self._level)) > LEVEL_CHANGE:
                 self._since = 0
             self._level, self._seen = p, self._frames
-        if RUNNER_UP and self._since <= UNSTEADY_FRAMES:
-            a, logp = _forecast_phase(*args, APART)
-            if abs(logp - math.log2(p / PRIOR_PERIOD)) > LEVEL_CHANGE:  # the runner-up changes the level
-                return a, logp
-        return _forecast_phase(*args, -1.0)[0], None
+        if RUNNER_UP and self._since <= UNSTEADY_FRAMES:  # the runner-up's level where it changes the level
+            a, logp, changed = _forecast_phase(*args, APART, math.log2(p / PRIOR_PERIOD),
+                                               max(LEVEL_CHANGE, RUNNER_UP_CHANGE))
+            return a, logp if changed else None
+        return _forecast_phase(*args, -1.0, 0.0, 0.0)[0], None
 
 
 @njit(cache=True, nogil=True)
@@ -145,22 +154,38 @@ def _runner_up(ring, pos, w, w_sum, lag_prior, lag_lo, lag_hi, apart):  # pragma
 
 @njit(cache=True, nogil=True)
 def _forecast_phase(ring, pos, lead, period, buf, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi,
-                    apart):  # pragma: no cover - compiled
+                    apart, now, change):  # pragma: no cover - compiled
     """Fill ``buf[n:]`` with the window ``lead`` frames on (the heard onsets ``ring[pos + 1 + lead:
-    pos + n + 1]``, then ``lead`` of them one ``period`` back, or where larger, with ``apart`` >= 0,
-    one :func:`_runner_up` period back) and return its (phase, log2 of its period / 15)."""
+    pos + n + 1]``, then ``lead`` of them one ``period`` back) and return its (phase, log2 of its
+    period / 15, False); with ``apart`` >= 0, first the window whose ``lead`` onsets are, where
+    larger, the onsets one :func:`_runner_up` period back: its (phase, log2 period / 15, True)
+    where that differs from ``now`` (log2 of the tracker's period / 15) by more than ``change``
+    octave (no onset larger: the period's window, True where its own level so differs). One
+    pass: the tracker's arithmetic once, or twice where the runner-up reads a level not taken."""
     n = w.shape[0]
     other = _runner_up(ring, pos, w, w_sum, lag_prior, lag_lo, lag_hi, apart) if apart >= 0.0 and lead > 0 else 0.0
     heard = n - lead
     for i in range(heard):
         buf[n + i] = ring[pos + 1 + lead + i]
+    larger = False
     for k in range(lead):
-        x = heard + k - period  # >= heard - 41 + k: already filled, a period is at least 10 frames
+        x = heard + k - period  # >= heard - 41 + k: already filled, a period is at least 9 frames
         i = int(math.floor(x))
         f = x - i
         v = (1.0 - f) * buf[n + i] + f * buf[n + i + 1]
-        if other > 0.0:  # a whole lag: the onset that many frames back
-            v = max(v, buf[n + heard + k - int(other)])
+        if other > 0.0:  # a whole lag (>= 10 frames): the heard onset that many frames back
+            u = buf[n + heard + k - int(other)]
+            if u > v:
+                v, larger = u, True
         buf[n + heard + k] = v
+    if larger:
+        ccos, csin, _, logp = _beat_columns(buf, n - 1, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi)
+        if abs(logp - now) > change:
+            return math.atan2(csin, ccos), logp, True
+        for k in range(lead):  # back to the period's window
+            x = heard + k - period
+            i = int(math.floor(x))
+            f = x - i
+            buf[n + heard + k] = (1.0 - f) * buf[n + i] + f * buf[n + i + 1]
     ccos, csin, _, logp = _beat_columns(buf, n - 1, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi)
-    return math.atan2(csin, ccos), logp
+    return math.atan2(csin, ccos), logp, apart >= 0.0 and not larger and abs(logp - now) > change
