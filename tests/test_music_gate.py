@@ -322,6 +322,51 @@ def test_the_music_heard_in_the_voices_pauses_is_music() -> None:
     assert not any(hears(rows, steadiness_col=-1))
 
 
+def level_network(db: float) -> np.ndarray:
+    """Packed parameters of a network that hears music while the statistics' running level (statistic
+    8, log energy / 10) lies above ``db`` dB (logit +10) and none below it (-10)."""
+    w1 = np.zeros((mg.HIDDEN, mg.N_STATS))
+    w1[0, 8] = 10.0
+    b1 = np.zeros(mg.HIDDEN)
+    b1[0] = -10.0 * db / 10.0
+    w2 = np.zeros(mg.HIDDEN)
+    w2[0] = 10.0
+    return mg.pack(np.zeros(mg.N_STATS), np.ones(mg.N_STATS), w1, b1, w2, 0.0)
+
+
+def test_a_voice_heard_over_the_dance_before_holds_its_stop() -> None:
+    """The voice-over context: a stop network that hears music at -10 dB and none at -20, a voice
+    network that always does. A performer dances 200 frames of music, a voice over it (-20 dB, the
+    level steady: the rules keep it) for 30 frames, music for 100, then a voice alone (pausing 25 dB:
+    not kept): the stop is held (``voice_holds``) for the first VOICE_HOLD - 1 frames of no music, then
+    not. Without the voice over the music before, in a dance shorter than CONTEXT_FRAMES, or with the
+    context or the voice-over rule switched off, nothing is held."""
+    d = 64
+    rng = np.random.default_rng(0)
+    music = constant_network(10.0)
+    row = rng.normal(size=d).astype(np.float32)
+
+    def holds(before: int = 200, voiced: int = 30, **rule: bool) -> list[bool]:
+        g = mg.MusicGate(np.zeros(d), np.ones(d), music, -60.0, clarity_col=60, stop_params=level_network(-15.0),
+                         voice_params=music, **rule)
+        out = []
+        for k in range(before + voiced + 100 + mg.VOICE_HOLD + 20):
+            r = row.copy()
+            c = k - before - voiced - 100  # the voice alone from c = 0
+            r[mg.ENERGY_COL] = -10.0 if (k < before or 0 <= k - before - voiced and c < 0) else \
+                -20.0 - (mg.FLOOR_DB + 7.0) * (c >= 0 and c % 2)
+            heard = g.step(r, True)
+            if c >= 0 and not heard:
+                out.append(g.voice_holds())
+        return out
+
+    got = holds()
+    assert len(got) > mg.VOICE_HOLD and all(got[: mg.VOICE_HOLD - 1]) and not any(got[mg.VOICE_HOLD - 1:])
+    assert not any(holds(voiced=0))
+    assert not any(holds(before=mg.CONTEXT_FRAMES - 200))
+    assert not any(holds(context_rule=False)) and not any(holds(voice_rule=False))
+
+
 def test_pause_steadiness_is_the_quietest_quarters_mean() -> None:
     """:func:`music_gate.pause_steadiness` over a ring of PAUSE_FRAMES: the mean steadiness of the
     ``1 + (m - 1) // 4`` quietest of the ``m`` frames pushed so far (the last PAUSE_FRAMES)."""

@@ -67,7 +67,8 @@ alone; ``--off`` switches off the parts that have no constant to set:
 ``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
 settles), ``fresh`` (the statistics keep their time constant after a silence), ``resume`` (the
 voice-over start's count starts from 0 when a voice stops the dance), ``song-start`` (the detector may
-stop a song's start at once: ``idle_gate.SONG_DANCE``). ``--trace`` prints the gate's
+stop a song's start at once: ``idle_gate.SONG_DANCE``), ``context`` (a voice heard over the dance before
+does not hold its stop: ``music_gate.VOICE_HOLD``). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, or through a reader
 after a recording, instead of the tables (which network or rule said what).
 
@@ -121,7 +122,8 @@ SETTLE_TARGET_OTHER_S: float = 2.5
 
 #: Parts of the gate ``--off`` switches off: name -> (``IdleGate`` or its ``MusicGate``, attribute).
 SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_only"), "fresh": ("presence", "fresh_rule"),
-                                        "resume": ("presence", "resume_rule"), "song-start": ("idle", "song_start")}
+                                        "resume": ("presence", "resume_rule"), "song-start": ("idle", "song_start"),
+                                        "context": ("presence", "context_rule")}
 #: The switches ``--off`` named (set by main).
 OFF: set[str] = set()
 
@@ -144,7 +146,8 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
     each (first, last) frame window: time (s), idle weight, music (the gate's state), heard (the
     detector's verdict), the stop or start logit (running mean), the voice network's logit, the
     floor (dB range over 1 s), the pauses' steadiness, kept by the voice-over (V) or pause (P) rule,
-    the stop count, the break's frames, the log energy (dB). An empty window: every stop of the
+    the stop count, the break's frames, the log energy (dB), the voice-over context (frames kept 10 s to
+    2.5 s ago: ``music_gate.CONTEXT_MIN`` holds the stop). An empty window: every stop of the
     dance after 3 s, from 1.5 s before it to its return."""
     from models.networks.music_gate import presence_logit
 
@@ -160,14 +163,14 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
         kept = "V" if pg.voice_frames > kv else "P" if pg.pause_frames > kp else "-"
         music.append(ig.music)
         rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
-                    f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f}")
+                    f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.context:3d}")
     if windows == [(0, 0)]:
         windows = []
         for t in range(91, len(music)):
             if music[t - 1] and not music[t]:
                 back = next((u for u in range(t, len(music)) if music[u]), len(music) - 1)
                 windows.append((max(0, t - 45), min(len(music) - 1, back + 6)))
-    head = "      s    w m h  logit  voice floor pause k count brk    dB"
+    head = "      s    w m h  logit  voice floor pause k count brk    dB ctx"
     return [line for a, b in windows for line in [f"-- frames {a}-{b}", head, *rows[a: b + 1]]]
 
 
@@ -413,7 +416,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--song-dance", type=int, help="frames a song's start is danced (idle_gate.SONG_DANCE; 0: as --off song-start)")
     p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
                    "through voids the whole stop count), fresh (the statistics keep their time constant after a silence), resume (the "
-                   "voice-over start's count starts from 0 at a stop), song-start (the detector may stop a song's start at once)")
+                   "voice-over start's count starts from 0 at a stop), song-start (the detector may stop a song's start at once), "
+                   "context (a voice heard over the dance before does not hold its stop for music_gate.VOICE_HOLD frames)")
     p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
                    "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "

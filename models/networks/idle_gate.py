@@ -199,6 +199,8 @@ class IdleGate:
                 self.run = self.break_count if self.void_breaks_only and was < FRESH_SILENCE else 0.0
         present = self._detector(row)
         self.present = present
+        if self.music and not present and not self.break_frames and self.presence is not None:
+            held = held or self.presence.voice_holds()  # a voice heard over this dance before: music_gate.VOICE_HOLD
         count = 1.0  # a sure detector counts a frame as more than one (music_gate.SURE_COUNT)
         if self.music and not present and self.presence is not None:
             count = self.presence.stop_count()
