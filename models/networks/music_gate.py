@@ -374,7 +374,7 @@ class MusicGate:
         self.resume_rule = bool(resume_rule)
         self.fresh_rule = bool(fresh_rule)
         self.context_rule = bool(context_rule)
-        self._kept = np.zeros(CONTEXT_FRAMES, np.int8)  # the voice-over context: a rule kept the sounding frame
+        self._kept = bytearray(CONTEXT_FRAMES)  # the voice-over context: a rule kept the sounding frame (1)
         self._pause_e = np.zeros(PAUSE_FRAMES)  # the last sounding frames' log energy (dB) and steadiness
         self._pause_s = np.zeros(PAUSE_FRAMES)
         self._pause_at = np.zeros(2)  # next slot, slots filled
@@ -408,7 +408,7 @@ class MusicGate:
         self.start_frames = 0  # frames the voice-over start heard as music
         self.silent = 0  # silent frames in a row
         self.fresh = 0  # sounding frames left at the idle time constant (after a silence)
-        self._kept[:] = 0
+        self._kept[:] = bytes(CONTEXT_FRAMES)
         self._kept_at = 0  # the next slot of ``_kept``
         self.context = 0  # frames the rules kept from CONTEXT_FRAMES to CONTEXT_LAG sounding frames ago
         self.unheard = 0  # a dancing performer's sounding frames heard as no music in a row
@@ -460,7 +460,7 @@ class MusicGate:
         ring (the count from CONTEXT_FRAMES to CONTEXT_LAG frames ago follows) and count the frames
         not ``heard`` as music in a row (module docstring)."""
         i = self._kept_at
-        self.context += int(self._kept[(i - CONTEXT_LAG) % CONTEXT_FRAMES]) - int(self._kept[i])
+        self.context += self._kept[i - CONTEXT_LAG] - self._kept[i]  # a negative index wraps round the ring
         self._kept[i] = kept
         self._kept_at = (i + 1) % CONTEXT_FRAMES
         self.unheard = 0 if heard else self.unheard + 1
