@@ -57,6 +57,12 @@ features as the engine computes them):
   silence (30 s), through a fresh stream, nothing heard before: the share of frames not fully idle
   (target 0; a false start the detector makes on them, which the song's start must not lengthen).
 
+* **A voice over a song's end, going on alone** (``--parts talkover``, not in the default): 20 s of each
+  ``--music`` recording (from ``--reader-at``) with the ``--speech`` recordings over it at each of
+  :data:`MIX_DB`, the voice going on alone :data:`TALKOVER_S` s after the music stops (a DJ talking
+  over a track's end): seconds from the music's end to fully idle (speech alone: within 2 s; what
+  the voice-over context's hold costs).
+
 ``--parts`` picks the parts (default ``recordings,mixes,gaps``). ``--floor-db`` and
 ``--voice-margin`` set the voice-over rule's ``music_gate.FLOOR_DB`` and ``VOICE_MARGIN`` (``inf``:
 that cue always holds; ``--floor-db 0``: the voice network's part off), ``--pause-steady`` its pause
@@ -109,6 +115,8 @@ BREAK_EVERY_S: float = 10.0
 #: Training songs (drawn with :data:`ESPEAK_SEED`) under and before the espeak-ng hosts of ``--parts espeak``.
 ESPEAK_SONGS: int = 8
 ESPEAK_SEED: int = 4343
+#: Seconds the readers of ``--parts talkover`` go on alone after the music stops.
+TALKOVER_S: float = 8.0
 #: espeak-ng hosts and the seed of ``--parts leadin`` (the seed of its noises too).
 LEADIN_HOSTS: int = 6
 LEADIN_SEED: int = 99
@@ -243,6 +251,26 @@ def stretches(lm, audio: np.ndarray, talk: np.ndarray, end: int, seed: int) -> d
     seg = slice(int(a[k]) * HOP, int(b[k]) * HOP)
     return {"longest_s": (b[k] - a[k]) / 30, "at_s": a[k] / 30, "music_dbfs": rms_dbfs(audio[seg]),
             "voice_dbfs": rms_dbfs(talk[seg]), "runs": int(((b - a) >= STRETCH_MIN).sum())}
+
+
+def talkover_rows(lm, shared: list, talk: np.ndarray, seed: int) -> list[dict]:
+    """``--parts talkover``: for each (name, audio) of ``shared`` (20 s of a recording) and each of
+    :data:`MIX_DB`, the readers ``talk`` over it (a different stretch of them per recording) going on
+    alone :data:`TALKOVER_S` s after the music stops: ``settle_s``, seconds from the music's end to
+    fully idle (None: never)."""
+    from models.features.spectral import extract_features
+
+    rows = []
+    for k, (name, a) in enumerate(shared):
+        a = a[: len(a) // HOP * HOP]
+        t = np.roll(talk, -k * 7 * SR)[: len(a) + int(TALKOVER_S * SR)]
+        for db in MIX_DB:
+            gain = 10 ** ((rms_dbfs(a) - rms_dbfs(talk) + db) / 20)
+            x = (np.concatenate([a, np.zeros(len(t) - len(a), np.float32)]) + gain * t).astype(np.float32)
+            w = new_stream(lm, seed).listen(extract_features(x[: len(x) // HOP * HOP], lm.features))
+            idle = np.flatnonzero(w[len(a) // HOP:] >= 1.0)
+            rows.append({"recording": name, "speech_db": db, "settle_s": (idle[0] + 1) / 30 if len(idle) else None})
+    return rows
 
 
 def leadin_rows(lm, speech: list, seed: int) -> list[dict]:
@@ -402,7 +430,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--parts", default="recordings,mixes,gaps",
                    help="comma-separated parts to run: recordings, mixes (voices and breaks), gaps, readers (after each "
                         "recording), espeak (espeak-ng hosts over and after training songs), stretches (the voices over the music with "
-                        "the stop undone: how long the gate hears no music), leadin (no music from the stream's start) "
+                        "the stop undone: how long the gate hears no music), leadin (no music from the stream's start), talkover "
+                        "(the readers over a recording going on alone after it) "
                         "(default recordings,mixes,gaps)")
     p.add_argument("--reader-at", type=float, default=1 / 3,
                    help="--parts readers: where the 20 s of each recording start, a share of its length (default 1/3)")
@@ -428,7 +457,7 @@ def main(argv: list[str] | None = None) -> int:
     if off - set(SWITCHES):
         p.error(f"--off: unknown part(s) {sorted(off - set(SWITCHES))}; known: {', '.join(SWITCHES)}")
     OFF.update(off)
-    known = {"recordings", "mixes", "gaps", "readers", "espeak", "stretches", "leadin"}
+    known = {"recordings", "mixes", "gaps", "readers", "espeak", "stretches", "leadin", "talkover"}
     if parts - known:
         p.error(f"--parts: unknown part(s) {sorted(parts - known)}")
 
@@ -538,6 +567,16 @@ def main(argv: list[str] | None = None) -> int:
             at = "-" if r["at_s"] is None else f"{r['at_s']:.1f}"
             print(f"| {r['recording']} | {r['speech_db']:g} | {r['longest_s']:.2f} | {at} | {lv} | {r['runs']} |")
 
+    talk_rows = [] if "talkover" not in parts or talk is None else talkover_rows(lm, [
+        (n, a[int(len(a) * args.reader_at): int(len(a) * args.reader_at) + int(args.song_s * SR)]) for n, a in recordings
+        if n in {f.name for f in args.music.glob("*.ogg")}], talk, args.seed)
+    if talk_rows:
+        f2 = lambda v: "never" if v is None else f"{v:.2f}"  # noqa: E731
+        print("\n| the readers over a recording, going on alone after it: settle (s ≤ 2) | "
+              + " | ".join(f"{db:g} dB" for db in MIX_DB) + " |\n| --- |" + " ---: |" * len(MIX_DB))
+        for k in range(0, len(talk_rows), len(MIX_DB)):
+            print(f"| {talk_rows[k]['recording']} | " + " | ".join(f2(r["settle_s"]) for r in talk_rows[k: k + len(MIX_DB)]) + " |")
+
     lead_rows = leadin_rows(lm, speech, args.seed) if "leadin" in parts else []
     if lead_rows:
         print("\n| no music from the stream's start, 30 s | not fully idle (0) |\n| --- | ---: |")
@@ -596,7 +635,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{settle_target(r['gap']):g} | {f(r['held'])} | "
               f"{f(r['back_s'])} | {r['max_step_deg']:.1f} | {f(r['idle_step_deg'])} | {r['dance_step_p99_deg']:.1f} |")
     if args.json:
-        args.json.write_text(json.dumps({"mixes": mix_rows, "stretches": stretch_rows, "leadin": lead_rows, "readers": reader_rows, "espeak": es_mix, "espeak_hosts": es_hosts, "gate_us_median": float(np.median(cost_us)),
+        args.json.write_text(json.dumps({"mixes": mix_rows, "stretches": stretch_rows, "talkover": talk_rows, "leadin": lead_rows, "readers": reader_rows, "espeak": es_mix, "espeak_hosts": es_hosts, "gate_us_median": float(np.median(cost_us)),
                                          "gate_us_p99": float(np.percentile(cost_us, 99)), "recordings": rec_rows, "gaps": [{k: v for k, v in r.items() if k != "idle_w"}
                                                                              for r in gap_rows]}, indent=1))
     if args.plot and not gap_rows:
