@@ -367,6 +367,39 @@ def test_a_voice_heard_over_the_dance_before_holds_its_stop() -> None:
     assert not any(holds(context_rule=False)) and not any(holds(voice_rule=False))
 
 
+def test_the_music_gone_releases_the_voice_over_contexts_hold() -> None:
+    """The voice-over context's release: as in the test above (music, a voice over it, music, then a
+    voice alone whose words fall FLOOR_DB + 7 dB between them), with a steadiness column (column 61).
+    Where the voice alone's steadiness is a voice's (0.0: its pauses' mean under GONE_STEADY) and its
+    floor broken by more than GONE_FLOOR_DB, the music is gone: nothing is held after the first frames
+    (the floor's and the pauses' windows filling). Where its pauses are steadier (0.2: over GONE_STEADY,
+    under the pause rule's PAUSE_STEADY) the stop is held as before."""
+    d = 64
+    rng = np.random.default_rng(0)
+    music = constant_network(10.0)
+    row = rng.normal(size=d).astype(np.float32)
+
+    def holds(alone_steady: float) -> list[bool]:
+        g = mg.MusicGate(np.zeros(d), np.ones(d), music, -60.0, clarity_col=60, steadiness_col=61,
+                         stop_params=level_network(-15.0), voice_params=music)
+        out = []
+        for k in range(200 + 30 + 100 + mg.VOICE_HOLD + 20):
+            r = row.copy()
+            c = k - 330  # the voice alone from c = 0
+            r[mg.ENERGY_COL] = -10.0 if (k < 200 or 230 <= k and c < 0) else -20.0 - (mg.FLOOR_DB + 7.0) * (c >= 0 and c % 2)
+            r[61] = 0.5 if c < 0 else alone_steady
+            heard = g.step(r, True)
+            if c >= 0 and not heard:
+                out.append(g.voice_holds())
+        return out
+
+    assert mg.FLOOR_DB + 7.0 > mg.GONE_FLOOR_DB and mg.GONE_STEADY < 0.2 < mg.PAUSE_STEADY
+    held = holds(0.2)
+    assert len(held) > mg.VOICE_HOLD and all(held[: mg.VOICE_HOLD - 1]) and not any(held[mg.VOICE_HOLD - 1:])
+    gone = holds(0.0)
+    assert len(gone) > mg.VOICE_HOLD and sum(gone) <= mg.PAUSE_FRAMES // 2
+
+
 def test_pause_steadiness_is_the_quietest_quarters_mean() -> None:
     """:func:`music_gate.pause_steadiness` over a ring of PAUSE_FRAMES: the mean steadiness of the
     ``1 + (m - 1) // 4`` quietest of the ``m`` frames pushed so far (the last PAUSE_FRAMES)."""

@@ -61,13 +61,15 @@ features as the engine computes them):
   ``--music`` recording (from ``--reader-at``) with the ``--speech`` recordings over it at each of
   :data:`MIX_DB`, the voice going on alone :data:`TALKOVER_S` s after the music stops (a DJ talking
   over a track's end): seconds from the music's end to fully idle (speech alone: within 2 s; what
-  the voice-over context's hold costs).
+  the voice-over context's hold would cost without its release where the music is gone).
 
 ``--parts`` picks the parts (default ``recordings,mixes,gaps``). ``--floor-db`` and
 ``--voice-margin`` set the voice-over rule's ``music_gate.FLOOR_DB`` and ``VOICE_MARGIN`` (``inf``:
 that cue always holds; ``--floor-db 0``: the voice network's part off), ``--pause-steady`` its pause
 rule's ``PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off), ``--start-evidence``
 and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) and ``START_DECAY``,
+``--voice-hold``, ``--gone-floor-db`` and ``--gone-steady`` the voice-over context's hold and its
+release (``music_gate.VOICE_HOLD``, ``GONE_FLOOR_DB``: ``inf``, never released; ``GONE_STEADY``),
 ``--song-dance`` the frames a song's start is danced (``idle_gate.SONG_DANCE``), to measure its parts
 alone; ``--off`` switches off the parts that have no constant to set:
 ``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
@@ -442,6 +444,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--start-evidence", type=float,
                    help="the voice-over start's START_EVIDENCE, frames (inf: an idle performer starts on its detector alone)")
     p.add_argument("--start-decay", type=float, help="the voice-over start's START_DECAY (frames a frame without evidence takes off)")
+    p.add_argument("--voice-hold", type=int, help="frames the voice-over context holds a stop (music_gate.VOICE_HOLD)")
+    p.add_argument("--gone-floor-db", type=float, help="the voice-over context's release: music_gate.GONE_FLOOR_DB (inf: never released)")
+    p.add_argument("--gone-steady", type=float, help="the voice-over context's release: music_gate.GONE_STEADY (dimensionless)")
     p.add_argument("--song-dance", type=int, help="frames a song's start is danced (idle_gate.SONG_DANCE; 0: as --off song-start)")
     p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
                    "through voids the whole stop count), fresh (the statistics keep their time constant after a silence), resume (the "
@@ -468,16 +473,11 @@ def main(argv: list[str] | None = None) -> int:
     from models.networks import music_gate as gate
     from models.training import music_gate as mg
 
-    if args.floor_db is not None:
-        gate.FLOOR_DB = args.floor_db
-    if args.voice_margin is not None:
-        gate.VOICE_MARGIN = args.voice_margin
-    if args.pause_steady is not None:
-        gate.PAUSE_STEADY = args.pause_steady
-    if args.start_evidence is not None:
-        gate.START_EVIDENCE = args.start_evidence
-    if args.start_decay is not None:
-        gate.START_DECAY = args.start_decay
+    for arg, const in (("floor_db", "FLOOR_DB"), ("voice_margin", "VOICE_MARGIN"), ("pause_steady", "PAUSE_STEADY"),
+                       ("start_evidence", "START_EVIDENCE"), ("start_decay", "START_DECAY"), ("voice_hold", "VOICE_HOLD"),
+                       ("gone_floor_db", "GONE_FLOOR_DB"), ("gone_steady", "GONE_STEADY")):
+        if getattr(args, arg) is not None:  # a constant of models/networks/music_gate.py set from the command line
+            setattr(gate, const, getattr(args, arg))
     if args.song_dance is not None:
         from models.networks import idle_gate
 

@@ -90,7 +90,11 @@ by a dip, the music's own rest), and a stop takes 8-15 such frames. A dance of
 :data:`CONTEXT_LAG` sounding frames ago) stops only after :data:`VOICE_HOLD` frames of no music in a
 row (:meth:`MusicGate.voice_holds`). A host after a song has no voice over the music before the last
 2.5 s (what the rules keep of a host's first words lies within it) and stops as before; a false start
-on a host alone dances less than 10 s. ``context_rule=False`` switches it off.
+on a host alone dances less than 10 s. **The music gone** releases the hold: a frame whose floor is
+broken by more than :data:`GONE_FLOOR_DB` and whose pauses are as unsteady as a voice alone (pause
+steadiness under :data:`GONE_STEADY`) is not held, so a voice going on alone after the song stops as
+it would without the context (a checkpoint without the steadiness column has no release).
+``context_rule=False`` switches the context off.
 """
 
 from __future__ import annotations
@@ -174,6 +178,13 @@ CONTEXT_FRAMES: int = 300
 CONTEXT_LAG: int = 75
 CONTEXT_MIN: int = 3
 VOICE_HOLD: int = 32
+#: The music gone (module docstring): a held frame is released where the floor (dB range over 1 s) is
+#: above GONE_FLOOR_DB and the pause steadiness under GONE_STEADY (a voice alone; the readers' own
+#: steadiness medians 0.02 and 0.06, music's 0.30-0.60: docs/presence.md). Set on the readers over the
+#: shared recordings and going on after them (idle_gate.py --parts mixes,talkover --gone-floor-db ...):
+#: the music under a voice held a floor of 12-21 dB or a steadiness of 0.10 or more on its held frames.
+GONE_FLOOR_DB: float = 24.0
+GONE_STEADY: float = 0.08
 #: Feature columns read: MFCC 1-2, log energy, MFCC 1-12 differences, energy difference, onset
 #: (and the beat columns: the model's ``clarity_col`` and its neighbours).
 MFCC_COLS: tuple[int, ...] = (1, 2)
@@ -469,9 +480,12 @@ class MusicGate:
     def voice_holds(self) -> bool:
         """The voice-over context holds a dancing performer's stop: it has danced CONTEXT_FRAMES
         sounding frames, a voice was heard over the music before (CONTEXT_MIN kept frames) and the
-        music has been unheard for fewer than VOICE_HOLD frames in a row (module docstring)."""
+        music has been unheard for fewer than VOICE_HOLD frames in a row, unless the music is gone
+        (floor above GONE_FLOOR_DB, pause steadiness under GONE_STEADY; not without a steadiness
+        column: module docstring)."""
         return (self.voice_rule and self.context_rule and self.dance_run >= CONTEXT_FRAMES and self.context >= CONTEXT_MIN
-                and 0 < self.unheard < VOICE_HOLD)
+                and 0 < self.unheard < VOICE_HOLD
+                and not (self._scol >= 0 and self.floor_db > GONE_FLOOR_DB and self.pause_steady < GONE_STEADY))
 
     def _resume(self, kept: bool) -> None:
         """The resume on a dancing frame: the voice-over start's count up 1 where a rule ``kept`` the
