@@ -183,7 +183,8 @@ VOICE_HOLD: int = 32
 #: above GONE_FLOOR_DB and the pause steadiness under GONE_STEADY (a voice alone; the readers' own
 #: steadiness medians 0.02 and 0.06, music's 0.30-0.60: docs/presence.md). Set on the readers over the
 #: shared recordings and going on after them (idle_gate.py --parts mixes,talkover --gone-floor-db ...):
-#: the music under a voice held a floor of 12-21 dB or a steadiness of 0.10 or more on its held frames.
+#: at brahms', pistachio's and vibeace's held (due) stops the music under a voice kept a floor of 12-23 dB or a
+#: steadiness of 0.10 or more; a floor of 21 dB reads the same, a steadiness of 0.1 too but for one talkover.
 GONE_FLOOR_DB: float = 24.0
 GONE_STEADY: float = 0.08
 #: Feature columns read: MFCC 1-2, log energy, MFCC 1-12 differences, energy difference, onset
