@@ -401,6 +401,84 @@ def test_the_music_heard_in_the_voices_pauses_is_music() -> None:
     assert not any(hears(rows, steadiness_col=-1))
 
 
+def level_network(db: float) -> np.ndarray:
+    """Packed parameters of a network that hears music while the statistics' running level (statistic
+    8, log energy / 10) lies above ``db`` dB (logit +10) and none below it (-10)."""
+    w1 = np.zeros((mg.HIDDEN, mg.N_STATS))
+    w1[0, 8] = 10.0
+    b1 = np.zeros(mg.HIDDEN)
+    b1[0] = -10.0 * db / 10.0
+    w2 = np.zeros(mg.HIDDEN)
+    w2[0] = 10.0
+    return mg.pack(np.zeros(mg.N_STATS), np.ones(mg.N_STATS), w1, b1, w2, 0.0)
+
+
+def test_a_voice_heard_over_the_dance_before_holds_its_stop() -> None:
+    """The voice-over context: a stop network that hears music at -10 dB and none at -20, a voice
+    network that always does. A performer dances 200 frames of music, a voice over it (-20 dB, the
+    level steady: the rules keep it) for 30 frames, music for 100, then a voice alone (pausing 25 dB:
+    not kept): the stop is held (``voice_holds``) for the first VOICE_HOLD - 1 frames of no music, then
+    not. Without the voice over the music before, in a dance shorter than CONTEXT_FRAMES, or with the
+    context or the voice-over rule switched off, nothing is held."""
+    d = 64
+    rng = np.random.default_rng(0)
+    music = constant_network(10.0)
+    row = rng.normal(size=d).astype(np.float32)
+
+    def holds(before: int = 200, voiced: int = 30, **rule: bool) -> list[bool]:
+        g = mg.MusicGate(np.zeros(d), np.ones(d), music, -60.0, clarity_col=60, stop_params=level_network(-15.0),
+                         voice_params=music, **rule)
+        out = []
+        for k in range(before + voiced + 100 + mg.VOICE_HOLD + 20):
+            r = row.copy()
+            c = k - before - voiced - 100  # the voice alone from c = 0
+            r[mg.ENERGY_COL] = -10.0 if (k < before or 0 <= k - before - voiced and c < 0) else \
+                -20.0 - (mg.FLOOR_DB + 7.0) * (c >= 0 and c % 2)
+            heard = g.step(r, True)
+            if c >= 0 and not heard:
+                out.append(g.voice_holds())
+        return out
+
+    got = holds()
+    assert len(got) > mg.VOICE_HOLD and all(got[: mg.VOICE_HOLD - 1]) and not any(got[mg.VOICE_HOLD - 1:])
+    assert not any(holds(voiced=0))
+    assert not any(holds(before=mg.CONTEXT_FRAMES - 200))
+    assert not any(holds(context_rule=False)) and not any(holds(voice_rule=False))
+
+
+def test_the_music_gone_releases_the_voice_over_contexts_hold() -> None:
+    """The voice-over context's release: as in the test above (music, a voice over it, music, then a
+    voice alone whose words fall FLOOR_DB + 7 dB between them), with a steadiness column (column 61).
+    Where the voice alone's steadiness is a voice's (0.0: its pauses' mean under GONE_STEADY) and its
+    floor broken by more than GONE_FLOOR_DB, the music is gone: nothing is held after the first frames
+    (the floor's and the pauses' windows filling). Where its pauses are steadier (0.2: over GONE_STEADY,
+    under the pause rule's PAUSE_STEADY) the stop is held as before."""
+    d = 64
+    rng = np.random.default_rng(0)
+    music = constant_network(10.0)
+    row = rng.normal(size=d).astype(np.float32)
+
+    def holds(alone_steady: float) -> list[bool]:
+        g = mg.MusicGate(np.zeros(d), np.ones(d), music, -60.0, clarity_col=60, steadiness_col=61,
+                         stop_params=level_network(-15.0), voice_params=music)
+        out = []
+        for k in range(200 + 30 + 100 + mg.VOICE_HOLD + 20):
+            r = row.copy()
+            c = k - 330  # the voice alone from c = 0
+            r[mg.ENERGY_COL] = -10.0 if (k < 200 or 230 <= k and c < 0) else -20.0 - (mg.FLOOR_DB + 7.0) * (c >= 0 and c % 2)
+            r[61] = 0.5 if c < 0 else alone_steady
+            heard = g.step(r, True)
+            if c >= 0 and not heard:
+                out.append(g.voice_holds())
+        return out
+
+    assert mg.FLOOR_DB + 7.0 > mg.GONE_FLOOR_DB and mg.GONE_STEADY < 0.2 < mg.PAUSE_STEADY
+    held = holds(0.2)
+    assert len(held) > mg.VOICE_HOLD and all(held[: mg.VOICE_HOLD - 1]) and not any(held[mg.VOICE_HOLD - 1:])
+    gone = holds(0.0)
+    assert len(gone) > mg.VOICE_HOLD and sum(gone) <= mg.PAUSE_FRAMES // 2
+
+
 def test_pause_steadiness_is_the_quietest_quarters_mean() -> None:
     """:func:`music_gate.pause_steadiness` over a ring of PAUSE_FRAMES: the mean steadiness of the
     ``1 + (m - 1) // 4`` quietest of the ``m`` frames pushed so far (the last PAUSE_FRAMES)."""

@@ -57,11 +57,19 @@ features as the engine computes them):
   silence (30 s), through a fresh stream, nothing heard before: the share of frames not fully idle
   (target 0; a false start the detector makes on them, which the song's start must not lengthen).
 
+* **A voice over a song's end, going on alone** (``--parts talkover``, not in the default): 20 s of each
+  ``--music`` recording (from ``--reader-at``) with the ``--speech`` recordings over it at each of
+  :data:`MIX_DB`, the voice going on alone :data:`TALKOVER_S` s after the music stops (a DJ talking
+  over a track's end): seconds from the music's end to fully idle (speech alone: within 2 s; what
+  the voice-over context's hold would cost without its release where the music is gone).
+
 ``--parts`` picks the parts (default ``recordings,mixes,gaps``). ``--floor-db`` and
 ``--voice-margin`` set the voice-over rule's ``music_gate.FLOOR_DB`` and ``VOICE_MARGIN`` (``inf``:
 that cue always holds; ``--floor-db 0``: the voice network's part off), ``--pause-steady`` its pause
 rule's ``PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off), ``--start-evidence``
 and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) and ``START_DECAY``,
+``--voice-hold``, ``--gone-floor-db`` and ``--gone-steady`` the voice-over context's hold and its
+release (``music_gate.VOICE_HOLD``, ``GONE_FLOOR_DB``: ``inf``, never released; ``GONE_STEADY``),
 ``--song-dance`` the frames a song's start is danced (``idle_gate.SONG_DANCE``), to measure its parts
 alone; ``--off`` switches off the parts that have no constant to set:
 ``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
@@ -69,7 +77,8 @@ settles), ``fresh`` (the statistics keep their time constant after a silence), `
 voice-over start's count starts from 0 when a voice stops the dance), ``song-start`` (the detector may
 stop a song's start at once: ``idle_gate.SONG_DANCE``), ``quiet-return`` (a break's end voids its count
 even on a frame still ``idle_gate.RETURN_DB`` under the music, heard as no music), ``veto`` (the voice
-network no longer overrules an unsure stop network: ``music_gate.VOICE_NO``). ``--trace`` prints the gate's
+network no longer overrules an unsure stop network: ``music_gate.VOICE_NO``), ``context`` (a voice heard
+over the dance before does not hold its stop: ``music_gate.VOICE_HOLD``). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, through a reader
 after a recording and the next recording's start, or through a gap between songs and the music's
 return (``gap:LABEL``), or through an espeak-ng host after a training song (``espeak:SONG/K``),
@@ -112,6 +121,8 @@ BREAK_EVERY_S: float = 10.0
 #: Training songs (drawn with :data:`ESPEAK_SEED`) under and before the espeak-ng hosts of ``--parts espeak``.
 ESPEAK_SONGS: int = 8
 ESPEAK_SEED: int = 4343
+#: Seconds the readers of ``--parts talkover`` go on alone after the music stops.
+TALKOVER_S: float = 8.0
 #: espeak-ng hosts and the seed of ``--parts leadin`` (the seed of its noises too).
 LEADIN_HOSTS: int = 6
 LEADIN_SEED: int = 99
@@ -126,7 +137,8 @@ SETTLE_TARGET_OTHER_S: float = 2.5
 #: Parts of the gate ``--off`` switches off: name -> (``IdleGate`` or its ``MusicGate``, attribute).
 SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_only"), "fresh": ("presence", "fresh_rule"),
                                         "resume": ("presence", "resume_rule"), "song-start": ("idle", "song_start"),
-                                        "quiet-return": ("idle", "quiet_return"), "veto": ("presence", "veto_rule")}
+                                        "quiet-return": ("idle", "quiet_return"), "veto": ("presence", "veto_rule"),
+                                        "context": ("presence", "context_rule")}
 #: The switches ``--off`` named (set by main).
 OFF: set[str] = set()
 
@@ -149,7 +161,8 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
     each (first, last) frame window: time (s), idle weight, music (the gate's state), heard (the
     detector's verdict), the stop or start logit (running mean), the voice network's logit, the
     floor (dB range over 1 s), the pauses' steadiness, kept by the voice-over (V) or pause (P) rule,
-    the stop count, the break's frames, the log energy (dB). An empty window: every stop of the
+    the stop count, the break's frames, the log energy (dB), the voice-over context (frames kept 10 s to
+    2.5 s ago: ``music_gate.CONTEXT_MIN`` holds the stop). An empty window: every stop of the
     dance after 3 s, from 1.5 s before it to its return."""
     from models.networks.music_gate import presence_logit
 
@@ -165,14 +178,14 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
         kept = "V" if pg.voice_frames > kv else "P" if pg.pause_frames > kp else "-"
         music.append(ig.music)
         rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
-                    f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f}")
+                    f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.context:3d}")
     if windows == [(0, 0)]:
         windows = []
         for t in range(91, len(music)):
             if music[t - 1] and not music[t]:
                 back = next((u for u in range(t, len(music)) if music[u]), len(music) - 1)
                 windows.append((max(0, t - 45), min(len(music) - 1, back + 6)))
-    head = "      s    w m h  logit  voice floor pause k count brk    dB"
+    head = "      s    w m h  logit  voice floor pause k count brk    dB ctx"
     return [line for a, b in windows for line in [f"-- frames {a}-{b}", head, *rows[a: b + 1]]]
 
 
@@ -245,6 +258,26 @@ def stretches(lm, audio: np.ndarray, talk: np.ndarray, end: int, seed: int) -> d
     seg = slice(int(a[k]) * HOP, int(b[k]) * HOP)
     return {"longest_s": (b[k] - a[k]) / 30, "at_s": a[k] / 30, "music_dbfs": rms_dbfs(audio[seg]),
             "voice_dbfs": rms_dbfs(talk[seg]), "runs": int(((b - a) >= STRETCH_MIN).sum())}
+
+
+def talkover_rows(lm, shared: list, talk: np.ndarray, seed: int) -> list[dict]:
+    """``--parts talkover``: for each (name, audio) of ``shared`` (20 s of a recording) and each of
+    :data:`MIX_DB`, the readers ``talk`` over it (a different stretch of them per recording) going on
+    alone :data:`TALKOVER_S` s after the music stops: ``settle_s``, seconds from the music's end to
+    fully idle (None: never)."""
+    from models.features.spectral import extract_features
+
+    rows = []
+    for k, (name, a) in enumerate(shared):
+        a = a[: len(a) // HOP * HOP]
+        t = np.roll(talk, -k * 7 * SR)[: len(a) + int(TALKOVER_S * SR)]
+        for db in MIX_DB:
+            gain = 10 ** ((rms_dbfs(a) - rms_dbfs(talk) + db) / 20)
+            x = (np.concatenate([a, np.zeros(len(t) - len(a), np.float32)]) + gain * t).astype(np.float32)
+            w = new_stream(lm, seed).listen(extract_features(x[: len(x) // HOP * HOP], lm.features))
+            idle = np.flatnonzero(w[len(a) // HOP:] >= 1.0)
+            rows.append({"recording": name, "speech_db": db, "settle_s": (idle[0] + 1) / 30 if len(idle) else None})
+    return rows
 
 
 def leadin_rows(lm, speech: list, seed: int) -> list[dict]:
@@ -462,7 +495,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--parts", default="recordings,mixes,gaps",
                    help="comma-separated parts to run: recordings, mixes (voices and breaks), gaps, readers (after each "
                         "recording), espeak (espeak-ng hosts over and after training songs), stretches (the voices over the music with "
-                        "the stop undone: how long the gate hears no music), leadin (no music from the stream's start) "
+                        "the stop undone: how long the gate hears no music), leadin (no music from the stream's start), talkover "
+                        "(the readers over a recording going on alone after it) "
                         "(default recordings,mixes,gaps)")
     p.add_argument("--reader-at", type=float, default=1 / 3,
                    help="--parts readers: where the 20 s of each recording start, a share of its length (default 1/3)")
@@ -473,12 +507,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--start-evidence", type=float,
                    help="the voice-over start's START_EVIDENCE, frames (inf: an idle performer starts on its detector alone)")
     p.add_argument("--start-decay", type=float, help="the voice-over start's START_DECAY (frames a frame without evidence takes off)")
+    p.add_argument("--voice-hold", type=int, help="frames the voice-over context holds a stop (music_gate.VOICE_HOLD)")
+    p.add_argument("--gone-floor-db", type=float, help="the voice-over context's release: music_gate.GONE_FLOOR_DB (inf: never released)")
+    p.add_argument("--gone-steady", type=float, help="the voice-over context's release: music_gate.GONE_STEADY (dimensionless)")
     p.add_argument("--song-dance", type=int, help="frames a song's start is danced (idle_gate.SONG_DANCE; 0: as --off song-start)")
     p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
                    "through voids the whole stop count), fresh (the statistics keep their time constant after a silence), resume (the "
                    "voice-over start's count starts from 0 at a stop), song-start (the detector may stop a song's start at once), quiet-return (a break's end "
                    "voids its count even on a quiet frame heard as no music), veto (an unsure stop network is not "
-                   "overruled by a sure voice network)")
+                   "overruled by a sure voice network), context (a voice heard over the dance before does not hold its "
+                   "stop for music_gate.VOICE_HOLD frames)")
     p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
                    "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "
@@ -491,7 +529,7 @@ def main(argv: list[str] | None = None) -> int:
     if off - set(SWITCHES):
         p.error(f"--off: unknown part(s) {sorted(off - set(SWITCHES))}; known: {', '.join(SWITCHES)}")
     OFF.update(off)
-    known = {"recordings", "mixes", "gaps", "readers", "espeak", "stretches", "leadin"}
+    known = {"recordings", "mixes", "gaps", "readers", "espeak", "stretches", "leadin", "talkover"}
     if parts - known:
         p.error(f"--parts: unknown part(s) {sorted(parts - known)}")
 
@@ -502,16 +540,11 @@ def main(argv: list[str] | None = None) -> int:
     from models.networks import music_gate as gate
     from models.training import music_gate as mg
 
-    if args.floor_db is not None:
-        gate.FLOOR_DB = args.floor_db
-    if args.voice_margin is not None:
-        gate.VOICE_MARGIN = args.voice_margin
-    if args.pause_steady is not None:
-        gate.PAUSE_STEADY = args.pause_steady
-    if args.start_evidence is not None:
-        gate.START_EVIDENCE = args.start_evidence
-    if args.start_decay is not None:
-        gate.START_DECAY = args.start_decay
+    for arg, const in (("floor_db", "FLOOR_DB"), ("voice_margin", "VOICE_MARGIN"), ("pause_steady", "PAUSE_STEADY"),
+                       ("start_evidence", "START_EVIDENCE"), ("start_decay", "START_DECAY"), ("voice_hold", "VOICE_HOLD"),
+                       ("gone_floor_db", "GONE_FLOOR_DB"), ("gone_steady", "GONE_STEADY")):
+        if getattr(args, arg) is not None:  # a constant of models/networks/music_gate.py set from the command line
+            setattr(gate, const, getattr(args, arg))
     if args.song_dance is not None:
         from models.networks import idle_gate
 
@@ -601,6 +634,16 @@ def main(argv: list[str] | None = None) -> int:
             at = "-" if r["at_s"] is None else f"{r['at_s']:.1f}"
             print(f"| {r['recording']} | {r['speech_db']:g} | {r['longest_s']:.2f} | {at} | {lv} | {r['runs']} |")
 
+    talk_rows = [] if "talkover" not in parts or talk is None else talkover_rows(lm, [
+        (n, a[int(len(a) * args.reader_at): int(len(a) * args.reader_at) + int(args.song_s * SR)]) for n, a in recordings
+        if n in {f.name for f in args.music.glob("*.ogg")}], talk, args.seed)
+    if talk_rows:
+        f2 = lambda v: "never" if v is None else f"{v:.2f}"  # noqa: E731
+        print("\n| the readers over a recording, going on alone after it: settle (s ≤ 2) | "
+              + " | ".join(f"{db:g} dB" for db in MIX_DB) + " |\n| --- |" + " ---: |" * len(MIX_DB))
+        for k in range(0, len(talk_rows), len(MIX_DB)):
+            print(f"| {talk_rows[k]['recording']} | " + " | ".join(f2(r["settle_s"]) for r in talk_rows[k: k + len(MIX_DB)]) + " |")
+
     lead_rows = leadin_rows(lm, speech, args.seed) if "leadin" in parts else []
     if lead_rows:
         print("\n| no music from the stream's start, 30 s | not fully idle (0) |\n| --- | ---: |")
@@ -659,7 +702,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{settle_target(r['gap']):g} | {f(r['held'])} | "
               f"{f(r['back_s'])} | {r['max_step_deg']:.1f} | {f(r['idle_step_deg'])} | {r['dance_step_p99_deg']:.1f} |")
     if args.json:
-        args.json.write_text(json.dumps({"mixes": mix_rows, "stretches": stretch_rows, "leadin": lead_rows, "readers": reader_rows, "espeak": es_mix, "espeak_hosts": es_hosts, "gate_us_median": float(np.median(cost_us)),
+        args.json.write_text(json.dumps({"mixes": mix_rows, "stretches": stretch_rows, "talkover": talk_rows, "leadin": lead_rows, "readers": reader_rows, "espeak": es_mix, "espeak_hosts": es_hosts, "gate_us_median": float(np.median(cost_us)),
                                          "gate_us_p99": float(np.percentile(cost_us, 99)), "recordings": rec_rows, "gaps": [{k: v for k, v in r.items() if k != "idle_w"}
                                                                              for r in gap_rows]}, indent=1))
     if args.plot and not gap_rows:
