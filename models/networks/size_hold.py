@@ -17,10 +17,11 @@ from __future__ import annotations
 import numpy as np
 
 #: Share of the tempo tilt's shift of the drawn codes' mean size z taken back by :func:`hold_size`
-#: (1: the tilted choice has the untilted one's mean size; 0: off, the tilt as before). Shipped off:
-#: held (with ``dance_stream.TEMPO_FREQ`` 2) the stretch set's centroid ratio reached 1.30 on 7 of 8
-#: songs and the ramp 0.84, but the amplitude ratio 1.25x / 0.8x stayed over 1.2 on 5 songs
-#: (1.62 at most) and the 3x2 stage's raw jitter read 1.35 at seed 3 (issue 39: 1.3); docs/listening.md.
+#: (1: the tilted choice has the untilted one's mean size; 0: off, the tilt as before). Shipped off
+#: (docs/listening.md, "The amplitude"): held, the stretch set's 1.25x / 0.8x amplitude read
+#: rate-neutral is within 0.90-1.14 on every song, but measured it stays over 1.2 on 5 songs (the
+#: measure's own rate effect, 1.09-1.27), DANCE_C_2's centroid ratio falls 1.41 -> 1.23 and the 3x2
+#: stage's raw jitter reads 1.32 at seed 2 (issue 39: 1.3); with TEMPO_FREQ 2, 1.35 at seed 3.
 SIZE_HOLD: float = 0.0
 #: The share where the tempo is faster than the memory's (the tilt positive); None: :data:`SIZE_HOLD`.
 SIZE_HOLD_FAST: float | None = None
