@@ -553,7 +553,6 @@ class DanceStream:
         self._tempo_z = (self._code_energy + np.float32(TEMPO_FREQ) * _cached_frequency(model, self._members)
                          if TEMPO_FREQ != 0.0 else self._code_energy)
         self._size_z = _cached_tables(model, self._members).size  # (K,) what the tilt holds (size_hold)
-        self._freq_z = _cached_frequency(model, self._members)  # (K,) quickness z (size_hold.ONSET_TILT)
         self._warp_scale = member_tables_part.warp_scale(self._tempo_z)  # (K + 1,) the beat warp's depth by code
         # a library (library_player): codes drawn a step, the bend that draws the next, the tempo's tilt by exemplar
         self._draws, self._guard, self._member_tilt = member_choice(model, speed, real, DRAWS)
@@ -816,10 +815,8 @@ class DanceStream:
             if tilt != 0.0:  # livelier codes at a faster tempo, calmer at a slower one (TEMPO_ENERGY)
                 z = self._tempo_z if TILT_Z_CAP == math.inf else np.clip(self._tempo_z, -TILT_Z_CAP, TILT_Z_CAP)
                 # quicker, not bigger: the untilted choice's mean size kept (size_hold.SIZE_HOLD, shipped off)
-                after = logits + np.float32(tilt) * z
-                q = size_hold_part.onset_tilt(self._density, self._tilt_weight())  # busier, quicker (off)
-                after = after + np.float32(q) * self._freq_z if q else after
-                logits = size_hold_part.hold_size(logits, after, self._size_z, size_hold_part.share(tilt))
+                logits = size_hold_part.hold_size(logits, logits + np.float32(tilt) * z, self._size_z,
+                                                  size_hold_part.share(tilt))
             if REPEAT_PENALTY > 0.0 and len(self.codes_drawn) >= REPEAT_FREE:
                 logits = self._repeat_penalty(logits)
             self._tokens.append(token)
@@ -926,17 +923,14 @@ class DanceStream:
                 out[c] -= np.float32(REPEAT_PENALTY * (n - REPEAT_FREE + 1) * self._repeat_weight[c])
         return logits if out is None else out
 
-    def _tilt_weight(self) -> float:
-        """The tempo tilt's fade (0-1): the pulse's confidence, and the energy control away from 1."""
-        return min(1.0, self._tempo.confidence / RATE_CONFIDENCE) * max(0.0, 1.0 - abs(self.energy - 1.0))
-
     def _tempo_tilt(self) -> float:
         """:data:`TEMPO_ENERGY` times ln(T / T_ref), blended to 0 as the pulse fades and as the
         energy control goes from 1 to 0 or to 2 (0 without a tempo)."""
         period = self._tempo.period
         if not FOLLOW_TEMPO or TEMPO_ENERGY == 0.0 or self._ref_period <= 0.0 or period <= 0.0:
             return 0.0
-        return TEMPO_ENERGY * self._tilt_weight() * math.log(self._ref_period / period)  # energy away from 1 takes over
+        w = min(1.0, self._tempo.confidence / RATE_CONFIDENCE) * max(0.0, 1.0 - abs(self.energy - 1.0))  # the energy control set away from 1 takes over
+        return TEMPO_ENERGY * w * math.log(self._ref_period / period)
 
     def _rate_for(self, code: int, member: int) -> float:
         """The playback rate of exemplar ``member`` of ``code`` now (:data:`FOLLOW_TEMPO`)."""

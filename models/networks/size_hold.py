@@ -25,12 +25,6 @@ import numpy as np
 SIZE_HOLD: float = 0.0
 #: The share where the tempo is faster than the memory's (the tilt positive); None: :data:`SIZE_HOLD`.
 SIZE_HOLD_FAST: float | None = None
-#: Busier music, quicker movements (an option, 0 shipped): the tilted logits also move by
-#: ``ONSET_TILT * ln(d / ONSET_REF) * q`` (d the stream's onset density, onsets a second over 8 s,
-#: which a time-stretch scales where the folded tempo may not, as on trance; q each code's quickness
-#: z), faded like the tempo's tilt. 0: off.
-ONSET_TILT: float = 0.0
-ONSET_REF: float = 3.0
 #: Newton steps of :func:`hold_size` at most (each moves mu by at most HOLD_STEP_CAP logit per size z,
 #: the mean size being steep where the tilt is strong), the tolerance (size z) that ends them early
 #: and the largest |mu| (logit per size z).
@@ -44,14 +38,6 @@ def share(tilt: float) -> float:
     """The hold's share for a tempo tilt ``tilt`` (logit per z; > 0 at a tempo over the memory's):
     :data:`SIZE_HOLD`, or :data:`SIZE_HOLD_FAST` where that is set and the tilt is positive."""
     return SIZE_HOLD if tilt < 0.0 or SIZE_HOLD_FAST is None else SIZE_HOLD_FAST
-
-
-def onset_tilt(density: float, weight: float) -> float:
-    """Logit per quickness z for an onset density ``density`` (onsets/s; 0: unknown) at the tempo
-    tilt's fade ``weight`` (0-1): :data:`ONSET_TILT` times ln(density / :data:`ONSET_REF`)."""
-    if ONSET_TILT == 0.0 or density <= 0.0:
-        return 0.0
-    return ONSET_TILT * weight * float(np.log(density / ONSET_REF))
 
 
 def _mean_var(logits: np.ndarray, s: np.ndarray) -> tuple[float, float]:
