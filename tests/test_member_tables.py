@@ -25,7 +25,7 @@ def memory():
 @pytest.mark.parametrize("tilt_lowpass", [0.0, 4.0])
 def test_member_tables_are_each_tables_own_values(memory, tilt_lowpass, monkeypatch):
     """Chunked (a few codes at a time, so several chunks and a short last one), every table is
-    bit for bit what member_dips, code_energy, code_frequency and member_contacts give; so with
+    bit for bit what member_dips, code_energy, code_frequency, code_size and member_contacts give; so with
     the tilt reading low-passed points (TILT_LOWPASS_HZ, not shipped)."""
     monkeypatch.setattr(mt, "TILT_LOWPASS_HZ", tilt_lowpass)
     members, counts, seg = memory
@@ -35,6 +35,7 @@ def test_member_tables_are_each_tables_own_values(memory, tilt_lowpass, monkeypa
     np.testing.assert_array_equal(t.speed, speed)
     np.testing.assert_array_equal(t.energy, mt.code_energy(members, counts, seg))
     np.testing.assert_array_equal(t.frequency, mt.code_frequency(members, counts))
+    np.testing.assert_array_equal(t.size, mt.code_size(members, counts))
     contacts, floor = member_contacts(mt.member_positions(members), counts)
     np.testing.assert_array_equal(t.contacts, contacts)
     assert t.floor == floor

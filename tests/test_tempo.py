@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import models.networks.dance_stream as ds
+import models.networks.size_hold as size_hold
 import models.networks.tempo as tempo
 from models.features.audio_io import load_audio
 from models.features.spectral import extract_features
@@ -420,6 +421,45 @@ def test_a_faster_tempo_chooses_quicker_movements(clip_stretched, freq_on, monke
         assert gap > 1.8, gap
     else:
         assert gap < 1.6, gap
+
+
+def _drawn_size(lm, feats: np.ndarray, bpm: float, seed: int) -> float:
+    """Mean :func:`code_size` z-score of the codes a stream draws on ``feats`` at a held tempo."""
+    return _drawn_mean(lm, feats, bpm, seed, lambda s: s._size_z)
+
+
+@pytest.mark.parametrize("hold_on", [True, False])
+def test_a_faster_tempo_chooses_quicker_not_bigger_movements(clip_stretched, hold_on, monkeypatch):
+    """size_hold.SIZE_HOLD 1 (issue 43; an option, shipped 0): the same music at 150 bpm against 70 bpm,
+    the drawn codes are quicker (frequency z-score 2.3 higher, mean of two seeds) and little larger
+    (size z-score, :func:`code_size`, 0.68 higher: each step holds the untilted choice's size, but the
+    predictor reads the codes drawn before); with the hold off the tilt draws larger movements too (2.6)."""
+    monkeypatch.setattr(size_hold, "SIZE_HOLD", 1.0 if hold_on else 0.0)  # off: the behaviour switched off
+    lm, feats = clip_stretched
+    seeds = (0, 1)
+    size = np.mean([_drawn_size(lm, feats[1.25], 150.0, s) - _drawn_size(lm, feats[1.25], 70.0, s) for s in seeds])
+    quick = np.mean([_drawn_quickness(lm, feats[1.25], 150.0, s) - _drawn_quickness(lm, feats[1.25], 70.0, s)
+                     for s in seeds])
+    assert quick > 1.5, quick
+    if hold_on:
+        assert abs(size) < 1.0, size
+    else:
+        assert size > 2.0, size
+
+
+def test_the_size_hold_keeps_the_untilted_mean_size():
+    """hold_size: the held logits' mean size z is the untilted one's within 0.02, for tilts of
+    either sign and strength; 0 hold returns the tilted logits unchanged."""
+    rng = np.random.default_rng(0)
+    size = rng.normal(size=512).astype(np.float32)
+    z = (0.7 * size + rng.normal(size=512)).astype(np.float32)
+    for tilt in (-2.0, -0.5, 0.5, 2.5):
+        before = rng.normal(0.0, 2.0, 512).astype(np.float32)
+        after = before + np.float32(tilt) * z
+        held = size_hold.hold_size(before, after, size, 1.0)
+        mean = [float(np.exp(x - x.max()) @ size / np.exp(x - x.max()).sum()) for x in (before, after, held)]
+        assert abs(mean[2] - mean[0]) < 0.02 and abs(mean[1] - mean[0]) > 0.2, (tilt, mean)
+        assert size_hold.hold_size(before, after, size, 0.0) is after
 
 
 @pytest.mark.parametrize("cap_on", [True, False])

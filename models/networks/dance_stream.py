@@ -53,6 +53,7 @@ from models.networks import lead as lead_part
 from models.networks.lead import PhaseForecast
 from models.networks.library_folders import folder_choice
 from models.networks.library_player import NEAREST, STYLE_BASE, bend_deg, member_choice, resolve_style
+from models.networks import size_hold as size_hold_part
 from models.networks.member_tables import (CHUNK_FRAMES, MemberTables, code_energy, code_frequency, member_dips,  # noqa: F401
                                           member_positions, member_speed, member_tables)
 from models.networks.streaming import FEATURE_LIMIT
@@ -551,6 +552,7 @@ class DanceStream:
         # what the tempo's tilt reads (TEMPO_ENERGY, TEMPO_FREQ): liveliness and quickness
         self._tempo_z = (self._code_energy + np.float32(TEMPO_FREQ) * _cached_frequency(model, self._members)
                          if TEMPO_FREQ != 0.0 else self._code_energy)
+        self._size_z = _cached_tables(model, self._members).size  # (K,) what the tilt holds (size_hold)
         self._warp_scale = member_tables_part.warp_scale(self._tempo_z)  # (K + 1,) the beat warp's depth by code
         # a library (library_player): codes drawn a step, the bend that draws the next, the tempo's tilt by exemplar
         self._draws, self._guard, self._member_tilt = member_choice(model, speed, real, DRAWS)
@@ -812,7 +814,9 @@ class DanceStream:
             tilt = self._tempo_tilt()
             if tilt != 0.0:  # livelier codes at a faster tempo, calmer at a slower one (TEMPO_ENERGY)
                 z = self._tempo_z if TILT_Z_CAP == math.inf else np.clip(self._tempo_z, -TILT_Z_CAP, TILT_Z_CAP)
-                logits = logits + np.float32(tilt) * z
+                # quicker, not bigger: the untilted choice's mean size kept (size_hold.SIZE_HOLD, shipped off)
+                logits = size_hold_part.hold_size(logits, logits + np.float32(tilt) * z, self._size_z,
+                                                  size_hold_part.share(tilt))
             if REPEAT_PENALTY > 0.0 and len(self.codes_drawn) >= REPEAT_FREE:
                 logits = self._repeat_penalty(logits)
             self._tokens.append(token)

@@ -133,12 +133,26 @@ def warp_scale(tempo_z: np.ndarray) -> np.ndarray:
     return np.append(1.0 - w * (1.0 - WARP_QUICK_FLOOR), 1.0).astype(np.float32)
 
 
-def _log_frequency(positions: np.ndarray) -> np.ndarray:
-    """(K, M) ln(mean joint acceleration / mean joint speed) of FK points (K, M, F, J + E, 3), root-relative."""
+def _log_speed_accel(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(K, M) ln mean joint speed (m/frame) and ln mean joint acceleration (m/frame^2) of FK points
+    (K, M, F, J + E, 3), root-relative (the dance, not its travel)."""
     pos = positions - positions[..., :1, :]
     v = np.linalg.norm(np.diff(pos, axis=2), axis=-1).mean((-1, -2))
     a = np.linalg.norm(np.diff(pos, 2, axis=2), axis=-1).mean((-1, -2))
-    return np.log(np.maximum(a, 1e-9) / np.maximum(v, 1e-9))
+    return np.log(np.maximum(v, 1e-9)), np.log(np.maximum(a, 1e-9))
+
+
+def _log_frequency(positions: np.ndarray) -> np.ndarray:
+    """(K, M) ln(mean joint acceleration / mean joint speed) of FK points (K, M, F, J + E, 3), root-relative."""
+    lv, la = _log_speed_accel(positions)
+    return la - lv
+
+
+def _log_size(positions: np.ndarray) -> np.ndarray:
+    """(K, M) ln(mean joint speed ** 2 / mean joint acceleration) of FK points (K, M, F, J + E, 3),
+    root-relative: for a sinusoid of amplitude A, 2 A / pi (m), whatever its frequency."""
+    lv, la = _log_speed_accel(positions)
+    return 2.0 * lv - la
 
 
 def _frequency_z(lf: np.ndarray, counts: np.ndarray) -> np.ndarray:
@@ -160,12 +174,23 @@ def code_frequency(members: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return _frequency_z(_log_frequency(_lowpass(member_positions(members), TILT_LOWPASS_HZ)), counts)
 
 
+def code_size(members: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """How large each code's movements are, whatever their pace: z-scores (K,) float32, over the
+    codes with exemplars, of the mean over its exemplars of ln(mean joint speed ** 2 / mean joint
+    acceleration) (:func:`_log_size`; root-relative, whole windows, low-passed at
+    :data:`TILT_LOWPASS_HZ`). ``members`` (K, M, F, P), ``counts`` (K,). A code without exemplars gets 0."""
+    if (counts > 0).sum() < 2:
+        return np.zeros(members.shape[0], np.float32)
+    return _frequency_z(_log_size(_lowpass(member_positions(members), TILT_LOWPASS_HZ)), counts)
+
+
 @dataclasses.dataclass
 class MemberTables:
     """A memory's start-up tables (K codes, M members, F = 2 seg frames):
     ``dips`` (K, M, seg) float32 (:func:`member_dips` of the first seg + 2 frames);
     ``speed`` (K, M) float64, mean joint speed over the movement (first seg frames), m/frame;
-    ``energy``, ``frequency`` (K,) float32 z-scores (:func:`code_energy`, :func:`code_frequency`);
+    ``energy``, ``frequency``, ``size`` (K,) float32 z-scores (:func:`code_energy`, :func:`code_frequency`,
+    :func:`code_size`);
     ``contacts`` (K, M, F, 3) float32 and ``floor`` m (:func:`models.networks.feet.member_contacts`)."""
 
     dips: np.ndarray
@@ -174,25 +199,28 @@ class MemberTables:
     frequency: np.ndarray
     contacts: np.ndarray
     floor: float
+    size: np.ndarray
 
 
 def member_tables(members: np.ndarray, counts: np.ndarray, seg: int,
                   chunk_frames: int = CHUNK_FRAMES) -> MemberTables:
     """Every table of exemplar windows ``members`` (K, M, F >= seg + 2, P), ``counts`` (K,) real
     ones, from one FK pass over chunks of codes (:data:`CHUNK_FRAMES` frames each): the same
-    values as :func:`member_dips`, :func:`code_energy`, :func:`code_frequency` and
+    values as :func:`member_dips`, :func:`code_energy`, :func:`code_frequency`, :func:`code_size` and
     :func:`models.networks.feet.member_contacts` each give, at a fraction of their peak memory."""
     k, m, f = members.shape[:3]
     counts = np.asarray(counts)
     step = max(1, chunk_frames // max(1, m * f))
-    dips, speed, band, lf, low, mid = [], [], [], [], [], []
+    dips, speed, band, lf, ls, low, mid = [], [], [], [], [], [], []
     for a in range(0, k, step):
         pos = member_positions(members[a: a + step])  # (c, M, F, J + E, 3) float64
         dips.append(_dips(_speed(pos[:, :, : seg + 2]), seg))
         speed.append(_speed(pos[:, :, :seg]).mean(-1))
         low_pos = _lowpass(pos, TILT_LOWPASS_HZ)  # what the tempo's tilt reads: the dance band
         band.append(speed[-1] if low_pos is pos else _speed(low_pos[:, :, :seg]).mean(-1))
-        lf.append(_log_frequency(low_pos))
+        lv, la = _log_speed_accel(low_pos)
+        lf.append(la - lv)
+        ls.append(2.0 * lv - la)
         lo, mi = feet_part.member_feet(pos)
         low.append(lo)
         mid.append(mi)
@@ -200,4 +228,4 @@ def member_tables(members: np.ndarray, counts: np.ndarray, seg: int,
     speed_all = np.concatenate(speed)
     contacts, floor = feet_part.feet_contacts(np.concatenate(low), np.concatenate(mid), counts)
     return MemberTables(np.concatenate(dips), speed_all, code_energy(members, counts, seg, np.concatenate(band)),
-                        _frequency_z(np.concatenate(lf), counts), contacts, floor)
+                        _frequency_z(np.concatenate(lf), counts), contacts, floor, _frequency_z(np.concatenate(ls), counts))
