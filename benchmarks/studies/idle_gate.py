@@ -70,6 +70,9 @@ rule's ``PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off)
 and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) and ``START_DECAY``,
 ``--voice-hold``, ``--gone-floor-db`` and ``--gone-steady`` the voice-over context's hold and its
 release (``music_gate.VOICE_HOLD``, ``GONE_FLOOR_DB``: ``inf``, never released; ``GONE_STEADY``),
+``--voice-no`` the veto's threshold (``music_gate.VOICE_NO``), ``--veto-top`` and ``--voice-no-run``
+its reach and threshold while a stop count runs (``VETO_TOP``, ``VOICE_NO_RUN``; ``--veto-top 0
+--voice-no-run 4``: as when none runs),
 ``--song-dance`` the frames a song's start is danced (``idle_gate.SONG_DANCE``), to measure its parts
 alone; ``--off`` switches off the parts that have no constant to set:
 ``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
@@ -510,6 +513,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--voice-hold", type=int, help="frames the voice-over context holds a stop (music_gate.VOICE_HOLD)")
     p.add_argument("--gone-floor-db", type=float, help="the voice-over context's release: music_gate.GONE_FLOOR_DB (inf: never released)")
     p.add_argument("--gone-steady", type=float, help="the voice-over context's release: music_gate.GONE_STEADY (dimensionless)")
+    p.add_argument("--voice-no", type=float, help="the veto's threshold: music_gate.VOICE_NO (the voice network's logit at or below minus it)")
+    p.add_argument("--veto-top", type=float, help="the veto's reach while a stop count runs: music_gate.VETO_TOP "
+                   "(stop logit; 0 with --voice-no-run 4: as when none runs)")
+    p.add_argument("--voice-no-run", type=float, help="the veto's threshold while a stop count runs: music_gate.VOICE_NO_RUN")
     p.add_argument("--song-dance", type=int, help="frames a song's start is danced (idle_gate.SONG_DANCE; 0: as --off song-start)")
     p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
                    "through voids the whole stop count), fresh (the statistics keep their time constant after a silence), resume (the "
@@ -542,7 +549,8 @@ def main(argv: list[str] | None = None) -> int:
 
     for arg, const in (("floor_db", "FLOOR_DB"), ("voice_margin", "VOICE_MARGIN"), ("pause_steady", "PAUSE_STEADY"),
                        ("start_evidence", "START_EVIDENCE"), ("start_decay", "START_DECAY"), ("voice_hold", "VOICE_HOLD"),
-                       ("gone_floor_db", "GONE_FLOOR_DB"), ("gone_steady", "GONE_STEADY")):
+                       ("gone_floor_db", "GONE_FLOOR_DB"), ("gone_steady", "GONE_STEADY"), ("voice_no", "VOICE_NO"), ("veto_top", "VETO_TOP"),
+                       ("voice_no_run", "VOICE_NO_RUN")):
         if getattr(args, arg) is not None:  # a constant of models/networks/music_gate.py set from the command line
             setattr(gate, const, getattr(args, arg))
     if args.song_dance is not None:
