@@ -168,7 +168,7 @@ VOICE_NO: float = 4.0
 #: The veto while a stop count runs (``MusicGate.counting``, set by the idle gate, module docstring):
 #: it also covers a stop logit up to VETO_TOP, the voice network at or below -VOICE_NO_RUN. Half and
 #: once MARGIN_STOP, round figures; set on crowd -30 in idle_gate.py's 20-s gap at seed 10 (the voice
-#: network -2.5 to -3.7 there; 2.5 reads the same on every part). VETO_TOP 0 and VOICE_NO_RUN
+#: network -2.1 to -3.7 there; 2.5 reads the same on every part). VETO_TOP 0 and VOICE_NO_RUN
 #: VOICE_NO: as when no count runs (docs/presence.md).
 VETO_TOP: float = 1.0
 VOICE_NO_RUN: float = 2.0
