@@ -29,8 +29,10 @@ Column order: ``[base | context | beat]``. The tracker costs the autocorrelation
 lags of 180 values and 180 cosines and sines per frame, as one compiled call
 (:func:`_beat_columns`: on the live path, where caches are cold after each wait for
 audio, its 15 NumPy calls and two FFTs took 0.2 ms a frame) and keeps ``base_dim + 2 W``
-numbers of state. It runs frame by frame, offline too, so that the live and offline
-columns are the same arithmetic.
+numbers of state and a :data:`WORK_SIZE` scratch (the compiled call allocates nothing). The
+window and its autocorrelation are :func:`_weighted_autocorrelation`, which the lead's
+forecast (:mod:`models.networks.lead`) reads too. It runs frame by frame, offline too, so
+that the live and offline columns are the same arithmetic.
 """
 
 from __future__ import annotations
@@ -50,7 +52,9 @@ LAGS: np.ndarray = np.arange(10, 41)
 PRIOR_PERIOD: float = 15.0
 #: Columns the beat tracker adds.
 BEAT_COLUMNS: int = 4
-_NFFT = 256  # >= TEMPO_WINDOW + max lag + 1: the circular autocorrelation does not wrap at the lags read
+#: Floats of the scratch :func:`_beat_columns` works in: the weighted window (W), then the
+#: autocorrelation indexed by lag (0 .. the largest lag + 1, the parabola's neighbour).
+WORK_SIZE: int = TEMPO_WINDOW + int(LAGS[-1]) + 2
 
 
 def _prior(period: np.ndarray) -> np.ndarray:
@@ -76,6 +80,7 @@ class ContextTracker:
         self._w_sum = float(self._w.sum())
         self._two_pi_j = 2.0 * np.pi * j
         self._lag_prior = _prior(LAGS.astype(np.float64))
+        self._work = np.empty(WORK_SIZE)  # scratch of _beat_columns, no state between frames
         self.reset()
 
     def reset(self) -> None:
@@ -111,27 +116,38 @@ class ContextTracker:
         pos = self._frames % W
         self._ring[pos] = self._ring[pos + W] = onset
         return _beat_columns(self._ring, pos, self._w, self._w_sum, self._two_pi_j, self._lag_prior,
-                             int(LAGS[0]), int(LAGS[-1]))
+                             int(LAGS[0]), int(LAGS[-1]), self._work)
 
 
 @njit(cache=True, nogil=True)
-def _beat_columns(ring, pos, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi):  # pragma: no cover - compiled
-    """The beat columns from the onset ring (module docstring): the last W onsets are
-    ``ring[pos + W - j]``, j frames ago; lags ``lag_lo..lag_hi`` are the candidate periods."""
+def _weighted_autocorrelation(ring, pos, w, w_sum, lo, hi, xw, ac):  # pragma: no cover - compiled
+    """The tracker's window and its autocorrelation, into scratch: ``xw[j]`` (W,) the last W
+    onsets ``ring[pos + W - j]`` (j frames ago), their ``w``-weighted mean removed, times ``w[j]``;
+    ``ac[lag]`` the sum over j of ``xw[j] xw[j + lag]`` for lags ``lo..hi`` (frames; ``ac`` at
+    least ``hi + 1`` long, its other entries left as they are). Loops, not NumPy: no temporaries,
+    and one summation order for :func:`_beat_columns` and the lead's runner-up (the same bits)."""
     n = w.shape[0]
-    xw = np.empty(n)
     mean = 0.0
     for j in range(n):
         mean += ring[pos + n - j] * w[j]
     mean /= w_sum
     for j in range(n):
         xw[j] = (ring[pos + n - j] - mean) * w[j]
-    ac = np.zeros(lag_hi + 2)  # the autocorrelation at lags lag_lo - 1 .. lag_hi + 1 (the parabola's)
-    for lag in range(lag_lo - 1, lag_hi + 2):
+    for lag in range(lo, hi + 1):
         acc = 0.0
         for j in range(n - lag):
             acc += xw[j] * xw[j + lag]
         ac[lag] = acc
+
+
+@njit(cache=True, nogil=True)
+def _beat_columns(ring, pos, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi, work):  # pragma: no cover - compiled
+    """The beat columns from the onset ring (module docstring): the last W onsets are
+    ``ring[pos + W - j]``, j frames ago; lags ``lag_lo..lag_hi`` are the candidate periods;
+    ``work`` a (:data:`WORK_SIZE`,) float64 scratch."""
+    n = w.shape[0]
+    xw, ac = work[:n], work[n:]  # ac: the autocorrelation at lags lag_lo - 1 .. lag_hi + 1 (the parabola's)
+    _weighted_autocorrelation(ring, pos, w, w_sum, lag_lo - 1, lag_hi + 1, xw, ac)
     lag = lag_lo
     best = ac[lag_lo] * lag_prior[0]
     for i in range(1, lag_hi - lag_lo + 1):

@@ -15,11 +15,11 @@ runner-up period back, where larger) would change it, the changed level's phase 
 (:data:`RUNNER_UP_CHANGE`). What it earns on each shared recording: docs/listening.md, "Lead".
 
 State: the last :data:`TEMPO_WINDOW` onset strengths twice over (a ring, as
-:class:`models.features.context.ContextTracker` keeps them) and a scratch window of the same
-size; nothing is allocated per frame outside the compiled arithmetic. Cost, a frame with a
-lead (one compiled call: the tracker's arithmetic once, on an unsteady level the runner-up's
-autocorrelation besides, and the arithmetic once more where the runner-up's window reads a
-level not taken; below, an unsteady level where the runner-up changes nothing; figures:
+:class:`models.features.context.ContextTracker` keeps them), a scratch window of the same
+size and the tracker's scratch (``context.WORK_SIZE``): the compiled call allocates nothing. Cost,
+a frame with a lead (one compiled call: the tracker's arithmetic once, on an unsteady level the
+runner-up's autocorrelation besides, and the arithmetic once more where the runner-up's window
+reads a level not taken; below, an unsteady level where the runner-up changes nothing; figures:
 docs/listening.md, "Lead")::
 
     python -m timeit -s "from models.networks import lead; f = lead.PhaseForecast(); \
@@ -33,7 +33,8 @@ import math
 import numpy as np
 from numba import njit
 
-from models.features.context import LAGS, PRIOR_PERIOD, TEMPO_WINDOW, ContextTracker, _beat_columns
+from models.features.context import (LAGS, PRIOR_PERIOD, TEMPO_WINDOW, WORK_SIZE, ContextTracker, _beat_columns,
+                                     _weighted_autocorrelation)
 
 #: The stream's lead reads :class:`PhaseForecast`'s phase; False: the phase of now rotated by
 #: ``2 pi L / P`` (the forecast before issue 43, kept to measure against: benchmarks/studies/lead.py
@@ -74,13 +75,14 @@ class PhaseForecast:
     period at the last call and the frames since it last changed level.
     """
 
-    __slots__ = ("_ring", "_buf", "_frames", "_w", "_w_sum", "_two_pi_j", "_lag_prior", "_level", "_since", "_seen")
+    __slots__ = ("_ring", "_buf", "_work", "_frames", "_w", "_w_sum", "_two_pi_j", "_lag_prior", "_level", "_since", "_seen")
 
     def __init__(self) -> None:
         ct = ContextTracker(1, 0.0, True)  # the tracker's window, weights and tempo prior
         self._w, self._w_sum, self._two_pi_j, self._lag_prior = ct._w, ct._w_sum, ct._two_pi_j, ct._lag_prior
         self._ring = np.zeros(2 * TEMPO_WINDOW)
         self._buf = np.zeros(2 * TEMPO_WINDOW)
+        self._work = np.empty(WORK_SIZE)  # the tracker's scratch (context._beat_columns), no state
         self.reset()
 
     def reset(self) -> None:
@@ -109,7 +111,7 @@ class PhaseForecast:
         None (the period as now)."""
         p = float(period)
         p = min(max(p, float(LAGS[0]) - 1.0), float(LAGS[-1]) + 1.0) if math.isfinite(p) else float(LAGS[0])
-        args = (self._ring, (self._frames - 1) % TEMPO_WINDOW, int(lead), p, self._buf,
+        args = (self._ring, (self._frames - 1) % TEMPO_WINDOW, int(lead), p, self._buf, self._work,
                 self._w, self._w_sum, self._two_pi_j, self._lag_prior, int(LAGS[0]), int(LAGS[-1]))
         if self._frames != self._seen:  # the tracker's level: frames since it last changed
             self._since += self._frames - self._seen
@@ -124,36 +126,29 @@ class PhaseForecast:
 
 
 @njit(cache=True, nogil=True)
-def _runner_up(ring, pos, w, w_sum, lag_prior, lag_lo, lag_hi, apart):  # pragma: no cover - compiled
+def _runner_up(ring, pos, w, w_sum, lag_prior, lag_lo, lag_hi, apart, work):  # pragma: no cover - compiled
     """The lag (frames) scoring best in the tracker's arithmetic (its weighted autocorrelation of
-    the window ``ring[pos + 1: pos + n + 1]`` times the tempo prior) among those at least ``apart``
-    octave from the best lag; 0.0 where none scores above zero."""
+    the window ``ring[pos + 1: pos + n + 1]``, :func:`models.features.context._weighted_autocorrelation`,
+    times the tempo prior) among those at least ``apart`` octave from the best lag; 0.0 where none
+    scores above zero. ``work``: a (``context.WORK_SIZE``,) float64 scratch."""
     n = w.shape[0]
-    mean = 0.0
-    for j in range(n):
-        mean += ring[pos + n - j] * w[j]
-    mean /= w_sum
-    xw = np.empty(n)
-    for j in range(n):
-        xw[j] = (ring[pos + n - j] - mean) * w[j]
-    score = np.empty(lag_hi - lag_lo + 1)
-    best = 0
-    for i in range(lag_hi - lag_lo + 1):
-        acc = 0.0
-        for j in range(n - lag_lo - i):
-            acc += xw[j] * xw[j + lag_lo + i]
-        score[i] = acc * lag_prior[i]
-        if score[i] > score[best]:
-            best = i
+    ac = work[n:]
+    _weighted_autocorrelation(ring, pos, w, w_sum, lag_lo, lag_hi, work[:n], ac)
+    best, top = 0, ac[lag_lo] * lag_prior[0]
+    for i in range(1, lag_hi - lag_lo + 1):
+        score = ac[lag_lo + i] * lag_prior[i]
+        if score > top:
+            best, top = i, score
     second, top = 0.0, 0.0
     for i in range(lag_hi - lag_lo + 1):
-        if abs(math.log2((lag_lo + i) / (lag_lo + best))) > apart and score[i] > top:
-            second, top = float(lag_lo + i), score[i]
+        score = ac[lag_lo + i] * lag_prior[i]
+        if abs(math.log2((lag_lo + i) / (lag_lo + best))) > apart and score > top:
+            second, top = float(lag_lo + i), score
     return second
 
 
 @njit(cache=True, nogil=True)
-def _forecast_phase(ring, pos, lead, period, buf, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi,
+def _forecast_phase(ring, pos, lead, period, buf, work, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi,
                     apart, now, change):  # pragma: no cover - compiled
     """Fill ``buf[n:]`` with the window ``lead`` frames on (the heard onsets ``ring[pos + 1 + lead:
     pos + n + 1]``, then ``lead`` of them one ``period`` back) and return its (phase, log2 of its
@@ -161,9 +156,10 @@ def _forecast_phase(ring, pos, lead, period, buf, w, w_sum, two_pi_j, lag_prior,
     larger, the onsets one :func:`_runner_up` period back: its (phase, log2 period / 15, True)
     where that differs from ``now`` (log2 of the tracker's period / 15) by more than ``change``
     octave (no onset larger: the period's window, True where its own level so differs). One
-    pass: the tracker's arithmetic once, or twice where the runner-up reads a level not taken."""
+    pass: the tracker's arithmetic once, or twice where the runner-up reads a level not taken.
+    ``work``: the tracker's scratch (``context.WORK_SIZE`` float64)."""
     n = w.shape[0]
-    other = _runner_up(ring, pos, w, w_sum, lag_prior, lag_lo, lag_hi, apart) if apart >= 0.0 and lead > 0 else 0.0
+    other = _runner_up(ring, pos, w, w_sum, lag_prior, lag_lo, lag_hi, apart, work) if apart >= 0.0 and lead > 0 else 0.0
     heard = n - lead
     for i in range(heard):
         buf[n + i] = ring[pos + 1 + lead + i]
@@ -179,7 +175,7 @@ def _forecast_phase(ring, pos, lead, period, buf, w, w_sum, two_pi_j, lag_prior,
                 v, larger = u, True
         buf[n + heard + k] = v
     if larger:
-        ccos, csin, _, logp = _beat_columns(buf, n - 1, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi)
+        ccos, csin, _, logp = _beat_columns(buf, n - 1, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi, work)
         if abs(logp - now) > change:
             return math.atan2(csin, ccos), logp, True
         for k in range(lead):  # back to the period's window
@@ -187,5 +183,5 @@ def _forecast_phase(ring, pos, lead, period, buf, w, w_sum, two_pi_j, lag_prior,
             i = int(math.floor(x))
             f = x - i
             buf[n + heard + k] = (1.0 - f) * buf[n + i] + f * buf[n + i + 1]
-    ccos, csin, _, logp = _beat_columns(buf, n - 1, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi)
+    ccos, csin, _, logp = _beat_columns(buf, n - 1, w, w_sum, two_pi_j, lag_prior, lag_lo, lag_hi, work)
     return math.atan2(csin, ccos), logp, apart >= 0.0 and not larger and abs(logp - now) > change
