@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-import models.networks.size_hold as size_hold
+import models.networks.lead as lead
 from script_loader import load_script
 
 cs = load_script("benchmarks/studies/constants.py")
@@ -12,15 +12,16 @@ cs = load_script("benchmarks/studies/constants.py")
 
 def test_constants_are_set_before_the_script_runs(tmp_path, monkeypatch, capsys):
     """The assignment reaches the module the script reads, and the script gets its own arguments."""
-    monkeypatch.setattr(size_hold, "SIZE_HOLD", size_hold.SIZE_HOLD)  # restored after the test
+    monkeypatch.setattr(lead, "RUNNER_UP_CHANGE", lead.RUNNER_UP_CHANGE)  # restored after the test
     script = tmp_path / "probe.py"
-    script.write_text("import sys\nimport models.networks.size_hold as h\nprint('read', h.SIZE_HOLD, sys.argv[1:])\n")
-    assert cs.main(["models.networks.size_hold.SIZE_HOLD=0.75", "--", str(script), "--x", "1"]) == 0
+    script.write_text("import sys\nimport models.networks.lead as m\nprint('read', m.RUNNER_UP_CHANGE, sys.argv[1:])\n")
+    assert cs.main(["models.networks.lead.RUNNER_UP_CHANGE=0.5", "--", str(script), "--x", "1"]) == 0
     out = capsys.readouterr().out
-    assert "read 0.75 ['--x', '1']" in out and "SIZE_HOLD=0.75" in out
+    assert "read 0.5 ['--x', '1']" in out and "RUNNER_UP_CHANGE=0.5" in out
 
 
-@pytest.mark.parametrize("bad", ["SIZE_HOLD=1", "models.networks.size_hold.NO_SUCH=1", "models.networks.size_hold.SIZE_HOLD"])
+@pytest.mark.parametrize("bad", ["RUNNER_UP_CHANGE=1", "models.networks.lead.NO_SUCH=1",
+                                 "models.networks.lead.RUNNER_UP_CHANGE"])
 def test_a_misspelt_constant_is_a_one_line_error(bad):
     with pytest.raises(SystemExit, match="constants.py: "):
         cs.apply([bad])

@@ -22,12 +22,9 @@ def memory():
     return ds._cached_members(model), model.member_count.numpy(), model.config.seg
 
 
-@pytest.mark.parametrize("tilt_lowpass", [0.0, 4.0])
-def test_member_tables_are_each_tables_own_values(memory, tilt_lowpass, monkeypatch):
+def test_member_tables_are_each_tables_own_values(memory):
     """Chunked (a few codes at a time, so several chunks and a short last one), every table is
-    bit for bit what member_dips, code_energy, code_frequency, code_size and member_contacts give; so with
-    the tilt reading low-passed points (TILT_LOWPASS_HZ, not shipped)."""
-    monkeypatch.setattr(mt, "TILT_LOWPASS_HZ", tilt_lowpass)
+    bit for bit what member_dips, code_energy, code_frequency and member_contacts give."""
     members, counts, seg = memory
     t = mt.member_tables(members, counts, seg, chunk_frames=7 * members.shape[1] * members.shape[2])
     np.testing.assert_array_equal(t.dips, mt.member_dips(members[:, :, : seg + 2], seg))
@@ -35,7 +32,6 @@ def test_member_tables_are_each_tables_own_values(memory, tilt_lowpass, monkeypa
     np.testing.assert_array_equal(t.speed, speed)
     np.testing.assert_array_equal(t.energy, mt.code_energy(members, counts, seg))
     np.testing.assert_array_equal(t.frequency, mt.code_frequency(members, counts))
-    np.testing.assert_array_equal(t.size, mt.code_size(members, counts))
     contacts, floor = member_contacts(mt.member_positions(members), counts)
     np.testing.assert_array_equal(t.contacts, contacts)
     assert t.floor == floor
@@ -56,15 +52,3 @@ def test_member_tables_peak_memory_is_bounded_by_chunks(memory):
     finally:
         tracemalloc.stop()
     assert peak < 60e6, f"member_tables peaked at {peak / 1e6:.0f} MB traced"
-
-
-def test_warp_scale_falls_from_one_to_the_floor_over_the_quickest_codes(monkeypatch):
-    """warp_scale: 1 up to WARP_QUICK_Z, linear over WARP_QUICK_SPAN down to WARP_QUICK_FLOOR, 1 for
-    "no code yet" (index K); floor 1 gives every code the full warp."""
-    monkeypatch.setattr(mt, "WARP_QUICK_Z", 1.0)
-    monkeypatch.setattr(mt, "WARP_QUICK_SPAN", 2.0)
-    monkeypatch.setattr(mt, "WARP_QUICK_FLOOR", 0.3)
-    np.testing.assert_allclose(mt.warp_scale(np.array([-2.0, 1.0, 2.0, 3.0, 5.0])), [1.0, 1.0, 0.65, 0.3, 0.3, 1.0],
-                               rtol=1e-6)
-    monkeypatch.setattr(mt, "WARP_QUICK_FLOOR", 1.0)
-    assert (mt.warp_scale(np.array([-2.0, 2.0, 5.0])) == 1.0).all()

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 import models.networks.dance_stream as ds
-import models.networks.size_hold as size_hold
 import models.networks.tempo as tempo
 from models.features.audio_io import load_audio
 from models.features.spectral import extract_features
@@ -421,105 +420,6 @@ def test_a_faster_tempo_chooses_quicker_movements(clip_stretched, freq_on, monke
         assert gap > 1.8, gap
     else:
         assert gap < 1.6, gap
-
-
-def _drawn_size(lm, feats: np.ndarray, bpm: float, seed: int) -> float:
-    """Mean :func:`code_size` z-score of the codes a stream draws on ``feats`` at a held tempo."""
-    return _drawn_mean(lm, feats, bpm, seed, lambda s: s._size_z)
-
-
-@pytest.mark.parametrize("hold_on", [True, False])
-def test_a_faster_tempo_chooses_quicker_not_bigger_movements(clip_stretched, hold_on, monkeypatch):
-    """size_hold.SIZE_HOLD 1 (issue 43; an option, shipped 0): the same music at 150 bpm against 70 bpm,
-    the drawn codes are quicker (frequency z-score 2.3 higher, mean of two seeds) and little larger
-    (size z-score, :func:`code_size`, 0.68 higher: each step holds the untilted choice's size, but the
-    predictor reads the codes drawn before); with the hold off the tilt draws larger movements too (2.6)."""
-    monkeypatch.setattr(size_hold, "SIZE_HOLD", 1.0 if hold_on else 0.0)  # off: the behaviour switched off
-    lm, feats = clip_stretched
-    seeds = (0, 1)
-    size = np.mean([_drawn_size(lm, feats[1.25], 150.0, s) - _drawn_size(lm, feats[1.25], 70.0, s) for s in seeds])
-    quick = np.mean([_drawn_quickness(lm, feats[1.25], 150.0, s) - _drawn_quickness(lm, feats[1.25], 70.0, s)
-                     for s in seeds])
-    assert quick > 1.5, quick
-    if hold_on:
-        assert abs(size) < 1.0, size
-    else:
-        assert size > 2.0, size
-
-
-def test_the_size_hold_keeps_the_untilted_mean_size():
-    """hold_size: the held logits' mean size z is the untilted one's within 0.02, for tilts of
-    either sign and strength; 0 hold returns the tilted logits unchanged."""
-    rng = np.random.default_rng(0)
-    size = rng.normal(size=512).astype(np.float32)
-    z = (0.7 * size + rng.normal(size=512)).astype(np.float32)
-    for tilt in (-2.0, -0.5, 0.5, 2.5):
-        before = rng.normal(0.0, 2.0, 512).astype(np.float32)
-        after = before + np.float32(tilt) * z
-        held = size_hold.hold_size(before, after, size, 1.0)
-        mean = [float(np.exp(x - x.max()) @ size / np.exp(x - x.max()).sum()) for x in (before, after, held)]
-        assert abs(mean[2] - mean[0]) < 0.02 and abs(mean[1] - mean[0]) > 0.2, (tilt, mean)
-        assert size_hold.hold_size(before, after, size, 0.0) is after
-
-
-@pytest.mark.parametrize("cap_on", [True, False])
-def test_a_fast_tempo_leans_towards_lively_codes_without_drawing_only_the_extremes(clip_stretched, cap_on,
-                                                                                  monkeypatch):
-    """TILT_Z_CAP (not shipped: inf; set to 1.5 here): at 150 bpm the tempo's tilt still favours
-    livelier, quicker codes, but the memory's extreme tail (z > 2: 13 % of the codes, the quickest,
-    docs/stage.md) is 35-40 % of the drawn codes, not 70-80 % as with the z unclipped
-    (seeds 0 and 1, the bundled clip at 1.25x)."""
-    monkeypatch.setattr(ds, "TILT_Z_CAP", 1.5 if cap_on else float("inf"))
-    lm, feats = clip_stretched
-    tail = np.mean([_drawn_mean(lm, feats[1.25], 150.0, seed, lambda s: (s._tempo_z > 2.0).astype(float))
-                    for seed in (0, 1)])
-    if cap_on:
-        assert tail < 0.5, tail
-    else:
-        assert tail > 0.6, tail
-
-
-def _hands_tremble(lm, feats: np.ndarray, bpm: float, seed: int) -> float:
-    """RMS (m) above 6 Hz of the hand points a stream dances on ``feats`` at a held tempo, put in
-    place, the first and last 0.5 s left out (one FFT over the whole dance, as the jitter ratio)."""
-    from models.evaluation.evaluate import positions
-    from models.evaluation.metrics import JITTER_BAND, in_place
-    from models.rig.skeleton import POINT_INDEX
-
-    s = ds.DanceStream(lm.model, seed=seed)
-    s._tempo = _HeldTempo(bpm)
-    pos = in_place(positions(s.push(feats)))
-    hands = [POINT_INDEX[n] for n in ("LeftLowerArm", "RightLowerArm", "LeftHand", "RightHand", "LeftHandTip",
-                                      "RightHandTip")]
-    p = pos[:, hands] - pos[:, hands].mean(axis=0)
-    spec = np.fft.rfft(p, axis=0)
-    spec[np.fft.rfftfreq(len(p), 1.0 / FPS) < JITTER_BAND[0]] = 0.0
-    return float(np.sqrt((np.fft.irfft(spec, n=len(p), axis=0)[15:-15] ** 2).sum(-1).mean()))
-
-
-@pytest.mark.parametrize("quick_on", [True, False])
-def test_the_quickest_movements_are_warped_less_so_a_fast_tempo_does_not_make_the_hands_tremble(
-        clip_stretched, quick_on, monkeypatch):
-    """WARP_QUICK_FLOOR 0.3 (member_tables.py, an option: shipped 1): at 150 bpm the tempo's tilt draws the memory's
-    quickest codes, and the beat warp's swing of their read-out speed carried their 3-6 Hz motion
-    above 6 Hz. With the warp's depth scaled down on them the hands' RMS above 6 Hz is 0.69
-    of what it is with the warp at full depth on every code (the same codes drawn; seeds 0
-    and 1, the bundled clip at 1.25x); switched off (floor 1) the two are the same dance."""
-    from models.networks import member_tables as mt
-
-    lm, feats = clip_stretched
-    shipped = 0.3 if quick_on else 1.0  # the option (shipped off, 1.0); off: the behaviour switched off
-    full, ours = [], []
-    for seed in (0, 1):
-        monkeypatch.setattr(mt, "WARP_QUICK_FLOOR", 1.0)
-        full.append(_hands_tremble(lm, feats[1.25], 150.0, seed))
-        monkeypatch.setattr(mt, "WARP_QUICK_FLOOR", shipped)
-        ours.append(_hands_tremble(lm, feats[1.25], 150.0, seed))
-    ratio = sum(ours) / sum(full)
-    if quick_on:
-        assert ratio < 0.85, (ours, full)
-    else:
-        assert ratio == pytest.approx(1.0), (ours, full)
 
 
 def test_joint_speed_is_member_speed():

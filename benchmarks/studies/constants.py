@@ -4,10 +4,10 @@ Each ``MODULE.NAME=VALUE`` before ``--`` sets that module-level constant (VALUE 
 literal) before the script after ``--`` runs in this process (``runpy``); the script's own arguments
 follow it. The figures then are the variant's; the same command without the assignments is the
 default's. Single-process scripts only (a worker process would start with the shipped constants).
-Example (issue 43: the tempo tilt's size hold off, the listening benchmark's stretch set and ramp)::
+Example (the tempo's tilt reading liveliness only, the listening benchmark's stretch set and ramp)::
 
-    PYTHONPATH=. .venv/bin/python benchmarks/studies/constants.py models.networks.size_hold.SIZE_HOLD=0 -- \\
-        benchmarks/listening.py --checkpoint models/assets/default.pt --sets stretch,ramp --out /tmp/hold0 --quiet
+    PYTHONPATH=. .venv/bin/python benchmarks/studies/constants.py models.networks.dance_stream.TEMPO_FREQ=0 -- \\
+        benchmarks/listening.py --checkpoint models/assets/default.pt --sets stretch,ramp --out /tmp/freq0 --quiet
 """
 
 from __future__ import annotations

@@ -6,11 +6,9 @@ The validation dances, the shipped checkpoint's live stream (seeds ``--seeds``) 
 every song left out, the FFT over the whole song). For every seed and stage the variants run one
 after the other in the same process (same load), each a set of constants (``--part NAME=SETS``,
 SETS ``part.CONST=VALUE`` joined by ``,``; part ``stream`` (models/networks/dance_stream.py),
-``stage``, ``feet`` or ``tables`` (member_tables.py, e.g. ``tables.WARP_QUICK_FLOOR=1``: the beat warp at full
-depth on every code, as before issue 39's fix); ``nofeet`` as a SET: the feet step off). Default parts:
+``stage``, ``feet`` or ``tables`` (member_tables.py); ``nofeet`` as a SET: the feet step off). Default parts:
 
 - ``shipped``: as shipped;
-- ``quick``: the beat warp at full depth on the quickest codes too (``tables.WARP_QUICK_FLOOR=1``);
 - ``warp``: the beat warp off (``BEAT_WARP=0``);
 - ``tempo``: every movement at its own pace and chosen regardless of the tempo (``FOLLOW_TEMPO=0``);
 - ``tilt``: the tempo's tilt of the choice off, the rate still following (``TEMPO_ENERGY=0``);
@@ -51,7 +49,7 @@ if str(Path(__file__).resolve().parent) not in sys.path:
 
 import numpy as np  # noqa: E402
 
-DEFAULT_PARTS = ("shipped=", "quick=tables.WARP_QUICK_FLOOR=1", "warp=stream.BEAT_WARP=0", "tempo=stream.FOLLOW_TEMPO=0", "tilt=stream.TEMPO_ENERGY=0",
+DEFAULT_PARTS = ("shipped=", "warp=stream.BEAT_WARP=0", "tempo=stream.FOLLOW_TEMPO=0", "tilt=stream.TEMPO_ENERGY=0",
                  "match=stream.SPEED_MATCH=0", "carry=stream.VEL_CAP=0", "feet=nofeet")
 
 

@@ -45,7 +45,6 @@ from models.networks.dance_jit import (joint_speed, match_exemplar, push_history
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 from models.networks.dance_vq import DanceVQ
 from models.networks import feet as feet_part
-from models.networks import member_tables as member_tables_part
 from models.networks.feet import FeetLock
 from models.networks.stage import SpotStage, Stage, cached_travel
 from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate
@@ -53,7 +52,6 @@ from models.networks import lead as lead_part
 from models.networks.lead import PhaseForecast
 from models.networks.library_folders import folder_choice
 from models.networks.library_player import NEAREST, STYLE_BASE, bend_deg, member_choice, resolve_style
-from models.networks import size_hold as size_hold_part
 from models.networks.member_tables import (CHUNK_FRAMES, MemberTables, code_energy, code_frequency, member_dips,  # noqa: F401
                                           member_positions, member_speed, member_tables)
 from models.networks.streaming import FEATURE_LIMIT
@@ -83,7 +81,6 @@ BEAT_WEIGHT: float = 1.0
 #: :data:`WARP_CLARITY` (at most 1), so the motion slows into every expected beat and
 #: catches up between them: speed dips (kinematic beats) move onto the music's beats, as
 #: Dancing to Music warps its dance units to the beat. 0 plays every movement at its own pace.
-#: ``member_tables.WARP_QUICK_FLOOR`` below 1 warps the memory's quickest codes less (an option, shipped off).
 BEAT_WARP: float = 0.45
 #: Frames after the tracker's beat that the warp slows into and the motion matching places a
 #: movement's speed dip on. The whole chain (the tracker's phase, the warp, the movements'
@@ -176,13 +173,6 @@ ENERGY_GAIN: float = 3.0
 #: strength energy 0 moved as much as energy 1 on DANCE_R_5, and energy 2 less than 1 on
 #: DANCE_C_2). 0: the choice ignores the tempo.
 TEMPO_ENERGY: float = 4.0
-#: The tempo's tilt reads each code's z (:data:`TEMPO_ENERGY`'s liveliness plus quickness) clipped to
-#: +-TILT_Z_CAP. Unclipped, a fast song draws mostly the memory's top tail (DANCE_C_2 at 126 bpm:
-#: drawn z +2.85; 13 % of the codes have z > 2), quick movements the beat warp made tremble: most of
-#: the hands' jitter between the songs' ends (1.5-1.9x the dancers'). 1.5 took the
-#: interior jitter in place from 1.38-1.61 to 1.03-1.17 but FD from 3.69 to 9.45, so not shipped
-#: (docs/history.md, "The hands' tremble"). inf: the z as it is.
-TILT_Z_CAP: float = float("inf")
 #: Tempo and frequency: the tempo's logit tilt (:data:`TEMPO_ENERGY`) reads each code's liveliness
 #: plus this times its movements' frequency (:func:`code_frequency`'s z-score: mean joint
 #: acceleration over mean joint speed, the root's travel taken out). At a faster tempo the
@@ -424,7 +414,7 @@ def _cached_tables(model: DanceVQ, members: np.ndarray) -> MemberTables:
     0.4-0.6 s a table, paid by every new stream otherwise). Recomputed when ``member_poses`` or
     ``member_count`` changes (another tensor, or the same one written in place) or a feet constant does."""
     key = (_members_key(model), model.config.seg, feet_part.CONTACT_HEIGHT, feet_part.CONTACT_SPEED,
-           feet_part.FLOOR_PERCENTILE, member_tables_part.TILT_LOWPASS_HZ)
+           feet_part.FLOOR_PERCENTILE)
     cached = getattr(model, "_tables_cache", None)
     if cached is None or cached[0] != key:
         model._tables_cache = None  # the old tables go before the new ones are built
@@ -552,8 +542,6 @@ class DanceStream:
         # what the tempo's tilt reads (TEMPO_ENERGY, TEMPO_FREQ): liveliness and quickness
         self._tempo_z = (self._code_energy + np.float32(TEMPO_FREQ) * _cached_frequency(model, self._members)
                          if TEMPO_FREQ != 0.0 else self._code_energy)
-        self._size_z = _cached_tables(model, self._members).size  # (K,) what the tilt holds (size_hold)
-        self._warp_scale = member_tables_part.warp_scale(self._tempo_z)  # (K + 1,) the beat warp's depth by code
         # a library (library_player): codes drawn a step, the bend that draws the next, the tempo's tilt by exemplar
         self._draws, self._guard, self._member_tilt = member_choice(model, speed, real, DRAWS)
         where = np.argwhere(real)  # (n, 2) every exemplar's (code, slot); its first pose's quaternions (n, 4 J)
@@ -813,10 +801,7 @@ class DanceStream:
                 logits = logits + bias
             tilt = self._tempo_tilt()
             if tilt != 0.0:  # livelier codes at a faster tempo, calmer at a slower one (TEMPO_ENERGY)
-                z = self._tempo_z if TILT_Z_CAP == math.inf else np.clip(self._tempo_z, -TILT_Z_CAP, TILT_Z_CAP)
-                # quicker, not bigger: the untilted choice's mean size kept (size_hold.SIZE_HOLD, shipped off)
-                logits = size_hold_part.hold_size(logits, logits + np.float32(tilt) * z, self._size_z,
-                                                  size_hold_part.share(tilt))
+                logits = logits + np.float32(tilt) * self._tempo_z
             if REPEAT_PENALTY > 0.0 and len(self.codes_drawn) >= REPEAT_FREE:
                 logits = self._repeat_penalty(logits)
             self._tokens.append(token)
@@ -1041,7 +1026,7 @@ class DanceStream:
             self._at = x
             return warp_pose(self._played, x)
         ccos, csin, clarity, logp = (float(self._raw[c]) for c in self._beat_cols)
-        depth = BEAT_WARP * float(self._warp_scale[self._last]) * min(1.0, max(clarity, 0.0) / WARP_CLARITY)
+        depth = BEAT_WARP * min(1.0, max(clarity, 0.0) / WARP_CLARITY)
         theta, _ = self._danced_phase(ccos, csin, logp)  # 0 BEAT_DELAY frames after a danced beat
         cos = math.cos(theta) if clarity > 1e-9 else 0.0
         rate = self._advance(j + 1) - self._advance(j)  # exemplar frames this frame plays

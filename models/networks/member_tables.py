@@ -9,8 +9,7 @@ Each was its own FK of the whole memory (float64, ~200 MB of points and rotation
 :func:`member_tables` runs the FK once, :data:`CHUNK_FRAMES` exemplar frames at a time, and keeps
 only each chunk's small per-exemplar results; every table is bit for bit what the function of
 its own computes (FK, gradients and filters work per window; the z-scores and the floor are
-taken over the whole memory at the end). :func:`warp_scale` turns the tempo z the tables give
-into the beat warp's depth per code (issue 39: the quickest movements warped less).
+taken over the whole memory at the end).
 """
 
 from __future__ import annotations
@@ -26,23 +25,6 @@ from models.timebase import FPS
 #: Exemplar frames (K x M x F rows) put through forward kinematics at once by :func:`member_tables`:
 #: ~6 MB of float64 points a chunk, ~15 MB transient with the rotations.
 CHUNK_FRAMES: int = 8192
-#: The tempo's tilt reads each code's liveliness (:func:`code_energy`) and quickness
-#: (:func:`code_frequency`) on its exemplars' points low-passed (zero-phase: 4th-order Butterworth
-#: forwards and back along the frames) at this many Hz first: the dance band's speed and
-#: quickness, not the tremble above it. 0: on the points as they are.
-TILT_LOWPASS_HZ: float = 0.0
-#: The beat warp (``dance_stream.BEAT_WARP``) swings a movement's read-out speed by up to +-45 %
-#: at the beat's frequency; on the memory's quickest movements that frequency modulation carries
-#: their 3-6 Hz motion above 6 Hz, where it reads as tremble (docs/stage.md, "Between the ends").
-#: So the warp's depth is scaled by :func:`warp_scale` of the playing code's tempo z
-#: (``DanceStream._tempo_z``: liveliness plus quickness): 1 up to :data:`WARP_QUICK_Z`, falling
-#: linearly over :data:`WARP_QUICK_SPAN` to this. 1 (shipped): the same depth for every code.
-#: 0.3 lowers the hands' tremble between a song's ends by a fifth but costs the beat hit rate
-#: (validation 0.566 -> 0.532, sweetwaltz 0.93 -> 0.80) and on the 3x2 stage leaves the raw
-#: jitter no lower (the songs' wrap decides it): an option, not the default (docs/stage.md).
-WARP_QUICK_FLOOR: float = 1.0
-WARP_QUICK_Z: float = 1.0
-WARP_QUICK_SPAN: float = 2.0
 
 
 def member_positions(windows: np.ndarray) -> np.ndarray:
@@ -103,34 +85,15 @@ def code_energy(members: np.ndarray, counts: np.ndarray, seg: int, speed: np.nda
     exemplars, of the log mean joint speed (:func:`member_speed`) of its exemplars' movements
     (their first seg frames). ``members`` (K, M, >= seg, P), ``counts`` (K,) exemplars per
     code; ``speed`` (K, M): those mean speeds, if already computed. A code without exemplars
-    gets 0 (the mean). Read on points low-passed at :data:`TILT_LOWPASS_HZ` (shipped 0: as they are)."""
+    gets 0 (the mean)."""
     k, m = members.shape[:2]
     has = counts > 0
     if has.sum() < 2:
         return np.zeros(k, np.float32)
     if speed is None:
-        pos = member_positions(members if TILT_LOWPASS_HZ > 0.0 else members[:, :, :seg])  # the filter wants the window
-        speed = _speed(_lowpass(pos, TILT_LOWPASS_HZ)[:, :, :seg]).mean(-1)  # (K, M)
+        speed = _speed(member_positions(members[:, :, :seg])).mean(-1)  # (K, M)
     mask = np.arange(m)[None, :] < counts[:, None]
     return _code_z(np.log(np.maximum((speed * mask).sum(1)[has] / counts[has], 1e-9)), has)
-
-
-def _lowpass(pos: np.ndarray, hz: float) -> np.ndarray:
-    """FK points ``pos`` (K, M, F, J + E, 3) at 30 fps, zero-phase low-passed along F at ``hz``
-    (4th-order Butterworth forwards and back, odd extension at the ends); 0: as they are."""
-    if hz <= 0.0:
-        return pos
-    from scipy.signal import butter, filtfilt
-
-    b, a = butter(4, hz / (FPS / 2.0))
-    return filtfilt(b, a, pos, axis=2, padtype="odd", padlen=min(pos.shape[2] - 1, 15))
-
-
-def warp_scale(tempo_z: np.ndarray) -> np.ndarray:
-    """(K + 1,) float32 factor on the beat warp's depth for codes of tempo z ``tempo_z`` (K,)
-    (:data:`WARP_QUICK_FLOOR`), then 1 for index K ("no code yet")."""
-    w = np.clip((np.asarray(tempo_z, np.float64) - WARP_QUICK_Z) / max(WARP_QUICK_SPAN, 1e-9), 0.0, 1.0)
-    return np.append(1.0 - w * (1.0 - WARP_QUICK_FLOOR), 1.0).astype(np.float32)
 
 
 def _log_speed_accel(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -148,13 +111,6 @@ def _log_frequency(positions: np.ndarray) -> np.ndarray:
     return la - lv
 
 
-def _log_size(positions: np.ndarray) -> np.ndarray:
-    """(K, M) ln(mean joint speed ** 2 / mean joint acceleration) of FK points (K, M, F, J + E, 3),
-    root-relative: for a sinusoid of amplitude A, 2 A / pi (m), whatever its frequency."""
-    lv, la = _log_speed_accel(positions)
-    return 2.0 * lv - la
-
-
 def _frequency_z(lf: np.ndarray, counts: np.ndarray) -> np.ndarray:
     has = counts > 0
     if has.sum() < 2:
@@ -167,21 +123,10 @@ def code_frequency(members: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """How quick each code's movements are: z-scores (K,) float32, over the codes with
     exemplars, of the mean over its exemplars of ln(mean joint acceleration / mean joint speed)
     (for a sinusoid 2 pi f a frame) over their whole windows, positions relative to the root
-    (the dance, not its travel), low-passed at :data:`TILT_LOWPASS_HZ` (shipped 0: as they are).
-    ``members`` (K, M, F, P), ``counts`` (K,). A code without exemplars gets 0."""
+    (the dance, not its travel). ``members`` (K, M, F, P), ``counts`` (K,). A code without exemplars gets 0."""
     if (counts > 0).sum() < 2:
         return np.zeros(members.shape[0], np.float32)
-    return _frequency_z(_log_frequency(_lowpass(member_positions(members), TILT_LOWPASS_HZ)), counts)
-
-
-def code_size(members: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """How large each code's movements are, whatever their pace: z-scores (K,) float32, over the
-    codes with exemplars, of the mean over its exemplars of ln(mean joint speed ** 2 / mean joint
-    acceleration) (:func:`_log_size`; root-relative, whole windows, low-passed at
-    :data:`TILT_LOWPASS_HZ`). ``members`` (K, M, F, P), ``counts`` (K,). A code without exemplars gets 0."""
-    if (counts > 0).sum() < 2:
-        return np.zeros(members.shape[0], np.float32)
-    return _frequency_z(_log_size(_lowpass(member_positions(members), TILT_LOWPASS_HZ)), counts)
+    return _frequency_z(_log_frequency(member_positions(members)), counts)
 
 
 @dataclasses.dataclass
@@ -189,8 +134,7 @@ class MemberTables:
     """A memory's start-up tables (K codes, M members, F = 2 seg frames):
     ``dips`` (K, M, seg) float32 (:func:`member_dips` of the first seg + 2 frames);
     ``speed`` (K, M) float64, mean joint speed over the movement (first seg frames), m/frame;
-    ``energy``, ``frequency``, ``size`` (K,) float32 z-scores (:func:`code_energy`, :func:`code_frequency`,
-    :func:`code_size`);
+    ``energy``, ``frequency`` (K,) float32 z-scores (:func:`code_energy`, :func:`code_frequency`);
     ``contacts`` (K, M, F, 3) float32 and ``floor`` m (:func:`models.networks.feet.member_contacts`)."""
 
     dips: np.ndarray
@@ -199,33 +143,28 @@ class MemberTables:
     frequency: np.ndarray
     contacts: np.ndarray
     floor: float
-    size: np.ndarray
 
 
 def member_tables(members: np.ndarray, counts: np.ndarray, seg: int,
                   chunk_frames: int = CHUNK_FRAMES) -> MemberTables:
     """Every table of exemplar windows ``members`` (K, M, F >= seg + 2, P), ``counts`` (K,) real
     ones, from one FK pass over chunks of codes (:data:`CHUNK_FRAMES` frames each): the same
-    values as :func:`member_dips`, :func:`code_energy`, :func:`code_frequency`, :func:`code_size` and
+    values as :func:`member_dips`, :func:`code_energy`, :func:`code_frequency` and
     :func:`models.networks.feet.member_contacts` each give, at a fraction of their peak memory."""
     k, m, f = members.shape[:3]
     counts = np.asarray(counts)
     step = max(1, chunk_frames // max(1, m * f))
-    dips, speed, band, lf, ls, low, mid = [], [], [], [], [], [], []
+    dips, speed, lf, low, mid = [], [], [], [], []
     for a in range(0, k, step):
         pos = member_positions(members[a: a + step])  # (c, M, F, J + E, 3) float64
         dips.append(_dips(_speed(pos[:, :, : seg + 2]), seg))
         speed.append(_speed(pos[:, :, :seg]).mean(-1))
-        low_pos = _lowpass(pos, TILT_LOWPASS_HZ)  # what the tempo's tilt reads: the dance band
-        band.append(speed[-1] if low_pos is pos else _speed(low_pos[:, :, :seg]).mean(-1))
-        lv, la = _log_speed_accel(low_pos)
-        lf.append(la - lv)
-        ls.append(2.0 * lv - la)
+        lf.append(_log_frequency(pos))
         lo, mi = feet_part.member_feet(pos)
         low.append(lo)
         mid.append(mi)
         del pos
     speed_all = np.concatenate(speed)
     contacts, floor = feet_part.feet_contacts(np.concatenate(low), np.concatenate(mid), counts)
-    return MemberTables(np.concatenate(dips), speed_all, code_energy(members, counts, seg, np.concatenate(band)),
-                        _frequency_z(np.concatenate(lf), counts), contacts, floor, _frequency_z(np.concatenate(ls), counts))
+    return MemberTables(np.concatenate(dips), speed_all, code_energy(members, counts, seg, speed_all),
+                        _frequency_z(np.concatenate(lf), counts), contacts, floor)
