@@ -250,6 +250,64 @@ def test_stage_facing_and_home_are_engine_and_osc_controls():
             other.control(action, value)
 
 
+
+def test_home_over_a_real_websocket_and_osc_udp_walks_the_performer_back_to_the_centre():
+    """``{"type": "control", "action": "home"}`` on a real WebSocket and ``/performer/home`` in a
+    real UDP datagram each reach the stream through the engine's control (``control_ok``), and the
+    performer then walks back from where it travelled to within 3 cm of the centre. Taking
+    ``home`` out of the controls fails this."""
+    import json
+    import socket
+    import time
+
+    from pythonosc.osc_message_builder import OscMessageBuilder
+    from test_engine import extractor, noise
+    from websockets.sync.client import connect
+
+    from models.timebase import SAMPLE_RATE
+    from realtime.audio_input import FileSource
+    from realtime.engine import Engine, EngineConfig
+    from realtime.osc_control import OscControl
+    from realtime.ws_server import WebSocketSink
+
+    def walked_away() -> DanceStream:
+        s = DanceStream(walking_model(speed=0.02), seed=0, stage="6x5")
+        s.push(music(300))
+        assert math.hypot(s.stage.x, s.stage.z) > 0.5 and not s.stage.homing
+        return s
+
+    def arrives(s: DanceStream) -> None:
+        deadline = time.monotonic() + 5.0
+        while not s.stage.homing:
+            assert time.monotonic() < deadline, "home never reached the stream"
+            time.sleep(0.01)
+        s.set_idle(True)  # stand still: only the walk home moves it
+        s.push(music(10 * FPS))  # at most 3.9 m at 0.6 m/s, then slowing in
+        assert math.hypot(s.stage.x, s.stage.z) < 0.03 and not s.stage.homing
+
+    s = walked_away()
+    eng = Engine(FileSource(noise(0.1), SAMPLE_RATE, realtime=False), extractor, s, [], EngineConfig(warmup_s=0))
+    server = WebSocketSink("127.0.0.1", 0, token="s3cret", control=eng.control)
+    try:
+        with connect(server.ws_url + "?token=s3cret", open_timeout=5) as ws:
+            assert json.loads(ws.recv(timeout=5))["control"]
+            ws.send(json.dumps({"type": "control", "action": "home"}))
+            reply = json.loads(ws.recv(timeout=5))
+            while reply.get("type") not in ("control_ok", "error"):  # skip a state or stats message
+                reply = json.loads(ws.recv(timeout=5))
+            assert (reply["type"], reply["action"]) == ("control_ok", "home"), reply
+    finally:
+        server.close()
+    arrives(s)
+
+    s = walked_away()
+    eng = Engine(FileSource(noise(0.1), SAMPLE_RATE, realtime=False), extractor, s, [], EngineConfig(warmup_s=0))
+    with OscControl(port=0, control=eng.control) as osc, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
+        osc.start()
+        udp.sendto(OscMessageBuilder("/performer/home").build().dgram, ("127.0.0.1", osc.port))
+        arrives(s)
+        assert osc.stats()["applied"] == 1
+
 def test_stage_0_set_live_walks_back_to_the_centre_and_a_stage_again_starts_there():
     """Switching the stage off live does not jump the performer to the centre: it walks back
     and turns to face +Z, then dances in place (the pose untouched); a stage set again starts

@@ -146,7 +146,7 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
     from models.networks import dance_stream
     from models.rig.skeleton import POINT_INDEX
 
-    from jitter_wrap import FEET, HANDS, summary, validation_clips
+    from jitter_wrap import FEET, HANDS, style_judge, summary, validation_clips
 
     from scipy.ndimage import gaussian_filter1d
 
@@ -183,16 +183,9 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
 
     lm, clips = validation_clips(data_root, checkpoint, cache)
     if fd:  # performer evaluate's FD and beat hit (in place), its style classifier
-        from models.evaluation.classifier import embed
-        from models.evaluation.evaluate import (EvalOptions, classifier_windows, load_clips, real_set, set_metrics,
-                                                split_dances, style_classifier)
+        from models.evaluation.evaluate import set_metrics
 
-        opts = EvalOptions(cache_dir=cache, progress=False)
-        val = real_set(data_root, clips, progress=False)
-        train = real_set(data_root, load_clips(data_root, split_dances(data_root, opts)[0], lm.features, opts),
-                         False, False)
-        classifier = style_classifier(train, opts.classifier_epochs, opts.seed, cache)
-        real_emb = embed(classifier, classifier_windows(val.positions))
+        val, classifier, real_emb = style_judge(data_root, lm, clips, cache)
     cut = int(round(ends_s * 30))
     real = {c.name: in_place(positions(c.poses)) for c in clips}
     rs = summary(real, cut)

@@ -124,6 +124,21 @@ def validation_clips(data_root: str, checkpoint: str, cache: str) -> tuple:
     return lm, load_clips(data_root, validation_names(data_root, None, opts), lm.features, opts)
 
 
+def style_judge(data_root: str, lm, clips: list, cache: str) -> tuple:
+    """``performer evaluate``'s judge for :func:`models.evaluation.evaluate.set_metrics`: (the
+    validation dances' real set, its style classifier, the real dances' classifier embeddings)."""
+    from models.evaluation.classifier import embed
+    from models.evaluation.evaluate import (EvalOptions, classifier_windows, load_clips, real_set, split_dances,
+                                            style_classifier)
+
+    opts = EvalOptions(cache_dir=cache, progress=False)
+    val = real_set(data_root, clips, progress=False)
+    train = real_set(data_root, load_clips(data_root, split_dances(data_root, opts)[0], lm.features, opts),
+                     False, False)
+    classifier = style_classifier(train, opts.classifier_epochs, opts.seed, cache)
+    return val, classifier, embed(classifier, classifier_windows(val.positions))
+
+
 def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], ends_s: float, feet: bool,
         worst: int, cache: str, travelling: bool = False) -> None:
     """Print the table (see the module docstring)."""
