@@ -10,7 +10,7 @@ length of the current break. Which frames sound like music is the detector's cal
   shipped one): its detector while idle, its stop network while dancing (a voice over the
   music kept as music by its voice network or by the music heard in the voice's pauses, the
   voice-over rule; an idle performer started by the voice network and the floor held 1.5 s,
-  the voice-over start; a stop held ``music_gate.VOICE_HOLD`` frames where a voice was heard over
+  the voice-over start; a stop held ``voice_context.VOICE_HOLD`` frames where a voice was heard over
   the dance before, the voice-over context: :meth:`MusicGate.voice_holds`);
 * an older one: the log frame energy above the model's silence threshold, and a logistic music
   detector on a 0.5-s running mean of the spectral shape (MFCC 1-12) and the beat tracker's
@@ -222,7 +222,7 @@ class IdleGate:
         present = self._detector(row)
         self.present = present
         if self.music and not present and not self.break_frames and self.presence is not None:
-            held = held or self.presence.voice_holds()  # a voice heard over this dance before: music_gate.VOICE_HOLD
+            held = held or self.presence.voice_holds()  # a voice heard over this dance before: voice_context.VOICE_HOLD
         count = 1.0  # a sure detector counts a frame as more than one (music_gate.SURE_COUNT)
         if self.music and not present and self.presence is not None:
             count = self.presence.stop_count()
