@@ -292,6 +292,34 @@ def test_a_song_that_starts_under_a_voice_is_danced_through_its_start_thanks_to_
     assert (off.listen(feats)[90:] > 0).mean() > 0.03
 
 
+@needs_shared
+def test_a_song_under_a_voice_from_its_first_note_is_guarded_until_the_voice_over_context_may_hold(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 43: fatswaller (stride piano) with the shared readers over its first 40 s at 0 dB. The
+    stop network hears the voice over the piano as music for 9 s, then doubts; the voice-over context
+    may hold a stop only after 10 s of dance (``voice_context.CONTEXT_FRAMES``). The song's start guards
+    the dance until then (``idle_gate.SONG_DANCE``): idle at most 2 % of the frames after the first 3 s
+    (0.0 %) against over 5 % with the guard's 5 s of before (10.7 %: stopped 9.2 s into its dance)."""
+    from models.features.spectral import extract_features
+    from models.generate import load_model
+    from models.networks import idle_gate
+    from models.networks.voice_context import CONTEXT_FRAMES
+    from script_loader import load_script
+
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    lm = load_model(None)
+    if not lm.model.presence_voice.abs().sum() > 0:
+        pytest.skip(f"{lm.path} has no voice network: the song's start has no guard")
+    song = _recording("fatswaller_aintmisbehavin_piano.ogg", 40.0)
+    feats = extract_features(ig.with_speech(song, _speech(), 0.0, len(song) // 735), lm.features)
+    assert idle_gate.SONG_DANCE == CONTEXT_FRAMES
+    on = (DanceStream(lm.model, seed=7).listen(feats)[90:] > 0).mean()
+    monkeypatch.setattr(idle_gate, "SONG_DANCE", 150)  # the guard's 5 s of before
+    off = (DanceStream(lm.model, seed=7).listen(feats)[90:] > 0).mean()
+    assert on <= 0.02
+    assert off > 0.05
+
+
 def test_a_false_start_on_noise_at_a_streams_start_is_not_lengthened_by_the_songs_start() -> None:
     """The song's start protects a dance only while the voice network still hears some music
     (``MusicGate.voice_hears``): pink noise at -30 dBFS from a stream's start, on which the cold
