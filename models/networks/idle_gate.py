@@ -101,8 +101,8 @@ BREAK_HOLD: int = 58
 #: stream's start) dances at least SONG_DANCE frames unless a break stops it. The idle: a host's
 #: false restarts come within 5 s of the stop (docs/history.md, issue 43). The dance: until the
 #: voice-over context may hold a stop (voice_context.CONTEXT_FRAMES, 10 s), not tuned (at 5 s a song
-#: under a voice from its start was left unguarded for 5 s; 8 and 9 s move no figure, 12.5 and 15 s
-#: read as 10: docs/presence.md, idle_gate.py --song-dance).
+#: under a voice from its start was left unguarded for 5 s; 9 s reads as 5 on every part, 12.5 s as
+#: 10: docs/presence.md, idle_gate.py --song-dance 270 / 375).
 SONG_IDLE: int = 150
 SONG_DANCE: int = CONTEXT_FRAMES
 #: The quiet return (module docstring): a break that ends on a frame still this many dB or more
