@@ -292,6 +292,34 @@ def test_a_song_that_starts_under_a_voice_is_danced_through_its_start_thanks_to_
     assert (off.listen(feats)[90:] > 0).mean() > 0.03
 
 
+@needs_shared
+def test_a_song_under_a_voice_from_its_first_note_is_guarded_until_the_voice_over_context_may_hold(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 43: fatswaller (stride piano) with the shared readers over its first 40 s at 0 dB. The
+    stop network hears the voice over the piano as music for 9 s, then doubts; the voice-over context
+    may hold a stop only after 10 s of dance (``voice_context.CONTEXT_FRAMES``). The song's start guards
+    the dance until then (``idle_gate.SONG_DANCE``): idle at most 2 % of the frames after the first 3 s
+    (0.0 %) against over 5 % with the guard's 5 s of before (10.7 %: stopped 9.2 s into its dance)."""
+    from models.features.spectral import extract_features
+    from models.generate import load_model
+    from models.networks import idle_gate
+    from models.networks.voice_context import CONTEXT_FRAMES
+    from script_loader import load_script
+
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    lm = load_model(None)
+    if not lm.model.presence_voice.abs().sum() > 0:
+        pytest.skip(f"{lm.path} has no voice network: the song's start has no guard")
+    song = _recording("fatswaller_aintmisbehavin_piano.ogg", 40.0)
+    feats = extract_features(ig.with_speech(song, _speech(), 0.0, len(song) // 735), lm.features)
+    assert idle_gate.SONG_DANCE == CONTEXT_FRAMES
+    on = (DanceStream(lm.model, seed=7).listen(feats)[90:] > 0).mean()
+    monkeypatch.setattr(idle_gate, "SONG_DANCE", 150)  # the guard's 5 s of before
+    off = (DanceStream(lm.model, seed=7).listen(feats)[90:] > 0).mean()
+    assert on <= 0.02
+    assert off > 0.05
+
+
 def test_a_false_start_on_noise_at_a_streams_start_is_not_lengthened_by_the_songs_start() -> None:
     """The song's start protects a dance only while the voice network still hears some music
     (``MusicGate.voice_hears``): pink noise at -30 dBFS from a stream's start, on which the cold
@@ -330,8 +358,8 @@ def test_a_performer_a_voice_stopped_over_the_music_resumes_sooner_thanks_to_the
 def test_a_voice_over_the_music_as_loud_as_it_is_danced_through_thanks_to_the_voice_over_context() -> None:
     """Issue 43's worst at 0 dB: brahms (strings) with the shared readers over it as loud as the music.
     Twice the gate heard no music under the voice for 0.8 s (a dip that broke the floor, the strings'
-    own rest) and stopped; a voice heard over this dance before (``music_gate.CONTEXT_MIN`` frames the
-    rules kept, 10 s to 2.5 s ago) holds the stop for ``music_gate.VOICE_HOLD`` frames: idle at most
+    own rest) and stopped; a voice heard over this dance before (``voice_context.CONTEXT_MIN`` frames the
+    rules kept, 10 s to 2.5 s ago) holds the stop for ``voice_context.VOICE_HOLD`` frames: idle at most
     2 % of the frames after the first 3 s to the end of its music (39.3 s) against more than 4 %
     with the voice-over context off (``music_gate.MusicGate.context_rule``)."""
     on, off = _idle_with_and_without("brahms_hungarian5_usarmystrings.ogg", 39.3, 0.0, "context_rule")
@@ -345,10 +373,10 @@ def test_a_voice_going_on_alone_after_the_song_it_talked_over_idles_within_two_s
     """Issue 43 (idle_gate.py --parts talkover): 20 s of brahms from a third in with the shared readers over
     it at 0 dB, the readers going on alone 8 s. The voice-over context would hold the stop VOICE_HOLD
     frames (fully idle 2.07 s after the music stops); where the floor is broken (over
-    ``music_gate.GONE_FLOOR_DB``) and the pauses as unsteady as a voice alone (under ``GONE_STEADY``)
+    ``voice_context.GONE_FLOOR_DB``) and the pauses as unsteady as a voice alone (under ``GONE_STEADY``)
     the music is gone and nothing is held: 1.30 s, within the 2 s asked of speech."""
     from models.generate import load_model
-    from models.networks import music_gate
+    from models.networks import voice_context
     from script_loader import load_script
 
     ig = load_script("benchmarks/studies/idle_gate.py")
@@ -360,7 +388,7 @@ def test_a_voice_going_on_alone_after_the_song_it_talked_over_idles_within_two_s
     whole = load_audio(SHARED / "music" / "brahms_hungarian5_usarmystrings.ogg", 22050)[0]
     a = whole[int(len(whole) / 3): int(len(whole) / 3) + 20 * 22050]  # as idle_gate.py --parts talkover
     on = ig.talkover_rows(lm, [("brahms", a)], _speech(), 7)[0]["settle_s"]
-    monkeypatch.setattr(music_gate, "GONE_FLOOR_DB", float("inf"))  # the release off: the hold as before
+    monkeypatch.setattr(voice_context, "GONE_FLOOR_DB", float("inf"))  # the release off: the hold as before
     off = ig.talkover_rows(lm, [("brahms", a)], _speech(), 7)[0]["settle_s"]
     assert on is not None and on <= 2.0
     assert off is None or off > 2.0

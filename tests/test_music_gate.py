@@ -16,6 +16,7 @@ import pytest
 import torch
 
 from models.networks import music_gate as mg
+from models.networks import voice_context as vc
 from models.training import music_gate as tm
 from script_loader import load_script
 
@@ -468,7 +469,7 @@ def test_a_voice_heard_over_the_dance_before_holds_its_stop() -> None:
         g = mg.MusicGate(np.zeros(d), np.ones(d), music, -60.0, clarity_col=60, stop_params=level_network(-15.0),
                          voice_params=music, **rule)
         out = []
-        for k in range(before + voiced + 100 + mg.VOICE_HOLD + 20):
+        for k in range(before + voiced + 100 + vc.VOICE_HOLD + 20):
             r = row.copy()
             c = k - before - voiced - 100  # the voice alone from c = 0
             r[mg.ENERGY_COL] = -10.0 if (k < before or 0 <= k - before - voiced and c < 0) else \
@@ -479,9 +480,9 @@ def test_a_voice_heard_over_the_dance_before_holds_its_stop() -> None:
         return out
 
     got = holds()
-    assert len(got) > mg.VOICE_HOLD and all(got[: mg.VOICE_HOLD - 1]) and not any(got[mg.VOICE_HOLD - 1:])
+    assert len(got) > vc.VOICE_HOLD and all(got[: vc.VOICE_HOLD - 1]) and not any(got[vc.VOICE_HOLD - 1:])
     assert not any(holds(voiced=0))
-    assert not any(holds(before=mg.CONTEXT_FRAMES - 200))
+    assert not any(holds(before=vc.CONTEXT_FRAMES - 200))
     assert not any(holds(context_rule=False)) and not any(holds(voice_rule=False))
 
 
@@ -501,7 +502,7 @@ def test_the_music_gone_releases_the_voice_over_contexts_hold() -> None:
         g = mg.MusicGate(np.zeros(d), np.ones(d), music, -60.0, clarity_col=60, steadiness_col=61,
                          stop_params=level_network(-15.0), voice_params=music)
         out = []
-        for k in range(200 + 30 + 100 + mg.VOICE_HOLD + 20):
+        for k in range(200 + 30 + 100 + vc.VOICE_HOLD + 20):
             r = row.copy()
             c = k - 330  # the voice alone from c = 0
             r[mg.ENERGY_COL] = -10.0 if (k < 200 or 230 <= k and c < 0) else -20.0 - (mg.FLOOR_DB + 7.0) * (c >= 0 and c % 2)
@@ -511,11 +512,11 @@ def test_the_music_gone_releases_the_voice_over_contexts_hold() -> None:
                 out.append(g.voice_holds())
         return out
 
-    assert mg.FLOOR_DB + 7.0 > mg.GONE_FLOOR_DB and mg.GONE_STEADY < 0.2 < mg.PAUSE_STEADY
+    assert mg.FLOOR_DB + 7.0 > vc.GONE_FLOOR_DB and vc.GONE_STEADY < 0.2 < mg.PAUSE_STEADY
     held = holds(0.2)
-    assert len(held) > mg.VOICE_HOLD and all(held[: mg.VOICE_HOLD - 1]) and not any(held[mg.VOICE_HOLD - 1:])
+    assert len(held) > vc.VOICE_HOLD and all(held[: vc.VOICE_HOLD - 1]) and not any(held[vc.VOICE_HOLD - 1:])
     gone = holds(0.0)
-    assert len(gone) > mg.VOICE_HOLD and sum(gone) <= mg.PAUSE_FRAMES // 2
+    assert len(gone) > vc.VOICE_HOLD and sum(gone) <= mg.PAUSE_FRAMES // 2
 
 
 def test_pause_steadiness_is_the_quietest_quarters_mean() -> None:

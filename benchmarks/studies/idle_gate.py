@@ -69,7 +69,7 @@ that cue always holds; ``--floor-db 0``: the voice network's part off), ``--paus
 rule's ``PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off), ``--start-evidence``
 and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) and ``START_DECAY``,
 ``--voice-hold``, ``--gone-floor-db`` and ``--gone-steady`` the voice-over context's hold and its
-release (``music_gate.VOICE_HOLD``, ``GONE_FLOOR_DB``: ``inf``, never released; ``GONE_STEADY``),
+release (``voice_context.VOICE_HOLD``, ``GONE_FLOOR_DB``: ``inf``, never released; ``GONE_STEADY``),
 ``--voice-no`` the veto's threshold (``music_gate.VOICE_NO``), ``--veto-top`` and ``--voice-no-run``
 its reach and threshold while a stop count runs (``VETO_TOP``, ``VOICE_NO_RUN``; ``--veto-top 0
 --voice-no-run 4``: as when none runs),
@@ -81,7 +81,7 @@ voice-over start's count starts from 0 when a voice stops the dance), ``song-sta
 stop a song's start at once: ``idle_gate.SONG_DANCE``), ``quiet-return`` (a break's end voids its count
 even on a frame still ``idle_gate.RETURN_DB`` under the music, heard as no music), ``veto`` (the voice
 network no longer overrules an unsure stop network: ``music_gate.VOICE_NO``), ``context`` (a voice heard
-over the dance before does not hold its stop: ``music_gate.VOICE_HOLD``). ``--trace`` prints the gate's
+over the dance before does not hold its stop: ``voice_context.VOICE_HOLD``). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, through a reader
 after a recording and the next recording's start, or through a gap between songs and the music's
 return (``gap:LABEL``), or through an espeak-ng host after a training song (``espeak:SONG/K``),
@@ -165,7 +165,7 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
     detector's verdict), the stop or start logit (running mean), the voice network's logit, the
     floor (dB range over 1 s), the pauses' steadiness, kept by the voice-over (V) or pause (P) rule,
     the stop count, the break's frames, the log energy (dB), the voice-over context (frames kept 10 s to
-    2.5 s ago: ``music_gate.CONTEXT_MIN`` holds the stop). An empty window: every stop of the
+    2.5 s ago: ``voice_context.CONTEXT_MIN`` holds the stop). An empty window: every stop of the
     dance after 3 s, from 1.5 s before it to its return."""
     from models.networks.music_gate import presence_logit
 
@@ -181,7 +181,7 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
         kept = "V" if pg.voice_frames > kv else "P" if pg.pause_frames > kp else "-"
         music.append(ig.music)
         rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
-                    f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.context:3d}")
+                    f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.voice_context.count:3d}")
     if windows == [(0, 0)]:
         windows = []
         for t in range(91, len(music)):
@@ -510,9 +510,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--start-evidence", type=float,
                    help="the voice-over start's START_EVIDENCE, frames (inf: an idle performer starts on its detector alone)")
     p.add_argument("--start-decay", type=float, help="the voice-over start's START_DECAY (frames a frame without evidence takes off)")
-    p.add_argument("--voice-hold", type=int, help="frames the voice-over context holds a stop (music_gate.VOICE_HOLD)")
-    p.add_argument("--gone-floor-db", type=float, help="the voice-over context's release: music_gate.GONE_FLOOR_DB (inf: never released)")
-    p.add_argument("--gone-steady", type=float, help="the voice-over context's release: music_gate.GONE_STEADY (dimensionless)")
+    p.add_argument("--voice-hold", type=int, help="frames the voice-over context holds a stop (voice_context.VOICE_HOLD)")
+    p.add_argument("--gone-floor-db", type=float, help="the voice-over context's release: voice_context.GONE_FLOOR_DB (inf: never released)")
+    p.add_argument("--gone-steady", type=float, help="the voice-over context's release: voice_context.GONE_STEADY (dimensionless)")
     p.add_argument("--voice-no", type=float, help="the veto's threshold: music_gate.VOICE_NO (the voice network's logit at or below minus it)")
     p.add_argument("--veto-top", type=float, help="the veto's reach while a stop count runs: music_gate.VETO_TOP "
                    "(stop logit; 0 with --voice-no-run 4: as when none runs)")
@@ -523,7 +523,7 @@ def main(argv: list[str] | None = None) -> int:
                    "voice-over start's count starts from 0 at a stop), song-start (the detector may stop a song's start at once), quiet-return (a break's end "
                    "voids its count even on a quiet frame heard as no music), veto (an unsure stop network is not "
                    "overruled by a sure voice network), context (a voice heard over the dance before does not hold its "
-                   "stop for music_gate.VOICE_HOLD frames)")
+                   "stop for voice_context.VOICE_HOLD frames)")
     p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
                    "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "
@@ -547,12 +547,14 @@ def main(argv: list[str] | None = None) -> int:
     from models.networks import music_gate as gate
     from models.training import music_gate as mg
 
+    from models.networks import voice_context
+
     for arg, const in (("floor_db", "FLOOR_DB"), ("voice_margin", "VOICE_MARGIN"), ("pause_steady", "PAUSE_STEADY"),
                        ("start_evidence", "START_EVIDENCE"), ("start_decay", "START_DECAY"), ("voice_hold", "VOICE_HOLD"),
                        ("gone_floor_db", "GONE_FLOOR_DB"), ("gone_steady", "GONE_STEADY"), ("voice_no", "VOICE_NO"), ("veto_top", "VETO_TOP"),
                        ("voice_no_run", "VOICE_NO_RUN")):
-        if getattr(args, arg) is not None:  # a constant of models/networks/music_gate.py set from the command line
-            setattr(gate, const, getattr(args, arg))
+        if getattr(args, arg) is not None:  # a constant of models/networks/music_gate.py (or voice_context.py) set
+            setattr(voice_context if hasattr(voice_context, const) else gate, const, getattr(args, arg))
     if args.song_dance is not None:
         from models.networks import idle_gate
 

@@ -10,7 +10,7 @@ length of the current break. Which frames sound like music is the detector's cal
   shipped one): its detector while idle, its stop network while dancing (a voice over the
   music kept as music by its voice network or by the music heard in the voice's pauses, the
   voice-over rule; an idle performer started by the voice network and the floor held 1.5 s,
-  the voice-over start; a stop held ``music_gate.VOICE_HOLD`` frames where a voice was heard over
+  the voice-over start; a stop held ``voice_context.VOICE_HOLD`` frames where a voice was heard over
   the dance before, the voice-over context: :meth:`MusicGate.voice_holds`);
 * an older one: the log frame energy above the model's silence threshold, and a logistic music
   detector on a 0.5-s running mean of the spectral shape (MFCC 1-12) and the beat tracker's
@@ -39,7 +39,10 @@ detector's stop is void (the count starts again) while the voice network still h
 (its logit above ``-music_gate.MARGIN_STOP``, :meth:`MusicGate.voice_hears`; without one, always):
 a false start on applause, noise or a host alone, where it hears none, stops as before. A break
 still stops it (silence idles within 3 s as ever). A restart sooner after a stop (a host the
-detector took for music a moment) stops as before. ``song_start=False`` switches it off.
+detector took for music a moment) stops as before. The guard lasts as long as the voice-over context
+needs dance before it may hold a stop (``voice_context.CONTEXT_FRAMES``, 10 s): with 5 s a song with a
+voice over it from its first note was protected by neither from 5 to 10 s (fatswaller with the shared
+readers at 0 dB stopped 9.2 s into its dance). ``song_start=False`` switches it off.
 
 **A quiet return is no return** (issue 43: applause around the break threshold after a song). A
 break that ends on a frame still :data:`RETURN_DB` or more under the music's level, which the
@@ -64,6 +67,7 @@ import numpy as np
 from models.networks.dance_jit import gate_ema
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ
 from models.networks.music_gate import ENERGY_COL, FRESH_SILENCE, MARGIN_STOP, START_FRAMES, MusicGate
+from models.networks.voice_context import CONTEXT_FRAMES
 
 #: Frames without music before the performer starts to settle (0.5 s; with the presence
 #: detector a frame it is sure of counts up to twice, ``music_gate.SURE_COUNT``: 0.27 s).
@@ -94,11 +98,13 @@ BREAK_HOLD_SILENT: int = 70
 #: or room; a stop-time break of a second or so danced through).
 BREAK_HOLD: int = 58
 #: A song's start (module docstring): a start after this many idle frames or more (5 s, or the
-#: stream's start) dances at least SONG_DANCE frames (5 s) unless a break stops it. The idle: a
-#: host's false restarts come within 5 s of the stop (docs/history.md, issue 43); the dance: the
-#: same round 5 s, not tuned (docs/presence.md, idle_gate.py --song-dance).
+#: stream's start) dances at least SONG_DANCE frames unless a break stops it. The idle: a host's
+#: false restarts come within 5 s of the stop (docs/history.md, issue 43). The dance: until the
+#: voice-over context may hold a stop (voice_context.CONTEXT_FRAMES, 10 s), not tuned (at 5 s a song
+#: under a voice from its start was left unguarded for 5 s; 9 s reads as 5 on every part, 12.5 s as
+#: 10: docs/presence.md, idle_gate.py --song-dance 270 / 375).
 SONG_IDLE: int = 150
-SONG_DANCE: int = 150
+SONG_DANCE: int = CONTEXT_FRAMES
 #: The quiet return (module docstring): a break that ends on a frame still this many dB or more
 #: under the music's level, heard as no music, voids only what its silent frames counted towards
 #: the stop. Half of BREAK_DB, a round figure, not tuned (docs/presence.md).
@@ -222,7 +228,7 @@ class IdleGate:
         present = self._detector(row)
         self.present = present
         if self.music and not present and not self.break_frames and self.presence is not None:
-            held = held or self.presence.voice_holds()  # a voice heard over this dance before: music_gate.VOICE_HOLD
+            held = held or self.presence.voice_holds()  # a voice heard over this dance before: voice_context.VOICE_HOLD
         count = 1.0  # a sure detector counts a frame as more than one (music_gate.SURE_COUNT)
         if self.music and not present and self.presence is not None:
             count = self.presence.stop_count()

@@ -92,18 +92,9 @@ steadiness column's mean over the quietest quarter of the last :data:`PAUSE_FRAM
 frames (:func:`pause_steadiness`) is above :data:`PAUSE_STEADY`. ``pause_rule=False`` (or
 ``voice_rule=False``) switches it off.
 
-**The voice-over context** (part of the voice-over rule; issue 43, the voices at 0 dB). Under a
-voice as loud as the music the gate hears no music for up to 0.8-1.03 s at a time (the floor broken
-by a dip, the music's own rest), and a stop takes 8-15 such frames. A dance of
-:data:`CONTEXT_FRAMES` sounding frames or more in which a voice has been heard over the music before
-(:data:`CONTEXT_MIN` frames kept by the rules above, from :data:`CONTEXT_FRAMES` to
-:data:`CONTEXT_LAG` sounding frames ago) stops only after :data:`VOICE_HOLD` frames of no music in a
-row (:meth:`MusicGate.voice_holds`). A host after a song has no voice over the music before the last
-2.5 s (what the rules keep of a host's first words lies within it) and stops as before; a false start
-on a host alone dances less than 10 s. **The music gone** releases the hold: a frame whose floor is
-broken by more than :data:`GONE_FLOOR_DB` and whose pauses are as unsteady as a voice alone (pause
-steadiness under :data:`GONE_STEADY`) is not held, so a voice going on alone after the song stops as
-it would without the context (a checkpoint without the steadiness column has no release).
+**The voice-over context** (part of the voice-over rule; issue 43, the voices at 0 dB): a dance in
+which a voice has been heard over the music before holds its stop a while, unless the music is gone
+(:mod:`models.networks.voice_context`, composed here: :meth:`MusicGate.voice_holds`).
 ``context_rule=False`` switches the context off.
 """
 
@@ -113,6 +104,8 @@ import math
 
 import numpy as np
 from numba import njit
+
+from models.networks.voice_context import VoiceContext
 
 #: Statistics the detector reads (see the module docstring).
 N_STATS: int = 12
@@ -185,30 +178,6 @@ START_DECAY: float = 0.25
 #: the readers: 30 frames took trance with 1-s breaks to 2.1 % idle (docs/presence.md).
 FRESH_SILENCE: int = 6
 FRESH_FRAMES: int = 15
-#: The voice-over context (module docstring): a performer dancing CONTEXT_FRAMES sounding frames or more
-#: (10 s) that heard a voice over the music (CONTEXT_MIN frames or more the voice-over or the pause rule
-#: kept, from CONTEXT_FRAMES to CONTEXT_LAG frames ago: 10 s to 2.5 s) stops only after VOICE_HOLD
-#: frames of no music in a row (1.07 s; the longest the readers' stretches last, 0.8-1.03 s:
-#: idle_gate.py --parts stretches). The lag outlasts what the rules keep of a host's first words after a
-#: song (1-1.4 s): an espeak-ng host after a training song (idle_gate.py --parts espeak) had no kept frame
-#: in the window at its stop, a voice over one 4 or more (the readers too: brahms' 4); CONTEXT_MIN 3 lies
-#: between. The 10 s of dance keep a detector's false start on a host alone (from a stream's start,
-#: --parts leadin; a restart within 5 s of a stop) from holding its stops: without it an espeak host from
-#: a stream's start was not fully idle 73 % of 30 s instead of 47 %, the host after DANCE_W_21 held 0.37
-#: instead of 0.57. The window's ends are round figures, not tuned; VOICE_HOLD 16-28 lost brahms or vibeace at
-#: 0 dB (3.0-3.7 % idle: idle_gate.py --parts mixes --voice-hold N; docs/history.md).
-CONTEXT_FRAMES: int = 300
-CONTEXT_LAG: int = 75
-CONTEXT_MIN: int = 3
-VOICE_HOLD: int = 32
-#: The music gone (module docstring): a held frame is released where the floor (dB range over 1 s) is
-#: above GONE_FLOOR_DB and the pause steadiness under GONE_STEADY (a voice alone; the readers' own
-#: steadiness medians 0.02 and 0.06, music's 0.30-0.60: docs/presence.md). Set on the readers over the
-#: shared recordings and going on after them (idle_gate.py --parts mixes,talkover --gone-floor-db ...):
-#: at brahms', pistachio's and vibeace's held (due) stops the music under a voice kept a floor of 12-23 dB or a
-#: steadiness of 0.10 or more; a floor of 21 dB reads the same, a steadiness of 0.1 too but for one talkover.
-GONE_FLOOR_DB: float = 24.0
-GONE_STEADY: float = 0.08
 #: Feature columns read: MFCC 1-2, log energy, MFCC 1-12 differences, energy difference, onset
 #: (and the beat columns: the model's ``clarity_col`` and its neighbours).
 MFCC_COLS: tuple[int, ...] = (1, 2)
@@ -411,7 +380,7 @@ class MusicGate:
         self.fresh_rule = bool(fresh_rule)
         self.veto_rule = bool(veto_rule)
         self.context_rule = bool(context_rule)
-        self._kept = bytearray(CONTEXT_FRAMES)  # the voice-over context: a rule kept the sounding frame (1)
+        self.voice_context = VoiceContext(release=self._scol >= 0)  # a voice heard over this dance before
         self._pause_e = np.zeros(PAUSE_FRAMES)  # the last sounding frames' log energy (dB) and steadiness
         self._pause_s = np.zeros(PAUSE_FRAMES)
         self._pause_at = np.zeros(2)  # next slot, slots filled
@@ -446,11 +415,7 @@ class MusicGate:
         self.start_frames = 0  # frames the voice-over start heard as music
         self.silent = 0  # silent frames in a row
         self.fresh = 0  # sounding frames left at the idle time constant (after a silence)
-        self._kept[:] = bytes(CONTEXT_FRAMES)
-        self._kept_at = 0  # the next slot of ``_kept``
-        self.context = 0  # frames the rules kept from CONTEXT_FRAMES to CONTEXT_LAG sounding frames ago
-        self.unheard = 0  # a dancing performer's sounding frames heard as no music in a row
-        self.dance_run = 0  # sounding frames danced since the last idle one
+        self.voice_context.reset()
 
     def step(self, row: np.ndarray, dancing: bool) -> bool:
         """True when frame ``row`` (D,) sounds like music to a performer that is ``dancing``."""
@@ -471,19 +436,18 @@ class MusicGate:
                    float(row[self._scol]) if self._scol >= 0 else math.nan, self._cues)
         self.floor_db, self.pause_steady = float(self._cues[0]), float(self._cues[1])
         if not dancing:
-            self._context(False, True)  # the voice-over context runs on while idle, nothing kept
-            self.dance_run = 0
+            self.voice_context.step(False, True, False)  # the voice-over context runs on while idle, nothing kept
             if self.logit > MARGIN_START:
                 return True
             return self.voice_rule and self.start_rule and self._voice_start()
         if self.logit > -MARGIN_STOP:
             if self.logit <= (VETO_TOP if self.counting else 0.0) and self._vetoed():
                 self._resume(False)
-                self._context(False, False)
+                self.voice_context.step(False, False, True)
                 return False  # the stop network unsure, the voice network sure of no music: the veto
             if self.evidence > 0.0:  # the resume's count runs down (most frames of a song skip the call)
                 self._resume(False)
-            self._context(False, True)
+            self.voice_context.step(False, True, True)
             return True
         if self.voice_rule and self.pause_rule and self.pause_steady > PAUSE_STEADY:
             self.pause_frames += 1  # the music heard in the voice's pauses: still music
@@ -491,32 +455,17 @@ class MusicGate:
             self.voice_frames += 1  # a voice over the music: still music
         else:
             self._resume(False)
-            self._context(False, False)
+            self.voice_context.step(False, False, True)
             return False
         self._resume(True)
-        self._context(True, True)
+        self.voice_context.step(True, True, True)
         return True
 
-    def _context(self, kept: bool, heard: bool) -> None:
-        """The voice-over context on a dancing sounding frame: push whether a rule ``kept`` it into the
-        ring (the count from CONTEXT_FRAMES to CONTEXT_LAG frames ago follows) and count the frames
-        not ``heard`` as music in a row (module docstring)."""
-        i = self._kept_at
-        self.context += self._kept[i - CONTEXT_LAG] - self._kept[i]  # a negative index wraps round the ring
-        self._kept[i] = kept
-        self._kept_at = (i + 1) % CONTEXT_FRAMES
-        self.unheard = 0 if heard else self.unheard + 1
-        self.dance_run += 1
-
     def voice_holds(self) -> bool:
-        """The voice-over context holds a dancing performer's stop: it has danced CONTEXT_FRAMES
-        sounding frames, a voice was heard over the music before (CONTEXT_MIN kept frames) and the
-        music has been unheard for fewer than VOICE_HOLD frames in a row, unless the music is gone
-        (floor above GONE_FLOOR_DB, pause steadiness under GONE_STEADY; not without a steadiness
-        column: module docstring)."""
-        return (self.voice_rule and self.context_rule and self.dance_run >= CONTEXT_FRAMES and self.context >= CONTEXT_MIN
-                and 0 < self.unheard < VOICE_HOLD
-                and not (self._scol >= 0 and self.floor_db > GONE_FLOOR_DB and self.pause_steady < GONE_STEADY))
+        """The voice-over context holds a dancing performer's stop on this frame
+        (:meth:`models.networks.voice_context.VoiceContext.holds`; never with the voice-over rule or
+        ``context_rule`` off)."""
+        return self.voice_rule and self.context_rule and self.voice_context.holds(self.floor_db, self.pause_steady)
 
     def _resume(self, kept: bool) -> None:
         """The resume on a dancing frame: the voice-over start's count up 1 where a rule ``kept`` the
