@@ -205,7 +205,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="near an edge, choose movements as in the middle (stage.INWARDS off): only the bend")
     p.add_argument("--set", action="append", default=[], metavar="PART.NAME=VALUE",
                    help="set a constant of models/networks/feet.py or stage.py for this run, e.g. "
-                        "feet.ROOT_LOCK=0 (repeatable)")
+                        "stage.MARGIN=0.4 or feet.LEASH=0.2 (repeatable)")
     p.add_argument("--settings", nargs="+", metavar="LABEL", choices=[s[0] for s in SETTINGS],
                    help="only these settings (default all: " + ", ".join(s[0] for s in SETTINGS) + ")")
     a = p.parse_args(argv)

@@ -1137,7 +1137,7 @@ class DanceStream:
                 if mode == "hold":
                     left, right, lift = self._contact_at(self._at)  # the idle stands on both feet
                     pose = self._feet.step(pose, left + e * (1.0 - left), right + e * (1.0 - right),
-                                           lift + e * (self._idle_lift - lift), self._stage)
+                                           lift + e * (self._idle_lift - lift))
                     self._feet_used = True
                 elif mode == "floor" or self._feet_used:  # knees and floor; what was held is handed back
                     pose = self._feet.step(pose, 0.0, 0.0, 0.0)

@@ -111,28 +111,6 @@ SOFT_REACH: float = 0.03
 #: stretches failed its vertical check; benchmarks/soak.py, docs/feet.md.)
 GROUND_RATE: float = 1.0
 
-#: Root lock (on a stage; measured, not shipped: docs/history.md): while a foot is planted, the
-#: world slide of its heel-toe midpoint this frame (what the travel, the heading and the dance make
-#: it do) is taken out of the ROOT's position (:meth:`models.networks.stage.Stage.nudge`: the
-#: frame's step no faster than the stage's MAX_SPEED, never out of it) instead of bent into the
-#: leg. Two feet planted: the mean of their slides, weighted by each one's lock. What the root does
-#: not take (an edge, the speed cap, two feet sliding apart) is left to the hold (:data:`LEASH`).
-#: The dancers glide, so it takes their travel out with the slide (path 0.71x -> 0.48x the
-#: dancers' on 6x5). False: the hold alone (as shipped).
-ROOT_LOCK: bool = False
-#: Two feet planted: each one's slide weighted by its lock over ``ROOT_STILL^2 + slide^2`` (m), the
-#: stiller foot leading; 0: their plain mean.
-ROOT_STILL: float = 0.0
-#: Two feet planted: this share of the pair's own turn a frame taken out of the heading (a pivot
-#: about the root before the slide), at most :data:`MAX_PIVOT` rad/s; 0: the position alone.
-ROOT_TURN: float = 0.0
-MAX_PIVOT: float = math.radians(720.0)
-#: The share of the slide the root takes (the rest left to the hold).
-ROOT_SHARE: float = 1.0
-#: Frames over which a foot's root lock grows when it is planted, and fades when it is lifted (smoothstep).
-ROOT_PLANT_FRAMES: int = 3
-ROOT_RELEASE_FRAMES: int = 4
-
 _SIDES = ("Left", "Right")
 
 
@@ -364,51 +342,6 @@ def _lowest(pose, f, bones, offs):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def root_slide(pose, bones, offs, contact, lock, last, grow, fade, still, turn, max_turn, share, out):  # pragma: no cover - compiled
-    """:data:`ROOT_LOCK`'s step wanted this frame: ``out[0:2]`` (x, z m) minus the lock-weighted mean
-    of the feet's heel-toe midpoints' slide since ``last`` (2, 3: x, z where they were last frame,
-    and whether known), ``out[2:6]`` the midpoints now (x, z, left first; after the pivot),
-    ``out[6]`` the pivot (rad, :data:`ROOT_TURN`); ``lock`` (2,) stepped."""
-    mids = np.empty((2, 2))
-    es = np.zeros(2)
-    for f in range(2):
-        _, ankle, heel, toe, _, _, _, _, _ = _leg_fk(pose, f, bones, offs)
-        mids[f, 0], mids[f, 1] = ankle[0] + 0.5 * (heel[0] + toe[0]), ankle[2] + 0.5 * (heel[2] + toe[2])
-        out[2 + 2 * f], out[3 + 2 * f] = mids[f, 0], mids[f, 1]
-        lock[f] = min(1.0, lock[f] + grow) if contact[f] > 0.5 else max(0.0, lock[f] - fade)
-        if last[f, 2] > 0.0:
-            es[f] = lock[f] * lock[f] * (3.0 - 2.0 * lock[f])
-    th = 0.0
-    if turn > 0.0 and es[0] > 0.0 and es[1] > 0.0:  # both planted: the pair's turn taken out of the heading
-        px, pz = mids[0, 0] - mids[1, 0], mids[0, 1] - mids[1, 1]
-        qx, qz = last[0, 0] - last[1, 0], last[0, 1] - last[1, 1]
-        d = math.sqrt(px * px + pz * pz)
-        th = math.atan2(qx, qz) - math.atan2(px, pz)
-        th = (th + math.pi) % (2.0 * math.pi) - math.pi
-        th *= turn * min(es[0], es[1]) * min(1.0, d / 0.15)
-        th = min(max(th, -max_turn), max_turn)
-        c, sn = math.cos(th), math.sin(th)
-        rx, rz = float(pose[0]), float(pose[2])
-        for f in range(2):
-            vx, vz = mids[f, 0] - rx, mids[f, 1] - rz
-            mids[f, 0], mids[f, 1] = rx + c * vx + sn * vz, rz - sn * vx + c * vz
-            out[2 + 2 * f], out[3 + 2 * f] = mids[f, 0], mids[f, 1]
-    sx = sz = wsum = esum = 0.0
-    for f in range(2):
-        if last[f, 2] > 0.0:
-            e = es[f]
-            dx, dz = mids[f, 0] - last[f, 0], mids[f, 1] - last[f, 1]
-            w = e / (still * still + dx * dx + dz * dz) if still > 0.0 else e
-            sx += w * dx
-            sz += w * dz
-            wsum += w
-            esum += e
-    k = share * min(esum, 1.0) / max(wsum, 1e-12)
-    out[0], out[1] = -sx * k, -sz * k
-    out[6] = th
-
-
-@njit(cache=True, nogil=True)
 def feet_kernel(pose, bones, offs, ang_rest, planted, plant, weight, ground, target, contact, floor, leash, pull,
                 release, knee_min, ground_rate, plant_rate, soft, knee_max=math.pi,
                 wrap_forward=True):  # pragma: no cover - compiled
@@ -450,9 +383,6 @@ class FeetLock:
         self.ground = np.zeros(2, np.float64)  # the body's height offset (m, GROUND_RATE) and its first low-pass
         self._target = np.zeros((2, 4), np.float64)  # each leg's ankle target and weight, this frame
         self._contact = np.zeros(3, np.float64)
-        self.lock = np.zeros(2, np.float64)  # each foot's root lock (0..1, ROOT_LOCK)
-        self.last = np.zeros((2, 3), np.float64)  # the dance's heel-toe midpoints last frame (x, z m; known)
-        self._slide = np.zeros(7, np.float64)
         self.reset()
 
     def reset(self) -> None:
@@ -461,29 +391,12 @@ class FeetLock:
         self.plant[:] = 0.0
         self.weight[:] = 0.0
         self.ground[:] = 0.0
-        self.lock[:] = 0.0
-        self.last[:] = 0.0
 
-    def step(self, pose: np.ndarray, left: float, right: float, lift: float = 0.0, stage=None) -> np.ndarray:
+    def step(self, pose: np.ndarray, left: float, right: float, lift: float = 0.0) -> np.ndarray:
         """``pose`` (P,) float32 with its legs put on the floor, in place (and returned); ``left``,
         ``right``: the memory's contact value of each foot at the frame played (0..1); ``lift``:
-        the exemplar's lift there (m, :func:`member_contacts`); ``stage``: the
-        :class:`~models.networks.stage.Stage` that placed ``pose``, which moves the root to keep
-        planted feet put (:data:`ROOT_LOCK`; None: the legs alone hold them)."""
+        the exemplar's lift there (m, :func:`member_contacts`)."""
         self._contact[0], self._contact[1], self._contact[2] = left, right, lift
-        if stage is not None and ROOT_LOCK:
-            out = self._slide
-            root_slide(pose, self._bones, self._offs, self._contact, self.lock, self.last,
-                       1.0 / max(ROOT_PLANT_FRAMES, 1), 1.0 / max(ROOT_RELEASE_FRAMES, 1), ROOT_STILL, ROOT_TURN,
-                       MAX_PIVOT / 30.0, ROOT_SHARE, out)
-            if out[6] != 0.0:
-                stage.pivot(pose, float(out[6]))
-            dx, dz = stage.nudge(pose, float(out[0]), float(out[1]))
-            self.last[:, 0] = out[2:6:2] + dx
-            self.last[:, 1] = out[3:6:2] + dz
-            self.last[:, 2] = 1.0
-        else:
-            self.last[:, 2] = 0.0
         feet_kernel(pose, self._bones, self._offs, self._ang_rest, self.planted, self.plant, self.weight, self.ground,
                     self._target, self._contact, self.floor, LEASH, LEASH_PULL, self._release, self._knee_min, GROUND_RATE,
                     self._plant, SOFT_REACH, math.radians(KNEE_MAX_DEG), KNEE_WRAP_FORWARD)

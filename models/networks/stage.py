@@ -206,7 +206,6 @@ class Stage:
         self._read = 0.0  # where it was read
         self._homing = False
         self._home_w = 0.0
-        self.last_step = (0.0, 0.0)  # the root's step on the stage this frame (m): what :meth:`nudge` adds to
         # counts for measuring (benchmarks/studies/stage_travel.py): frames near an edge and those
         # the stage bent; movements chosen near an edge and those whose own travel heads inwards
         self.counts = {"edge_frames": 0, "steered_frames": 0, "edge_choices": 0, "inward_choices": 0}
@@ -297,40 +296,12 @@ class Stage:
             turn = self._face_audience(turn)
         self.x += wx
         self.z += wz
-        self.last_step = (wx, wz)
         self.heading = h + turn
         if leaving and math.hypot(self.x, self.z) < 1e-3 and abs(_wrap(self.heading)) < 1e-3:
             self.x = self.z = self.heading = 0.0  # back at the centre (under a millimetre): in place from here
             self._homing = False
         pose[0], pose[2] = self.x, self.z
         half = 0.5 * self.heading
-        c, s = math.cos(half), math.sin(half)
-        qx, qy, qz, qw = float(pose[3]), float(pose[4]), float(pose[5]), float(pose[6])
-        pose[3], pose[4], pose[5], pose[6] = c * qx + s * qz, c * qy + s * qw, c * qz - s * qx, c * qw - s * qy
-
-    def nudge(self, pose: np.ndarray, dx: float, dz: float) -> tuple[float, float]:
-        """Move the root by (``dx``, ``dz``) m more this frame (the feet's root lock,
-        models/networks/feet.py), through the same rules as the travel: the frame's whole step
-        no faster than :data:`MAX_SPEED`, its part towards a near edge shrunk (never leaves the
-        stage). Writes ``pose[0]``, ``pose[2]``; returns the step taken."""
-        if not self.active or self._homing:
-            return 0.0, 0.0
-        sx, sz = self.last_step
-        fast = math.hypot(sx + dx, sz + dz) * FPS / MAX_SPEED
-        if fast > 1.0:  # the frame's whole step at MAX_SPEED at most: the travel's own step kept
-            dx, dz = (sx + dx) / fast - sx, (sz + dz) / fast - sz
-        dx, dz, _ = self._bound(dx, dz)  # from where the travel's step reached
-        self.x += dx
-        self.z += dz
-        self.last_step = (sx + dx, sz + dz)
-        pose[0] += dx
-        pose[2] += dz
-        return dx, dz
-
-    def pivot(self, pose: np.ndarray, turn: float) -> None:
-        """Turn the performer by ``turn`` rad more this frame, about its root (the feet's root lock)."""
-        self.heading += turn
-        half = 0.5 * turn
         c, s = math.cos(half), math.sin(half)
         qx, qy, qz, qw = float(pose[3]), float(pose[4]), float(pose[5]), float(pose[6])
         pose[3], pose[4], pose[5], pose[6] = c * qx + s * qz, c * qy + s * qw, c * qz - s * qx, c * qw - s * qy
