@@ -203,6 +203,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", metavar="OUT", help="also write every song's figures as JSON")
     p.add_argument("--no-inwards", action="store_true",
                    help="near an edge, choose movements as in the middle (stage.INWARDS off): only the bend")
+    p.add_argument("--set", action="append", default=[], metavar="PART.NAME=VALUE",
+                   help="set a constant of models/networks/feet.py or stage.py for this run, e.g. "
+                        "stage.MARGIN=0.4 or feet.LEASH=0.2 (repeatable)")
     p.add_argument("--settings", nargs="+", metavar="LABEL", choices=[s[0] for s in SETTINGS],
                    help="only these settings (default all: " + ", ".join(s[0] for s in SETTINGS) + ")")
     a = p.parse_args(argv)
@@ -213,6 +216,11 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(1)
     if a.settings:
         SETTINGS = tuple(s for s in SETTINGS if s[0] in a.settings)
+    if a.set:
+        sys.path.insert(0, str(Path(__file__).parent))
+        from foot_skating import apply_sets
+
+        apply_sets(p, a.set)
     if a.no_inwards:
         from models.networks import stage
 
