@@ -413,20 +413,24 @@ def test_a_voice_over_the_music_starts_an_idle_performer_after_its_evidence() ->
 
 
 def test_an_idle_performer_starts_where_the_three_networks_agree_on_music() -> None:
-    """The three networks' agreement (issue 43, back within 1 s): an idle performer whose detector leans
-    to music but stays under MARGIN_START (logit +1), with a stop network over AGREE_STOP and a voice
-    network over AGREE_VOICE: every frame is music. None with the agreement off, with either network
-    or the detector under its threshold, or without a voice network (fewer frames than the voice-over
-    start's START_EVIDENCE: that rule does not start it)."""
+    """The three networks' agreement (issue 43, back within 1 s): a performer that has danced (one frame)
+    and is idle again, whose detector leans to music but stays under MARGIN_START (logit +1), with a stop
+    network over AGREE_STOP and a voice network over AGREE_VOICE: every idle frame is music. None with the
+    agreement off, with either network or the detector under its threshold, without a voice network, or
+    in a stream that has not danced yet (its first start is the detector's; fewer frames than the
+    voice-over start's START_EVIDENCE: that rule does not start it)."""
     d = 64
     rows, _ = steady_and_pausing(20, d)
     lean = constant_network(1.0)
     stop_yes, stop_no = constant_network(mg.AGREE_STOP + 0.5), constant_network(mg.AGREE_STOP - 0.5)
     voice_yes, voice_no = constant_network(mg.AGREE_VOICE + 0.5), constant_network(mg.AGREE_VOICE - 0.5)
 
-    def hears(start: np.ndarray, stop: np.ndarray, voice: np.ndarray, agree: bool = True) -> list[bool]:  # idle
+    def hears(start: np.ndarray, stop: np.ndarray, voice: np.ndarray, agree: bool = True,
+              danced: bool = True) -> list[bool]:  # idle after one danced frame (or none)
         g = mg.MusicGate(np.zeros(d), np.ones(d), start, -60.0, clarity_col=60, stop_params=stop, voice_params=voice)
         g.agree_rule = agree
+        if danced:
+            g.step(rows[0], True)
         return [g.step(r, False) for r in rows]
 
     assert 0.0 < 1.0 < mg.MARGIN_START and mg.AGREE_START < 1.0
@@ -435,6 +439,7 @@ def test_an_idle_performer_starts_where_the_three_networks_agree_on_music() -> N
     assert not any(hears(lean, stop_no, voice_yes)) and not any(hears(lean, stop_yes, voice_no))
     assert not any(hears(constant_network(mg.AGREE_START - 0.5), stop_yes, voice_yes))
     assert not any(hears(lean, stop_yes, np.zeros(mg.N_PARAMS)))
+    assert not any(hears(lean, stop_yes, voice_yes, danced=False))
 
 
 def test_the_music_after_a_reader_is_danced_within_1_s_thanks_to_the_three_networks_agreeing(lm, dwm_root) -> None:

@@ -71,9 +71,10 @@ count starts from 0 at the stop).
 statistics (idle time constant, 0.2 s) hear the step from the gap's quiet to the music's level as
 spread, as in speech, and the detector's logit stays between 0 and :data:`MARGIN_START` for 0.4-0.6 s
 while the stop and voice networks, which weigh the spread less, already hear music. An idle
-performer's frame also counts as music where all three do: the detector above :data:`AGREE_START`,
-the stop network above :data:`AGREE_STOP` and the voice network above :data:`AGREE_VOICE`
-(``agree_rule = False`` switches it off; a checkpoint without both networks has none).
+performer that has danced in this stream (the music's return; a stream's first start is as before: its
+statistics start from its first frame, no step) also hears music where all three do: the detector
+above :data:`AGREE_START`, the stop network above :data:`AGREE_STOP` and the voice network above
+:data:`AGREE_VOICE` (``agree_rule = False`` switches it off; a checkpoint without both networks has none).
 
 **The veto** (issue 43: a crowd after a song). The stop network may hear a crowd between
 ``-``:data:`MARGIN_STOP` and 0 for as long as it lasts, neither music nor sure enough to stop. A
@@ -463,6 +464,7 @@ class MusicGate:
         self.counting = False  # a dancing performer's stop count runs (set by the idle gate): VETO_TOP
         self.start_frames = 0  # frames the voice-over start heard as music
         self.agree_frames = 0  # idle frames the three networks' agreement heard as music
+        self.has_danced = False  # the performer has danced in this stream: a start is the music's return
         self.silent = 0  # silent frames in a row
         self.fresh = 0  # sounding frames left at the idle time constant (after a silence)
         self._kept[:] = bytes(CONTEXT_FRAMES)
@@ -489,6 +491,7 @@ class MusicGate:
         sound_cues(self._ring, self._ring_at, self._pause_e, self._pause_s, self._pause_at, float(row[ENERGY_COL]),
                    float(row[self._scol]) if self._scol >= 0 else math.nan, self._cues)
         self.floor_db, self.pause_steady = float(self._cues[0]), float(self._cues[1])
+        self.has_danced = self.has_danced or dancing
         if not dancing:
             self._context(False, True)  # the voice-over context runs on while idle, nothing kept
             self.dance_run = 0
@@ -561,9 +564,10 @@ class MusicGate:
                 and presence_logit(self.stats, *self._voice) <= -(VOICE_NO_RUN if self.counting else VOICE_NO))
 
     def _agreed(self) -> bool:
-        """The three networks agree on music on this idle frame (the detector's logit above AGREE_START, the
-        stop network's above AGREE_STOP, the voice network's above AGREE_VOICE; module docstring)."""
-        if not (self.has_stop and self.has_voice and self.logit > AGREE_START
+        """The three networks agree on music on this idle frame of a performer that has danced in this stream
+        (the music's return: the detector's logit above AGREE_START, the stop network's above AGREE_STOP, the
+        voice network's above AGREE_VOICE; module docstring)."""
+        if not (self.has_danced and self.has_stop and self.has_voice and self.logit > AGREE_START
                 and presence_logit(self.stats, *self._stop) > AGREE_STOP
                 and presence_logit(self.stats, *self._voice) > AGREE_VOICE):
             return False
