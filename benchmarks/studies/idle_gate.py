@@ -167,8 +167,10 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
     each (first, last) frame window: time (s), idle weight, music (the gate's state), heard (the
     detector's verdict), the stop or start logit (running mean), the voice network's logit, the
     floor (dB range over 1 s), the pauses' steadiness, kept by the voice-over (V) or pause (P) rule
-    or heard as music by the three networks' agreement (A), the stop count, the break's frames, the log energy (dB), the voice-over context (frames kept 10 s to
-    2.5 s ago: ``music_gate.CONTEXT_MIN`` holds the stop). An empty window: every stop of the
+    or heard as music by the three networks' agreement (A), the stop count, the break's frames, the log
+    energy (dB), the voice-over context (frames kept 10 s to 2.5 s ago: ``music_gate.CONTEXT_MIN`` holds
+    the stop), and three statistics: the log energy's spread (dB), the pulse clarity, the beat phase's
+    coherence. An empty window: every stop of the
     dance after 3 s, from 1.5 s before it to its return."""
     from models.networks.music_gate import presence_logit
 
@@ -184,14 +186,15 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
         kept = "V" if pg.voice_frames > kv else "P" if pg.pause_frames > kp else "A" if pg.agree_frames > ka else "-"
         music.append(ig.music)
         rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
-                    f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.context:3d}")
+                    f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.context:3d}"
+                    f" {pg.stats[3]:5.1f} {pg.stats[7]:4.2f} {pg.stats[10]:4.2f}")
     if windows == [(0, 0)]:
         windows = []
         for t in range(91, len(music)):
             if music[t - 1] and not music[t]:
                 back = next((u for u in range(t, len(music)) if music[u]), len(music) - 1)
                 windows.append((max(0, t - 45), min(len(music) - 1, back + 6)))
-    head = "      s    w m h  logit  voice floor pause k count brk    dB ctx"
+    head = "      s    w m h  logit  voice floor pause k count brk    dB ctx  sprd clar  coh"
     return [line for a, b in windows for line in [f"-- frames {a}-{b}", head, *rows[a: b + 1]]]
 
 
