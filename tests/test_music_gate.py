@@ -413,6 +413,71 @@ def test_a_voice_over_the_music_starts_an_idle_performer_after_its_evidence() ->
     assert not any(hears(rows, np.zeros(mg.N_PARAMS))) and not any(hears(rows, never))
 
 
+def test_an_idle_performer_starts_where_the_three_networks_agree_on_music() -> None:
+    """The three networks' agreement (issue 43, back within 1 s): a performer that has danced (one frame)
+    and is idle again, whose detector leans to music but stays under MARGIN_START (logit +1), with a stop
+    network over AGREE_STOP and a voice network over AGREE_VOICE: every idle frame is music. None with the
+    agreement off, with either network or the detector under its threshold, without a voice network, or
+    in a stream that has not danced yet (its first start is the detector's; fewer frames than the
+    voice-over start's START_EVIDENCE: that rule does not start it)."""
+    d = 64
+    rows, _ = steady_and_pausing(20, d)
+    lean = constant_network(1.0)
+    stop_yes, stop_no = constant_network(mg.AGREE_STOP + 0.5), constant_network(mg.AGREE_STOP - 0.5)
+    voice_yes, voice_no = constant_network(mg.AGREE_VOICE + 0.5), constant_network(mg.AGREE_VOICE - 0.5)
+
+    def hears(start: np.ndarray, stop: np.ndarray, voice: np.ndarray, agree: bool = True,
+              danced: bool = True) -> list[bool]:  # idle after one danced frame (or none)
+        g = mg.MusicGate(np.zeros(d), np.ones(d), start, -60.0, clarity_col=60, stop_params=stop, voice_params=voice)
+        g.agree_rule = agree
+        if danced:
+            g.step(rows[0], True)
+        return [g.step(r, False) for r in rows]
+
+    assert 0.0 < 1.0 < mg.MARGIN_START and mg.AGREE_START < 1.0
+    assert all(hears(lean, stop_yes, voice_yes))
+    assert not any(hears(lean, stop_yes, voice_yes, agree=False))
+    assert not any(hears(lean, stop_no, voice_yes)) and not any(hears(lean, stop_yes, voice_no))
+    assert not any(hears(constant_network(mg.AGREE_START - 0.5), stop_yes, voice_yes))
+    assert not any(hears(lean, stop_yes, np.zeros(mg.N_PARAMS)))
+    assert not any(hears(lean, stop_yes, voice_yes, danced=False))
+
+
+def test_the_music_after_a_reader_is_danced_within_1_s_thanks_to_the_three_networks_agreeing(lm, dwm_root) -> None:
+    """Issue 43: a reader (LibriSpeech 5703) after 20 s of nutcracker, then pistachio (each from a third
+    in, as ``idle_gate.py --parts readers`` plays them): the detector hears the step from the reader's
+    last quiet (-45 dB) to the piano as spread for 0.6 s, under MARGIN_START, while the stop and voice
+    networks hear music. Fully dancing within 1 s of pistachio's start; 1.30 s with the agreement off."""
+    from models.features.audio_io import load_audio
+    from models.features.spectral import extract_features
+    from models.networks.dance_stream import DanceStream
+
+    shared = dwm_root.parent
+    paths = [shared / "music" / "nutcracker_sugarplum_kevinmacleod.ogg", shared / "speech" / "librispeech_5703-47212-0000.ogg",
+             shared / "music" / "pistachio_ragtime_lenaorsa.ogg"]
+    if not all(p.is_file() for p in paths):
+        pytest.skip(f"shared recordings not found: {[str(p) for p in paths if not p.is_file()]}")
+    if float(lm.model.presence_voice.abs().sum()) == 0 or float(lm.model.presence_stop.abs().sum()) == 0:
+        pytest.skip(f"{lm.path} has no stop or voice network (refit: {REFIT} --voice-network)")
+    a, talk, b = (load_audio(p, 22050)[0] for p in paths)
+    a, b = (x[len(x) // 3: len(x) // 3 + 20 * 22050] for x in (a, b))
+    a, b = a[: len(a) // HOP * HOP], b[: len(b) // HOP * HOP]
+    talk = talk * np.sqrt(np.mean(a.astype(np.float64) ** 2) / np.mean(talk.astype(np.float64) ** 2))
+    talk = talk[: len(talk) // HOP * HOP]
+    feats = extract_features(np.concatenate([a, talk, b]).astype(np.float32), lm.features)
+    g1 = (len(a) + len(talk)) // HOP
+
+    def back(agree: bool) -> float | None:
+        stream = DanceStream(lm.model, seed=0)
+        stream._idle.presence.agree_rule = agree
+        w = stream.listen(feats)
+        return (int(np.argmax(w[g1:] <= 0)) + 1) / 30 if (w[g1:] <= 0).any() else None
+
+    on, off = back(True), back(False)
+    assert on is not None and on <= 1.0, on
+    assert off is None or off > 1.0, off
+
+
 def test_the_music_heard_in_the_voices_pauses_is_music() -> None:
     """The pause rule: a stop network that never hears music, no voice network. A dancing
     performer's sound whose quietest frames (every fourth, 12 dB down: a voice's pauses) hold

@@ -72,7 +72,8 @@ and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) a
 release (``voice_context.VOICE_HOLD``, ``GONE_FLOOR_DB``: ``inf``, never released; ``GONE_STEADY``),
 ``--voice-no`` the veto's threshold (``music_gate.VOICE_NO``), ``--veto-top`` and ``--voice-no-run``
 its reach and threshold while a stop count runs (``VETO_TOP``, ``VOICE_NO_RUN``; ``--veto-top 0
---voice-no-run 4``: as when none runs),
+--voice-no-run 4``: as when none runs), ``--agree-stop`` and ``--agree-voice`` the stop and voice networks'
+thresholds of the three networks' agreement on an idle frame (``music_gate.AGREE_STOP``, ``AGREE_VOICE``),
 ``--song-dance`` the frames a song's start is danced (``idle_gate.SONG_DANCE``), to measure its parts
 alone; ``--off`` switches off the parts that have no constant to set:
 ``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
@@ -81,7 +82,8 @@ voice-over start's count starts from 0 when a voice stops the dance), ``song-sta
 stop a song's start at once: ``idle_gate.SONG_DANCE``), ``quiet-return`` (a break's end voids its count
 even on a frame still ``idle_gate.RETURN_DB`` under the music, heard as no music), ``veto`` (the voice
 network no longer overrules an unsure stop network: ``music_gate.VOICE_NO``), ``context`` (a voice heard
-over the dance before does not hold its stop: ``voice_context.VOICE_HOLD``). ``--trace`` prints the gate's
+over the dance before does not hold its stop: ``voice_context.VOICE_HOLD``), ``agree`` (an idle performer
+starts on its detector over ``music_gate.MARGIN_START`` only, not where the three networks agree). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, through a reader
 after a recording and the next recording's start, or through a gap between songs and the music's
 return (``gap:LABEL``), or through an espeak-ng host after a training song (``espeak:SONG/K``),
@@ -141,7 +143,8 @@ SETTLE_TARGET_OTHER_S: float = 2.5
 SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_only"), "fresh": ("presence", "fresh_rule"),
                                         "resume": ("presence", "resume_rule"), "song-start": ("idle", "song_start"),
                                         "quiet-return": ("idle", "quiet_return"), "veto": ("presence", "veto_rule"),
-                                        "context": ("presence", "context_rule")}
+                                        "context": ("presence", "context_rule"),
+                                        "agree": ("presence", "agree_rule")}
 #: The switches ``--off`` named (set by main).
 OFF: set[str] = set()
 
@@ -163,9 +166,11 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
     """The gate's state frame by frame (a fresh stream on ``feats`` (T, D), :data:`OFF` applied) over
     each (first, last) frame window: time (s), idle weight, music (the gate's state), heard (the
     detector's verdict), the stop or start logit (running mean), the voice network's logit, the
-    floor (dB range over 1 s), the pauses' steadiness, kept by the voice-over (V) or pause (P) rule,
-    the stop count, the break's frames, the log energy (dB), the voice-over context (frames kept 10 s to
-    2.5 s ago: ``voice_context.CONTEXT_MIN`` holds the stop). An empty window: every stop of the
+    floor (dB range over 1 s), the pauses' steadiness, kept by the voice-over (V) or pause (P) rule
+    or heard as music by the three networks' agreement (A), the stop count, the break's frames, the log
+    energy (dB), the voice-over context (frames kept 10 s to 2.5 s ago: ``voice_context.CONTEXT_MIN`` holds
+    the stop), and three statistics: the log energy's spread (dB), the pulse clarity, the beat phase's
+    coherence. An empty window: every stop of the
     dance after 3 s, from 1.5 s before it to its return."""
     from models.networks.music_gate import presence_logit
 
@@ -175,20 +180,21 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
         return ["(no presence detector: nothing to trace)"]
     rows, music = [], []
     for t in range(len(feats)):
-        kv, kp = pg.voice_frames, pg.pause_frames
+        kv, kp, ka = pg.voice_frames, pg.pause_frames, pg.agree_frames
         w = ig.step(np.asarray(feats[t], np.float32))
         vz = presence_logit(pg.stats, *pg._voice) if pg.has_voice else float("nan")
-        kept = "V" if pg.voice_frames > kv else "P" if pg.pause_frames > kp else "-"
+        kept = "V" if pg.voice_frames > kv else "P" if pg.pause_frames > kp else "A" if pg.agree_frames > ka else "-"
         music.append(ig.music)
         rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
-                    f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.voice_context.count:3d}")
+                    f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.voice_context.count:3d}"
+                    f" {pg.stats[3]:5.1f} {pg.stats[7]:4.2f} {pg.stats[10]:4.2f}")
     if windows == [(0, 0)]:
         windows = []
         for t in range(91, len(music)):
             if music[t - 1] and not music[t]:
                 back = next((u for u in range(t, len(music)) if music[u]), len(music) - 1)
                 windows.append((max(0, t - 45), min(len(music) - 1, back + 6)))
-    head = "      s    w m h  logit  voice floor pause k count brk    dB ctx"
+    head = "      s    w m h  logit  voice floor pause k count brk    dB ctx  sprd clar  coh"
     return [line for a, b in windows for line in [f"-- frames {a}-{b}", head, *rows[a: b + 1]]]
 
 
@@ -517,13 +523,18 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--veto-top", type=float, help="the veto's reach while a stop count runs: music_gate.VETO_TOP "
                    "(stop logit; 0 with --voice-no-run 4: as when none runs)")
     p.add_argument("--voice-no-run", type=float, help="the veto's threshold while a stop count runs: music_gate.VOICE_NO_RUN")
+    p.add_argument("--agree-stop", type=float, help="the three networks' agreement on an idle frame: the stop network's "
+                   "threshold, music_gate.AGREE_STOP (inf: the agreement off)")
+    p.add_argument("--agree-voice", type=float, help="the three networks' agreement: the voice network's threshold, "
+                   "music_gate.AGREE_VOICE")
     p.add_argument("--song-dance", type=int, help="frames a song's start is danced (idle_gate.SONG_DANCE; 0: as --off song-start)")
     p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
                    "through voids the whole stop count), fresh (the statistics keep their time constant after a silence), resume (the "
                    "voice-over start's count starts from 0 at a stop), song-start (the detector may stop a song's start at once), quiet-return (a break's end "
                    "voids its count even on a quiet frame heard as no music), veto (an unsure stop network is not "
                    "overruled by a sure voice network), context (a voice heard over the dance before does not hold its "
-                   "stop for voice_context.VOICE_HOLD frames)")
+                   "stop for voice_context.VOICE_HOLD frames), agree (an idle performer does not start where the detector, the stop "
+                   "and the voice network agree on music, the detector under music_gate.MARGIN_START)")
     p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
                    "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "
@@ -552,7 +563,7 @@ def main(argv: list[str] | None = None) -> int:
     for arg, const in (("floor_db", "FLOOR_DB"), ("voice_margin", "VOICE_MARGIN"), ("pause_steady", "PAUSE_STEADY"),
                        ("start_evidence", "START_EVIDENCE"), ("start_decay", "START_DECAY"), ("voice_hold", "VOICE_HOLD"),
                        ("gone_floor_db", "GONE_FLOOR_DB"), ("gone_steady", "GONE_STEADY"), ("voice_no", "VOICE_NO"), ("veto_top", "VETO_TOP"),
-                       ("voice_no_run", "VOICE_NO_RUN")):
+                       ("voice_no_run", "VOICE_NO_RUN"), ("agree_stop", "AGREE_STOP"), ("agree_voice", "AGREE_VOICE")):
         if getattr(args, arg) is not None:  # a constant of models/networks/music_gate.py (or voice_context.py) set
             setattr(voice_context if hasattr(voice_context, const) else gate, const, getattr(args, arg))
     if args.song_dance is not None:

@@ -67,6 +67,15 @@ again from what it had heard (a band that stays under a host restarts the dance 
 after a song has no voice over the music before it). ``resume_rule=False`` switches it off (the
 count starts from 0 at the stop).
 
+**The three networks agree** (issue 43, back within 1 s of the music). At the music's return the
+statistics (idle time constant, 0.2 s) hear the step from the gap's quiet to the music's level as
+spread, as in speech, and the detector's logit stays between 0 and :data:`MARGIN_START` for 0.4-0.6 s
+while the stop and voice networks, which weigh the spread less, already hear music. An idle
+performer that has danced in this stream (the music's return; a stream's first start is as before: its
+statistics start from its first frame, no step) also hears music where all three do: the detector
+above :data:`AGREE_START`, the stop network above :data:`AGREE_STOP` and the voice network above
+:data:`AGREE_VOICE` (``agree_rule = False`` switches it off; a checkpoint without both networks has none).
+
 **The veto** (issue 43: a crowd after a song). The stop network may hear a crowd between
 ``-``:data:`MARGIN_STOP` and 0 for as long as it lasts, neither music nor sure enough to stop. A
 dancing performer's frame in that band is no music when the voice network is sure there is none
@@ -173,6 +182,14 @@ VOICE_NO_RUN: float = 2.0
 #: host held 0.93; docs/history.md, issue 43).
 START_EVIDENCE: float = 45.0
 START_DECAY: float = 0.25
+#: The three networks agree (module docstring): an idle performer's frame is music where the detector's
+#: logit is above AGREE_START (it leans to music), the stop network's above AGREE_STOP (MARGIN_START, the
+#: detector's own start margin) and the voice network's above AGREE_VOICE (it hears music under a voice too,
+#: so it must be surer). AGREE_VOICE set on espeak-ng hosts from a stream's start (idle_gate.py --parts
+#: leadin --agree-voice 4: the dance started 29 s into one host; 4.5 the lowest that did not; docs/history.md).
+AGREE_START: float = 0.0
+AGREE_STOP: float = MARGIN_START
+AGREE_VOICE: float = 5.0
 #: After a silence (module docstring): FRESH_FRAMES sounding frames (0.5 s, as ABSENT_FRAMES) after
 #: FRESH_SILENCE silent ones or more (0.2 s, as TAU_IDLE) run at the idle time constant. Not tuned on
 #: the readers: 30 frames took trance with 1-s breaks to 2.1 % idle (docs/presence.md).
@@ -355,7 +372,8 @@ class MusicGate:
     with it; resume_rule: False switches the resume off; fresh_rule: False keeps the statistics'
     time constant after a silence (module docstring); veto_rule: False lets an unsure stop network
     keep the dance whatever the voice network hears; context_rule: False switches the voice-over
-    context off (module docstring).
+    context off (module docstring). The attribute ``agree_rule`` (True) switches the three networks'
+    agreement on an idle frame (module docstring); ``agree_frames`` counts the frames it heard as music.
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
@@ -381,6 +399,7 @@ class MusicGate:
         self.veto_rule = bool(veto_rule)
         self.context_rule = bool(context_rule)
         self.voice_context = VoiceContext(release=self._scol >= 0)  # a voice heard over this dance before
+        self.agree_rule = True  # the three networks agree: an idle frame is music (module docstring)
         self._pause_e = np.zeros(PAUSE_FRAMES)  # the last sounding frames' log energy (dB) and steadiness
         self._pause_s = np.zeros(PAUSE_FRAMES)
         self._pause_at = np.zeros(2)  # next slot, slots filled
@@ -413,6 +432,8 @@ class MusicGate:
         self.evidence = 0.0  # the voice-over start's count (frames, START_EVIDENCE starts)
         self.counting = False  # a dancing performer's stop count runs (set by the idle gate): VETO_TOP
         self.start_frames = 0  # frames the voice-over start heard as music
+        self.agree_frames = 0  # idle frames the three networks' agreement heard as music
+        self.has_danced = False  # the performer has danced in this stream: a start is the music's return
         self.silent = 0  # silent frames in a row
         self.fresh = 0  # sounding frames left at the idle time constant (after a silence)
         self.voice_context.reset()
@@ -435,11 +456,13 @@ class MusicGate:
         sound_cues(self._ring, self._ring_at, self._pause_e, self._pause_s, self._pause_at, float(row[ENERGY_COL]),
                    float(row[self._scol]) if self._scol >= 0 else math.nan, self._cues)
         self.floor_db, self.pause_steady = float(self._cues[0]), float(self._cues[1])
+        self.has_danced = self.has_danced or dancing
         if not dancing:
             self.voice_context.step(False, True, False)  # the voice-over context runs on while idle, nothing kept
             if self.logit > MARGIN_START:
                 return True
-            return self.voice_rule and self.start_rule and self._voice_start()
+            voiced = self.voice_rule and self.start_rule and self._voice_start()  # its count runs on every such frame
+            return voiced or (self.agree_rule and self._agreed())
         if self.logit > -MARGIN_STOP:
             if self.logit <= (VETO_TOP if self.counting else 0.0) and self._vetoed():
                 self._resume(False)
@@ -488,6 +511,17 @@ class MusicGate:
         (-VOICE_NO_RUN while a count runs), and the floor held (module docstring)."""
         return (self.veto_rule and self.has_voice and self.floor_db < FLOOR_DB
                 and presence_logit(self.stats, *self._voice) <= -(VOICE_NO_RUN if self.counting else VOICE_NO))
+
+    def _agreed(self) -> bool:
+        """The three networks agree on music on this idle frame of a performer that has danced in this stream
+        (the music's return: the detector's logit above AGREE_START, the stop network's above AGREE_STOP, the
+        voice network's above AGREE_VOICE; module docstring)."""
+        if not (self.has_danced and self.has_stop and self.has_voice and self.logit > AGREE_START
+                and presence_logit(self.stats, *self._stop) > AGREE_STOP
+                and presence_logit(self.stats, *self._voice) > AGREE_VOICE):
+            return False
+        self.agree_frames += 1
+        return True
 
     def _voice_start(self) -> bool:
         """The voice-over start on this idle frame: the evidence count, and whether it has reached
