@@ -15,7 +15,9 @@ import numpy as np
 import pytest
 import torch
 
+from models.networks import agreement as ag
 from models.networks import music_gate as mg
+from models.networks import veto
 from models.networks import voice_context as vc
 from models.training import music_gate as tm
 from script_loader import load_script
@@ -285,8 +287,8 @@ def test_a_crowd_the_stop_network_wavers_on_idles_within_2_5_s_thanks_to_the_vet
         pytest.skip(f"{lm.path} has no voice network (refit: {REFIT} --voice-network)")
     settle, _ = _gap_after_a_song(lm, dwm_root, "crowd -30", gap_s=20.0, seed=10)
     assert settle is not None and settle <= 2.5, settle
-    monkeypatch.setattr(mg, "VOICE_NO_RUN", mg.VOICE_NO)
-    monkeypatch.setattr(mg, "VETO_TOP", 0.0)
+    monkeypatch.setattr(veto, "VOICE_NO_RUN", veto.VOICE_NO)
+    monkeypatch.setattr(veto, "VETO_TOP", 0.0)
     settle_off, _ = _gap_after_a_song(lm, dwm_root, "crowd -30", gap_s=20.0, seed=10)
     assert settle_off is None or settle_off > 2.5, settle_off
 
@@ -358,7 +360,7 @@ def test_an_unsure_stop_network_is_overruled_by_a_sure_voice_network_thanks_to_t
     with the floor broken (the level falling 25 dB every other frame) or without a voice network."""
     d = 64
     music, unsure = constant_network(10.0), constant_network(-1.0)
-    sure_none, doubt = constant_network(-mg.VOICE_NO - 1.0), constant_network(-mg.VOICE_NO + 1.0)
+    sure_none, doubt = constant_network(-veto.VOICE_NO - 1.0), constant_network(-veto.VOICE_NO + 1.0)
     rows, pausing = steady_and_pausing(40, d)
 
     def hears(x: np.ndarray, voice: np.ndarray, **rule: bool) -> list[bool]:  # dancing throughout
@@ -374,7 +376,7 @@ def test_an_unsure_stop_network_is_overruled_by_a_sure_voice_network_thanks_to_t
 def test_the_veto_reaches_a_stop_logit_just_over_0_only_while_a_stop_count_runs() -> None:
     """The veto while a stop count runs (issue 43, a crowd the stop network wavers on): a stop network
     just over 0 (logit +0.5), a voice network at -3 (between -VOICE_NO_RUN and -VOICE_NO), the floor
-    held. While a stop count runs (``MusicGate.counting``, set by the idle gate) the frames are no
+    held. While a stop count runs (``MusicGate.veto.counting``, set by the idle gate) the frames are no
     music; when none runs, music (as with VETO_TOP 0 and VOICE_NO_RUN 4)."""
     d = 64
     rows, _ = steady_and_pausing(40, d)
@@ -384,7 +386,7 @@ def test_the_veto_reaches_a_stop_logit_just_over_0_only_while_a_stop_count_runs(
                          stop_params=constant_network(0.5), voice_params=constant_network(-3.0))
         out = []
         for r in rows:
-            g.counting = counting
+            g.veto.counting = counting
             out.append(g.step(r, True))
         return out
 
@@ -423,8 +425,8 @@ def test_an_idle_performer_starts_where_the_three_networks_agree_on_music() -> N
     d = 64
     rows, _ = steady_and_pausing(20, d)
     lean = constant_network(1.0)
-    stop_yes, stop_no = constant_network(mg.AGREE_STOP + 0.5), constant_network(mg.AGREE_STOP - 0.5)
-    voice_yes, voice_no = constant_network(mg.AGREE_VOICE + 0.5), constant_network(mg.AGREE_VOICE - 0.5)
+    stop_yes, stop_no = constant_network(ag.AGREE_STOP + 0.5), constant_network(ag.AGREE_STOP - 0.5)
+    voice_yes, voice_no = constant_network(ag.AGREE_VOICE + 0.5), constant_network(ag.AGREE_VOICE - 0.5)
 
     def hears(start: np.ndarray, stop: np.ndarray, voice: np.ndarray, agree: bool = True,
               danced: bool = True) -> list[bool]:  # idle after one danced frame (or none)
@@ -434,11 +436,11 @@ def test_an_idle_performer_starts_where_the_three_networks_agree_on_music() -> N
             g.step(rows[0], True)
         return [g.step(r, False) for r in rows]
 
-    assert 0.0 < 1.0 < mg.MARGIN_START and mg.AGREE_START < 1.0
+    assert 0.0 < 1.0 < mg.MARGIN_START and ag.AGREE_START < 1.0 and ag.AGREE_STOP == mg.MARGIN_START
     assert all(hears(lean, stop_yes, voice_yes))
     assert not any(hears(lean, stop_yes, voice_yes, agree=False))
     assert not any(hears(lean, stop_no, voice_yes)) and not any(hears(lean, stop_yes, voice_no))
-    assert not any(hears(constant_network(mg.AGREE_START - 0.5), stop_yes, voice_yes))
+    assert not any(hears(constant_network(ag.AGREE_START - 0.5), stop_yes, voice_yes))
     assert not any(hears(lean, stop_yes, np.zeros(mg.N_PARAMS)))
     assert not any(hears(lean, stop_yes, voice_yes, danced=False))
 

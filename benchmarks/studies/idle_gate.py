@@ -70,10 +70,10 @@ rule's ``PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off)
 and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) and ``START_DECAY``,
 ``--voice-hold``, ``--gone-floor-db`` and ``--gone-steady`` the voice-over context's hold and its
 release (``voice_context.VOICE_HOLD``, ``GONE_FLOOR_DB``: ``inf``, never released; ``GONE_STEADY``),
-``--voice-no`` the veto's threshold (``music_gate.VOICE_NO``), ``--veto-top`` and ``--voice-no-run``
+``--voice-no`` the veto's threshold (``veto.VOICE_NO``), ``--veto-top`` and ``--voice-no-run``
 its reach and threshold while a stop count runs (``VETO_TOP``, ``VOICE_NO_RUN``; ``--veto-top 0
 --voice-no-run 4``: as when none runs), ``--agree-stop`` and ``--agree-voice`` the stop and voice networks'
-thresholds of the three networks' agreement on an idle frame (``music_gate.AGREE_STOP``, ``AGREE_VOICE``),
+thresholds of the three networks' agreement on an idle frame (``agreement.AGREE_STOP``, ``AGREE_VOICE``),
 ``--song-dance`` the frames a song's start is danced (``idle_gate.SONG_DANCE``), to measure its parts
 alone; ``--off`` switches off the parts that have no constant to set:
 ``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
@@ -81,7 +81,7 @@ settles), ``fresh`` (the statistics keep their time constant after a silence), `
 voice-over start's count starts from 0 when a voice stops the dance), ``song-start`` (the detector may
 stop a song's start at once: ``idle_gate.SONG_DANCE``), ``quiet-return`` (a break's end voids its count
 even on a frame still ``idle_gate.RETURN_DB`` under the music, heard as no music), ``veto`` (the voice
-network no longer overrules an unsure stop network: ``music_gate.VOICE_NO``), ``context`` (a voice heard
+network no longer overrules an unsure stop network: ``veto.VOICE_NO``), ``context`` (a voice heard
 over the dance before does not hold its stop: ``voice_context.VOICE_HOLD``), ``agree`` (an idle performer
 starts on its detector over ``music_gate.MARGIN_START`` only, not where the three networks agree). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, through a reader
@@ -180,10 +180,10 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
         return ["(no presence detector: nothing to trace)"]
     rows, music = [], []
     for t in range(len(feats)):
-        kv, kp, ka = pg.voice_frames, pg.pause_frames, pg.agree_frames
+        kv, kp, ka = pg.voice_frames, pg.pause_frames, pg.agreement.frames
         w = ig.step(np.asarray(feats[t], np.float32))
         vz = presence_logit(pg.stats, *pg._voice) if pg.has_voice else float("nan")
-        kept = "V" if pg.voice_frames > kv else "P" if pg.pause_frames > kp else "A" if pg.agree_frames > ka else "-"
+        kept = "V" if pg.voice_frames > kv else "P" if pg.pause_frames > kp else "A" if pg.agreement.frames > ka else "-"
         music.append(ig.music)
         rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
                     f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.voice_context.count:3d}"
@@ -519,14 +519,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--voice-hold", type=int, help="frames the voice-over context holds a stop (voice_context.VOICE_HOLD)")
     p.add_argument("--gone-floor-db", type=float, help="the voice-over context's release: voice_context.GONE_FLOOR_DB (inf: never released)")
     p.add_argument("--gone-steady", type=float, help="the voice-over context's release: voice_context.GONE_STEADY (dimensionless)")
-    p.add_argument("--voice-no", type=float, help="the veto's threshold: music_gate.VOICE_NO (the voice network's logit at or below minus it)")
-    p.add_argument("--veto-top", type=float, help="the veto's reach while a stop count runs: music_gate.VETO_TOP "
+    p.add_argument("--voice-no", type=float, help="the veto's threshold: veto.VOICE_NO (the voice network's logit at or below minus it)")
+    p.add_argument("--veto-top", type=float, help="the veto's reach while a stop count runs: veto.VETO_TOP "
                    "(stop logit; 0 with --voice-no-run 4: as when none runs)")
-    p.add_argument("--voice-no-run", type=float, help="the veto's threshold while a stop count runs: music_gate.VOICE_NO_RUN")
+    p.add_argument("--voice-no-run", type=float, help="the veto's threshold while a stop count runs: veto.VOICE_NO_RUN")
     p.add_argument("--agree-stop", type=float, help="the three networks' agreement on an idle frame: the stop network's "
-                   "threshold, music_gate.AGREE_STOP (inf: the agreement off)")
+                   "threshold, agreement.AGREE_STOP (inf: the agreement off)")
     p.add_argument("--agree-voice", type=float, help="the three networks' agreement: the voice network's threshold, "
-                   "music_gate.AGREE_VOICE")
+                   "agreement.AGREE_VOICE")
     p.add_argument("--song-dance", type=int, help="frames a song's start is danced (idle_gate.SONG_DANCE; 0: as --off song-start)")
     p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
                    "through voids the whole stop count), fresh (the statistics keep their time constant after a silence), resume (the "
@@ -558,14 +558,14 @@ def main(argv: list[str] | None = None) -> int:
     from models.networks import music_gate as gate
     from models.training import music_gate as mg
 
-    from models.networks import voice_context
+    from models.networks import agreement, veto, voice_context
 
     for arg, const in (("floor_db", "FLOOR_DB"), ("voice_margin", "VOICE_MARGIN"), ("pause_steady", "PAUSE_STEADY"),
                        ("start_evidence", "START_EVIDENCE"), ("start_decay", "START_DECAY"), ("voice_hold", "VOICE_HOLD"),
                        ("gone_floor_db", "GONE_FLOOR_DB"), ("gone_steady", "GONE_STEADY"), ("voice_no", "VOICE_NO"), ("veto_top", "VETO_TOP"),
                        ("voice_no_run", "VOICE_NO_RUN"), ("agree_stop", "AGREE_STOP"), ("agree_voice", "AGREE_VOICE")):
-        if getattr(args, arg) is not None:  # a constant of models/networks/music_gate.py (or voice_context.py) set
-            setattr(voice_context if hasattr(voice_context, const) else gate, const, getattr(args, arg))
+        if getattr(args, arg) is not None:  # a constant set on the module that defines it (models/networks/)
+            setattr(next(m for m in (voice_context, veto, agreement, gate) if hasattr(m, const)), const, getattr(args, arg))
     if args.song_dance is not None:
         from models.networks import idle_gate
 

@@ -224,7 +224,7 @@ class IdleGate:
                 if self.quiet_return and energy < self.level - RETURN_DB:  # a quiet return: all but what its silent
                     self.run = max(self.run, self.break_kept)  # frames counted stays
         if self.presence is not None:
-            self.presence.counting = self.music and self.run > 0.0  # the veto's reach (music_gate.VETO_TOP)
+            self.presence.veto.counting = self.music and self.run > 0.0  # the veto's reach (veto.VETO_TOP)
         present = self._detector(row)
         self.present = present
         if self.music and not present and not self.break_frames and self.presence is not None:

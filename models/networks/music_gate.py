@@ -67,24 +67,15 @@ again from what it had heard (a band that stays under a host restarts the dance 
 after a song has no voice over the music before it). ``resume_rule=False`` switches it off (the
 count starts from 0 at the stop).
 
-**The three networks agree** (issue 43, back within 1 s of the music). At the music's return the
-statistics (idle time constant, 0.2 s) hear the step from the gap's quiet to the music's level as
-spread, as in speech, and the detector's logit stays between 0 and :data:`MARGIN_START` for 0.4-0.6 s
-while the stop and voice networks, which weigh the spread less, already hear music. An idle
-performer that has danced in this stream (the music's return; a stream's first start is as before: its
-statistics start from its first frame, no step) also hears music where all three do: the detector
-above :data:`AGREE_START`, the stop network above :data:`AGREE_STOP` and the voice network above
-:data:`AGREE_VOICE` (``agree_rule = False`` switches it off; a checkpoint without both networks has none).
+**The three networks agree** (issue 43, back within 1 s of the music): an idle performer that has
+danced in this stream also hears music where the detector, the stop and the voice network all lean to
+music (:mod:`models.networks.agreement`, composed here; ``agree_rule = False`` switches it off; a
+checkpoint without both networks has none).
 
-**The veto** (issue 43: a crowd after a song). The stop network may hear a crowd between
-``-``:data:`MARGIN_STOP` and 0 for as long as it lasts, neither music nor sure enough to stop. A
-dancing performer's frame in that band is no music when the voice network is sure there is none
-(logit at or below ``-``:data:`VOICE_NO`) and the floor holds (a crowd or a noise has no pauses;
-over a song's quiet passage with a voice, or a voice alone, the floor breaks). Once a stop count
-runs (``MusicGate.counting``, set by the idle gate) the stop network may climb back just over 0 in a
-crowd while the voice network stays at -2 to -4: the count went back to 0 and the stop came 0.7 s
-later. While it runs the veto also covers a stop logit up to :data:`VETO_TOP` with the voice network
-at or below ``-``:data:`VOICE_NO_RUN`. ``veto_rule=False`` switches it off.
+**The veto** (issue 43: a crowd after a song): a dancing performer's frame the stop network is
+unsure of is no music when the voice network is sure there is none and the floor holds
+(:mod:`models.networks.veto`, composed here; ``MusicGate.veto.counting``, set by the idle gate, widens its
+reach while a stop count runs). ``veto_rule=False`` switches it off.
 
 **After a silence the statistics listen afresh** (issue 43, the slow settles). In silence they
 wait, so after a song that ends in silence they still hold the song when a voice begins (a
@@ -114,6 +105,8 @@ import math
 import numpy as np
 from numba import njit
 
+from models.networks.agreement import Agreement
+from models.networks.veto import Veto
 from models.networks.voice_context import VoiceContext
 
 #: Statistics the detector reads (see the module docstring).
@@ -162,18 +155,6 @@ FLOOR_DB: float = 18.0
 #: docs/history.md, issue 43).
 PAUSE_FRAMES: int = 20
 PAUSE_STEADY: float = 0.25
-#: The veto (module docstring): a dancing frame the stop network is unsure of (its logit between
-#: -MARGIN_STOP and 0) is no music when the voice network's logit lies at or below -VOICE_NO and the
-#: floor holds (under FLOOR_DB: no pauses, a crowd or a noise, not a voice over a song's quiet
-#: passage). Twice MARGIN_STOP (where a frame counts SURE_COUNT), not tuned (docs/presence.md).
-VOICE_NO: float = 4.0
-#: The veto while a stop count runs (``MusicGate.counting``, set by the idle gate, module docstring):
-#: it also covers a stop logit up to VETO_TOP, the voice network at or below -VOICE_NO_RUN. Half and
-#: once MARGIN_STOP, round figures; set on crowd -30 in idle_gate.py's 20-s gap at seed 10 (the voice
-#: network -2.1 to -3.7 there; 2.5 reads the same on every part). VETO_TOP 0 and VOICE_NO_RUN
-#: VOICE_NO: as when no count runs (docs/presence.md).
-VETO_TOP: float = 1.0
-VOICE_NO_RUN: float = 2.0
 #: The voice-over start (module docstring): an idle performer's frame is evidence of music under
 #: a voice when both cues of the voice-over rule hold (the voice network hears music, the floor
 #: holds); a count up by 1 a frame of evidence and down by START_DECAY a frame without (capped at
@@ -182,14 +163,6 @@ VOICE_NO_RUN: float = 2.0
 #: host held 0.93; docs/history.md, issue 43).
 START_EVIDENCE: float = 45.0
 START_DECAY: float = 0.25
-#: The three networks agree (module docstring): an idle performer's frame is music where the detector's
-#: logit is above AGREE_START (it leans to music), the stop network's above AGREE_STOP (MARGIN_START, the
-#: detector's own start margin) and the voice network's above AGREE_VOICE (it hears music under a voice too,
-#: so it must be surer). AGREE_VOICE set on espeak-ng hosts from a stream's start (idle_gate.py --parts
-#: leadin --agree-voice 4: the dance started 29 s into one host; 4.5 the lowest that did not; docs/history.md).
-AGREE_START: float = 0.0
-AGREE_STOP: float = MARGIN_START
-AGREE_VOICE: float = 5.0
 #: After a silence (module docstring): FRESH_FRAMES sounding frames (0.5 s, as ABSENT_FRAMES) after
 #: FRESH_SILENCE silent ones or more (0.2 s, as TAU_IDLE) run at the idle time constant. Not tuned on
 #: the readers: 30 frames took trance with 1-s breaks to 2.1 % idle (docs/presence.md).
@@ -353,6 +326,11 @@ def sound_cues(ring, ring_at, pause_e, pause_s, pause_at, e, s, out):  # pragma:
     out[1] = pause_steadiness(pause_e, pause_s, pause_at, e, s) if s == s else -np.inf
 
 
+def _switch(part: str, doc: str) -> property:
+    """A gate attribute that reads and sets the ``rule`` switch of its composed ``part``."""
+    return property(lambda g: getattr(g, part).rule, lambda g, on: setattr(getattr(g, part), "rule", bool(on)), doc=doc)
+
+
 class MusicGate:
     """Frame-by-frame music presence: :meth:`step` takes one feature row (D,) and the
     performer's current state (dancing or not) and says whether this frame sounds like
@@ -373,7 +351,7 @@ class MusicGate:
     time constant after a silence (module docstring); veto_rule: False lets an unsure stop network
     keep the dance whatever the voice network hears; context_rule: False switches the voice-over
     context off (module docstring). The attribute ``agree_rule`` (True) switches the three networks'
-    agreement on an idle frame (module docstring); ``agree_frames`` counts the frames it heard as music.
+    agreement on an idle frame (module docstring); ``agreement.frames`` counts the frames it heard as music.
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
@@ -396,10 +374,10 @@ class MusicGate:
         self.start_rule = bool(start_rule)
         self.resume_rule = bool(resume_rule)
         self.fresh_rule = bool(fresh_rule)
-        self.veto_rule = bool(veto_rule)
         self.context_rule = bool(context_rule)
         self.voice_context = VoiceContext(release=self._scol >= 0)  # a voice heard over this dance before
-        self.agree_rule = True  # the three networks agree: an idle frame is music (module docstring)
+        self.veto = Veto(self.has_voice, veto_rule)  # the voice network sure of no music (module docstring)
+        self.agreement = Agreement(self.has_stop and self.has_voice)  # the three networks agree: an idle frame is music
         self._pause_e = np.zeros(PAUSE_FRAMES)  # the last sounding frames' log energy (dB) and steadiness
         self._pause_s = np.zeros(PAUSE_FRAMES)
         self._pause_at = np.zeros(2)  # next slot, slots filled
@@ -430,13 +408,12 @@ class MusicGate:
         self.pause_steady = -math.inf  # the steadiness in the voice's pauses (-inf: no steadiness column)
         self.pause_frames = 0  # frames the pause rule kept as music
         self.evidence = 0.0  # the voice-over start's count (frames, START_EVIDENCE starts)
-        self.counting = False  # a dancing performer's stop count runs (set by the idle gate): VETO_TOP
         self.start_frames = 0  # frames the voice-over start heard as music
-        self.agree_frames = 0  # idle frames the three networks' agreement heard as music
-        self.has_danced = False  # the performer has danced in this stream: a start is the music's return
         self.silent = 0  # silent frames in a row
         self.fresh = 0  # sounding frames left at the idle time constant (after a silence)
         self.voice_context.reset()
+        self.veto.reset()
+        self.agreement.reset()
 
     def step(self, row: np.ndarray, dancing: bool) -> bool:
         """True when frame ``row`` (D,) sounds like music to a performer that is ``dancing``."""
@@ -456,15 +433,15 @@ class MusicGate:
         sound_cues(self._ring, self._ring_at, self._pause_e, self._pause_s, self._pause_at, float(row[ENERGY_COL]),
                    float(row[self._scol]) if self._scol >= 0 else math.nan, self._cues)
         self.floor_db, self.pause_steady = float(self._cues[0]), float(self._cues[1])
-        self.has_danced = self.has_danced or dancing
+        self.agreement.note(dancing)
         if not dancing:
             self.voice_context.step(False, True, False)  # the voice-over context runs on while idle, nothing kept
             if self.logit > MARGIN_START:
                 return True
             voiced = self.voice_rule and self.start_rule and self._voice_start()  # its count runs on every such frame
-            return voiced or (self.agree_rule and self._agreed())
+            return voiced or self.agreement.hears(self.logit, self._stop_logit, self._voice_logit)
         if self.logit > -MARGIN_STOP:
-            if self.logit <= (VETO_TOP if self.counting else 0.0) and self._vetoed():
+            if self.veto.vetoes(self.logit, self.floor_db < FLOOR_DB, self._voice_logit):
                 self._resume(False)
                 self.voice_context.step(False, False, True)
                 return False  # the stop network unsure, the voice network sure of no music: the veto
@@ -490,6 +467,10 @@ class MusicGate:
         ``context_rule`` off)."""
         return self.voice_rule and self.context_rule and self.voice_context.holds(self.floor_db, self.pause_steady)
 
+    veto_rule = _switch("veto", "False switches the veto off (:attr:`models.networks.veto.Veto.rule`).")
+    agree_rule = _switch("agreement", "False switches the three networks' agreement off "
+                         "(:attr:`models.networks.agreement.Agreement.rule`).")
+
     def _resume(self, kept: bool) -> None:
         """The resume on a dancing frame: the voice-over start's count up 1 where a rule ``kept`` the
         frame as music, down START_DECAY where not (module docstring; 0 with the resume off)."""
@@ -505,23 +486,13 @@ class MusicGate:
         energy floor holds (module docstring)."""
         return self.has_voice and self.floor_db < FLOOR_DB and presence_logit(self.stats, *self._voice) > -VOICE_MARGIN
 
-    def _vetoed(self) -> bool:
-        """The veto on this frame (the stop network unsure, its logit in (-MARGIN_STOP, 0], to VETO_TOP
-        while a stop count runs): the voice network sure of no music, its logit at or below -VOICE_NO
-        (-VOICE_NO_RUN while a count runs), and the floor held (module docstring)."""
-        return (self.veto_rule and self.has_voice and self.floor_db < FLOOR_DB
-                and presence_logit(self.stats, *self._voice) <= -(VOICE_NO_RUN if self.counting else VOICE_NO))
+    def _voice_logit(self) -> float:
+        """The voice network's logit on the statistics of the last sounding frame."""
+        return presence_logit(self.stats, *self._voice)
 
-    def _agreed(self) -> bool:
-        """The three networks agree on music on this idle frame of a performer that has danced in this stream
-        (the music's return: the detector's logit above AGREE_START, the stop network's above AGREE_STOP, the
-        voice network's above AGREE_VOICE; module docstring)."""
-        if not (self.has_danced and self.has_stop and self.has_voice and self.logit > AGREE_START
-                and presence_logit(self.stats, *self._stop) > AGREE_STOP
-                and presence_logit(self.stats, *self._voice) > AGREE_VOICE):
-            return False
-        self.agree_frames += 1
-        return True
+    def _stop_logit(self) -> float:
+        """The stop network's logit on the statistics of the last sounding frame."""
+        return presence_logit(self.stats, *self._stop)
 
     def _voice_start(self) -> bool:
         """The voice-over start on this idle frame: the evidence count, and whether it has reached
