@@ -30,8 +30,8 @@ AGREE_VOICE: float = 5.0
 
 
 class Agreement:
-    """The agreement's state (module docstring): :meth:`note` on every sounding frame, :meth:`hears`
-    on an idle frame the detector alone does not start.
+    """The agreement's state (module docstring): ``has_danced`` set by the gate on every sounding
+    frame, :meth:`hears` on an idle frame the detector alone does not start.
 
     active: the gate has a stop and a voice network (without both, no agreement)."""
 
@@ -43,10 +43,6 @@ class Agreement:
     def reset(self) -> None:
         self.frames = 0  # idle frames the agreement heard as music
         self.has_danced = False  # the performer has danced in this stream: a start is the music's return
-
-    def note(self, dancing: bool) -> None:
-        """One sounding frame of a performer that is ``dancing`` (or not)."""
-        self.has_danced = self.has_danced or dancing
 
     def hears(self, logit: float, stop_logit: Callable[[], float], voice_logit: Callable[[], float]) -> bool:
         """The three networks agree on music on this idle frame of a performer that has danced in this

@@ -433,7 +433,7 @@ class MusicGate:
         sound_cues(self._ring, self._ring_at, self._pause_e, self._pause_s, self._pause_at, float(row[ENERGY_COL]),
                    float(row[self._scol]) if self._scol >= 0 else math.nan, self._cues)
         self.floor_db, self.pause_steady = float(self._cues[0]), float(self._cues[1])
-        self.agreement.note(dancing)
+        self.agreement.has_danced = self.agreement.has_danced or dancing
         if not dancing:
             self.voice_context.step(False, True, False)  # the voice-over context runs on while idle, nothing kept
             if self.logit > MARGIN_START:
@@ -441,7 +441,9 @@ class MusicGate:
             voiced = self.voice_rule and self.start_rule and self._voice_start()  # its count runs on every such frame
             return voiced or self.agreement.hears(self.logit, self._stop_logit, self._voice_logit)
         if self.logit > -MARGIN_STOP:
-            if self.veto.vetoes(self.logit, self.floor_db < FLOOR_DB, self._voice_logit):
+            # the veto reaches 0 (VETO_TOP while a count runs): most frames of a song skip the call
+            if (self.logit <= 0.0 or self.veto.counting) and self.veto.vetoes(self.logit, self.floor_db < FLOOR_DB,
+                                                                               self._voice_logit):
                 self._resume(False)
                 self.voice_context.step(False, False, True)
                 return False  # the stop network unsure, the voice network sure of no music: the veto
