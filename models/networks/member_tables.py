@@ -96,19 +96,13 @@ def code_energy(members: np.ndarray, counts: np.ndarray, seg: int, speed: np.nda
     return _code_z(np.log(np.maximum((speed * mask).sum(1)[has] / counts[has], 1e-9)), has)
 
 
-def _log_speed_accel(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(K, M) ln mean joint speed (m/frame) and ln mean joint acceleration (m/frame^2) of FK points
+def _log_frequency(positions: np.ndarray) -> np.ndarray:
+    """(K, M) ln mean joint acceleration (m/frame^2) less ln mean joint speed (m/frame) of FK points
     (K, M, F, J + E, 3), root-relative (the dance, not its travel)."""
     pos = positions - positions[..., :1, :]
     v = np.linalg.norm(np.diff(pos, axis=2), axis=-1).mean((-1, -2))
     a = np.linalg.norm(np.diff(pos, 2, axis=2), axis=-1).mean((-1, -2))
-    return np.log(np.maximum(v, 1e-9)), np.log(np.maximum(a, 1e-9))
-
-
-def _log_frequency(positions: np.ndarray) -> np.ndarray:
-    """(K, M) ln(mean joint acceleration / mean joint speed) of FK points (K, M, F, J + E, 3), root-relative."""
-    lv, la = _log_speed_accel(positions)
-    return la - lv
+    return np.log(np.maximum(a, 1e-9)) - np.log(np.maximum(v, 1e-9))
 
 
 def _frequency_z(lf: np.ndarray, counts: np.ndarray) -> np.ndarray:

@@ -486,7 +486,7 @@ class MusicGate:
     def _voice_over(self) -> bool:
         """Both cues of the voice-over rule on this frame: the voice network hears music and the
         energy floor holds (module docstring)."""
-        return self.has_voice and self.floor_db < FLOOR_DB and presence_logit(self.stats, *self._voice) > -VOICE_MARGIN
+        return self.has_voice and self.floor_db < FLOOR_DB and self._voice_logit() > -VOICE_MARGIN
 
     def _voice_logit(self) -> float:
         """The voice network's logit on the statistics of the last sounding frame."""
@@ -509,7 +509,7 @@ class MusicGate:
     def voice_hears(self, margin: float) -> bool:
         """The voice network's logit on the statistics of the last sounding frame lies above ``-margin``
         (it hears some music under a voice; True without a voice network)."""
-        return not self.has_voice or presence_logit(self.stats, *self._voice) > -margin
+        return not self.has_voice or self._voice_logit() > -margin
 
     def stop_count(self) -> float:
         """Frames a dancing performer's frame that :meth:`step` heard as no music counts towards
