@@ -23,7 +23,7 @@ from typing import Callable
 #: the stop network's above AGREE_STOP (``music_gate.MARGIN_START``, the detector's own start margin) and
 #: the voice network's above AGREE_VOICE (it hears music under a voice too, so it must be surer).
 #: AGREE_VOICE set on espeak-ng hosts from a stream's start (idle_gate.py --parts leadin --agree-voice 4:
-#: the dance started 29 s into one host; 4.5 the lowest that did not; docs/history.md).
+#: the dance started 29 s into one host; 4.5 the lowest that did not; docs/history-listening.md).
 AGREE_START: float = 0.0
 AGREE_STOP: float = 1.5
 AGREE_VOICE: float = 5.0

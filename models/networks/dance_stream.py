@@ -107,7 +107,7 @@ WARP_PULL: float = 0.05
 #: :data:`RATE_RANGE`, and no movement is sped up past the memory's 90th-percentile speed
 #: (:data:`SPEED_CAP`; one faster on its own plays at its own pace); the rate moves from the last movement's to the new one's over the
 #: movement, so a change of tempo never jerks. Each exemplar's own song tempo as the
-#: reference (``T / T_src``) was measured too (docs/history.md, "Listening"): the rate then jumps
+#: reference (``T / T_src``) was measured too (docs/history-listening.md, "Listening"): the rate then jumps
 #: between exemplars of different styles at every handover (jerk 2.1x the dancers',
 #: bone steps up to 49.6 degrees), for no gain in how the pace follows the music. False
 #: plays every movement at its own pace.
@@ -167,7 +167,7 @@ ENERGY_GAIN: float = 3.0
 #: dancers chose (over the memory's exemplars, their own speed grows with the tempo of the song
 #: they were danced to: as its 0.64th power, correlation 0.25). Without it the choice of
 #: movement ignores the tempo and only the playback rate follows it; the speed caps hold the
-#: rate back at fast tempos (docs/history.md, "Listening": stretch-set speed ratio 1.24 at 0,
+#: rate back at fast tempos (docs/history-listening.md, "Listening": stretch-set speed ratio 1.24 at 0,
 #: 1.42 at 4 with :data:`SPEED_CAP_TEMPO`). Away from energy 1 (:meth:`DanceStream.set_energy`)
 #: it shrinks, to nothing at 0 and at 2: the show's energy setting takes over (at full
 #: strength energy 0 moved as much as energy 1 on DANCE_R_5, and energy 2 less than 1 on

@@ -99,7 +99,7 @@ BREAK_HOLD_SILENT: int = 70
 BREAK_HOLD: int = 58
 #: A song's start (module docstring): a start after this many idle frames or more (5 s, or the
 #: stream's start) dances at least SONG_DANCE frames unless a break stops it. The idle: a host's
-#: false restarts come within 5 s of the stop (docs/history.md, issue 43). The dance: until the
+#: false restarts come within 5 s of the stop (docs/history-listening.md, issue 43). The dance: until the
 #: voice-over context may hold a stop (voice_context.CONTEXT_FRAMES, 10 s), not tuned (at 5 s a song
 #: under a voice from its start was left unguarded for 5 s; 9 s reads as 5 on every part, 12.5 s as
 #: 10: docs/presence.md, idle_gate.py --song-dance 270 / 375).

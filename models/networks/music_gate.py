@@ -145,14 +145,14 @@ START_FRAMES: int = 3
 #: The voice-over rule (module docstring): the voice network's logit above minus this hears
 #: music, while the log energy's range (dB) over the last FLOOR_FRAMES sounding frames (1 s) lies
 #: under FLOOR_DB. Chosen on espeak-ng voices over training songs and synthetic music; FLOOR_DB
-#: 18, not 21, after a shared reader took 3.07 s to idle at 21 (docs/history.md, issue 43).
+#: 18, not 21, after a shared reader took 3.07 s to idle at 21 (docs/history-listening.md, issue 43).
 VOICE_MARGIN: float = 1.0
 FLOOR_FRAMES: int = 30
 FLOOR_DB: float = 18.0
 #: The pause rule (module docstring): the steadiness column's mean over the quietest quarter of
 #: the last PAUSE_FRAMES sounding frames (0.67 s) above PAUSE_STEADY hears the music under a
 #: voice. Chosen on espeak-ng voices over and after training songs (idle_gate.py --parts espeak;
-#: docs/history.md, issue 43).
+#: docs/history-listening.md, issue 43).
 PAUSE_FRAMES: int = 20
 PAUSE_STEADY: float = 0.25
 #: The voice-over start (module docstring): an idle performer's frame is evidence of music under
@@ -160,7 +160,7 @@ PAUSE_STEADY: float = 0.25
 #: holds); a count up by 1 a frame of evidence and down by START_DECAY a frame without (capped at
 #: START_EVIDENCE) starts the dance on a frame of evidence at START_EVIDENCE (1.5 s of evidence).
 #: Chosen on espeak-ng hosts after training songs (idle_gate.py --parts espeak: at 40 frames one
-#: host held 0.93; docs/history.md, issue 43).
+#: host held 0.93; docs/history-listening.md, issue 43).
 START_EVIDENCE: float = 45.0
 START_DECAY: float = 0.25
 #: After a silence (module docstring): FRESH_FRAMES sounding frames (0.5 s, as ABSENT_FRAMES) after

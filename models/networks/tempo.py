@@ -95,7 +95,7 @@ FAST_HOLD: float = 0.95
 #: clarity-weighted running mean over FAST_MEAN frames (8 s), the faster octave is danced
 #: whatever the onsets a beat say. nutcracker_sugarplum_kevinmacleod at 1.25x (140 bpm, one
 #: onset a beat) holds it (share 0.9-1.0); DANCE_W_31 at 0.8x (138 bpm, as many onsets a beat)
-#: reads it half the time and a 4:3 level otherwise, DANCE_R_5 0.4-0.5 (docs/history.md).
+#: reads it half the time and a 4:3 level otherwise, DANCE_R_5 0.4-0.5 (docs/history-listening.md).
 FAST_TOLERANCE: float = 0.1
 FAST_SHARE: float = 0.8
 FAST_MEAN: float = 240.0

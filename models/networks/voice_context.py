@@ -34,7 +34,7 @@ from __future__ import annotations
 #: holding its stops: without it an espeak host from a stream's start was not fully idle 73 % of 30 s
 #: instead of 47 %, the host after DANCE_W_21 held 0.37 instead of 0.57. The window's ends are round
 #: figures, not tuned; VOICE_HOLD 16-28 lost brahms or vibeace at 0 dB (3.0-3.7 % idle: idle_gate.py
-#: --parts mixes --voice-hold N; docs/history.md).
+#: --parts mixes --voice-hold N; docs/history-listening.md).
 CONTEXT_FRAMES: int = 300
 CONTEXT_LAG: int = 75
 CONTEXT_MIN: int = 3

@@ -289,7 +289,7 @@ STEADY_MUSIC_WEIGHT: float = 2.0
 #: only a voice alone is not. 0 (the shipped networks): none. The shipped stop network idles 1-29 %
 #: of the shared recordings with speech over them at 0 dB; refitted with 0.5 (--stop-only), 0-13 %,
 #: but one fit idled a drums-and-bass recording alone 15 % of its length: not shipped
-#: (docs/history.md, "Listening, second round").
+#: (docs/history-listening.md, "Listening, second round").
 VOICE_OVER: float = 0.0
 #: Share of voiced music clips in the voice network's programmes (``--voice-network``, the
 #: voice-over rule of models/networks/music_gate.py; the shipped one: 0.5, seed 0).
