@@ -378,6 +378,7 @@ class MusicGate:
         self.voice_context = VoiceContext(release=self._scol >= 0)  # a voice heard over this dance before
         self.veto = Veto(self.has_voice, veto_rule)  # the voice network sure of no music (module docstring)
         self.agreement = Agreement(self.has_stop and self.has_voice)  # the three networks agree: an idle frame is music
+        self._stop_z, self._voice_z = self._stop_logit, self._voice_logit  # bound once, not a frame (the callbacks)
         self._pause_e = np.zeros(PAUSE_FRAMES)  # the last sounding frames' log energy (dB) and steadiness
         self._pause_s = np.zeros(PAUSE_FRAMES)
         self._pause_at = np.zeros(2)  # next slot, slots filled
@@ -439,11 +440,11 @@ class MusicGate:
             if self.logit > MARGIN_START:
                 return True
             voiced = self.voice_rule and self.start_rule and self._voice_start()  # its count runs on every such frame
-            return voiced or self.agreement.hears(self.logit, self._stop_logit, self._voice_logit)
+            return voiced or self.agreement.hears(self.logit, self._stop_z, self._voice_z)
         if self.logit > -MARGIN_STOP:
             # the veto reaches 0 (VETO_TOP while a count runs): most frames of a song skip the call
             if (self.logit <= 0.0 or self.veto.counting) and self.veto.vetoes(self.logit, self.floor_db < FLOOR_DB,
-                                                                               self._voice_logit):
+                                                                               self._voice_z):
                 self._resume(False)
                 self.voice_context.step(False, False, True)
                 return False  # the stop network unsure, the voice network sure of no music: the veto
