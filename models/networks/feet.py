@@ -21,9 +21,8 @@ dancers stand at different heights on the default skeleton.
 **The state** (:class:`FeetLock`, per foot, left first; ``reset()`` clears it):
 
 - ``planted`` (2,) 1 while the foot is planted: the memory's contact value is over 0.5;
-- ``plant`` (2, 3) the planted heel-toe midpoint in the world (x and z are held, slipping after
-  the dance's foot by at most :data:`SLIP` a frame; the height follows the dance, so a heel or
-  toe lift still shows);
+- ``plant`` (2, 3) the planted heel-toe midpoint in the world (x and z are held; the
+  height follows the dance, so a heel or toe lift still shows);
 - ``weight`` (2,) the IK blend weight: 1 while planted; from the frame the exemplar lifts
   the foot it falls to 0 over :data:`RELEASE_FRAMES` (smoothstep), so the foot is handed
   back to the dance without a jump. A foot planted anew starts where it is shown and its
@@ -32,8 +31,7 @@ dancers stand at different heights on the default skeleton.
 
 **Every frame, per leg** (one compiled call, :func:`feet_kernel`; 0.014 ms a frame for both,
 p99 0.042 ms: benchmarks/hop_profile.py): the body is grounded; the dance's heel-toe midpoint
-is moved by ``weight`` towards the plant horizontally; the plant slips after the dance's foot by
-at most :data:`SLIP` a frame (the dancers glide); a plant more than :data:`LEASH` from
+is moved by ``weight`` towards the plant horizontally; a plant more than :data:`LEASH` from
 the dance's foot is pulled after it, softly (:data:`LEASH_PULL`: the foot slides rather
 than the leg being torn, where the exemplar's dancer travelled but the performer does not,
 or the stage bends its path); the ankle
@@ -95,13 +93,6 @@ LEASH: float = 0.4
 #: leash, the validation songs on a 6x5 stage: jitter 1.40, jerk 2.13 the dancers'; with 0.2 and
 #: 0.4 m: 1.33, 1.88; benchmarks/studies/foot_skating.py --stage 6x5).
 LEASH_PULL: float = 0.2
-#: Slip (m a frame): a planted foot follows the dance's foot horizontally at up to this speed (0.005 =
-#: 0.15 m/s; the dancers' own contact feet move 0.49 m/s travelling, and the foot-skating ratio counts
-#: a slide from 0.3 m/s). The dancers glide: a plant held still falls behind a gliding foot until the
-#: leash pulls it (the leg stretched after it, the foot then yanked), which the style classifier reads as
-#: unlike them. Validation songs on 3x2, seeds 0-3 (docs/feet.md, "FD on a stage"): FD 9.85-14.95 with
-#: 0 -> 7.3-13.9 with 0.005, FSR 0.15-0.18 -> 0.12-0.14, contact feet 0.12-0.15 -> 0.20-0.21 m/s. 0: held still.
-SLIP: float = 0.005
 #: The least knee flexion the IK leaves (degrees): never past straight.
 KNEE_MIN_DEG: float = 0.5
 #: Soft reach (m): a target within this of the leg's full length, or beyond it, is approached
@@ -237,7 +228,7 @@ def _leg_fk(pose, f, bones, offs):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def _leg_target(pose, f, bones, offs, planted, plant, weight, contact, leash, pull, release, plant_rate,
-                target, slip):  # pragma: no cover - compiled
+                target):  # pragma: no cover - compiled
     """Leg f's state stepped (plant, release, leash) and its ankle target written to ``target[f]``:
     x, y, z (the dance's ankle, moved by the blend weight towards the plant horizontally) and the
     smoothstepped weight."""
@@ -263,12 +254,6 @@ def _leg_target(pose, f, bones, offs, planted, plant, weight, contact, leash, pu
     dx, dz = plant[f, 0] - mx, plant[f, 2] - mz
     if planted[f] == 1:
         d = math.sqrt(dx * dx + dz * dz)
-        if slip > 0.0 and d > 1e-12:  # the plant slips after the dance's foot, at most slip a frame
-            k = max(0.0, 1.0 - slip / d)
-            plant[f, 0] = mx + dx * k
-            plant[f, 2] = mz + dz * k
-            dx, dz = plant[f, 0] - mx, plant[f, 2] - mz
-            d = math.sqrt(dx * dx + dz * dz)
         if d > leash:  # pulled after the dance's foot, by pull of the way past the leash a frame
             k = 1.0 - pull * (d - leash) / d
             plant[f, 0] = mx + dx * k
@@ -359,15 +344,14 @@ def _lowest(pose, f, bones, offs):  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def feet_kernel(pose, bones, offs, ang_rest, planted, plant, weight, ground, target, contact, floor, leash, pull,
                 release, knee_min, ground_rate, plant_rate, soft, knee_max=math.pi,
-                wrap_forward=True, slip=0.0):  # pragma: no cover - compiled
+                wrap_forward=True):  # pragma: no cover - compiled
     """Both legs of ``pose`` (P,) float32, in place; the state arrays updated (see :class:`FeetLock`)."""
     if ground_rate > 0.0:  # the body lowered or raised by the exemplar's lift (GROUND_RATE < 1: low-passed twice)
         ground[1] += ground_rate * (contact[2] - ground[1])
         ground[0] += ground_rate * (ground[1] - ground[0])
         pose[1] = pose[1] + ground[0]
     for f in range(2):
-        _leg_target(pose, f, bones, offs, planted, plant, weight, contact, leash, pull, release, plant_rate, target,
-                    slip)
+        _leg_target(pose, f, bones, offs, planted, plant, weight, contact, leash, pull, release, plant_rate, target)
     for f in range(2):
         _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, knee_max, wrap_forward)
 
@@ -415,7 +399,7 @@ class FeetLock:
         self._contact[0], self._contact[1], self._contact[2] = left, right, lift
         feet_kernel(pose, self._bones, self._offs, self._ang_rest, self.planted, self.plant, self.weight, self.ground,
                     self._target, self._contact, self.floor, LEASH, LEASH_PULL, self._release, self._knee_min, GROUND_RATE,
-                    self._plant, SOFT_REACH, math.radians(KNEE_MAX_DEG), KNEE_WRAP_FORWARD, SLIP)
+                    self._plant, SOFT_REACH, math.radians(KNEE_MAX_DEG), KNEE_WRAP_FORWARD)
         return pose
 
     def lift_of(self, pose: np.ndarray) -> float:
