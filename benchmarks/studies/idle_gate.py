@@ -568,7 +568,8 @@ def main(argv: list[str] | None = None) -> int:
                        ("gone_floor_db", "GONE_FLOOR_DB"), ("gone_steady", "GONE_STEADY"), ("voice_no", "VOICE_NO"), ("veto_top", "VETO_TOP"),
                        ("voice_no_run", "VOICE_NO_RUN"), ("agree_stop", "AGREE_STOP"), ("agree_voice", "AGREE_VOICE")):
         if getattr(args, arg) is not None:  # a constant set on the module that defines it (models/networks/)
-            setattr(next(m for m in (voice_context, voice_pauses, voice_start, veto, agreement, gate) if hasattr(m, const)), const, getattr(args, arg))
+            where = (voice_context, voice_pauses, voice_start, veto, agreement, gate)
+            setattr(next(m for m in where if hasattr(m, const)), const, getattr(args, arg))
     if args.song_dance is not None:
         from models.networks import idle_gate
 
