@@ -19,6 +19,8 @@ from models.networks import agreement as ag
 from models.networks import music_gate as mg
 from models.networks import veto
 from models.networks import voice_context as vc
+from models.networks import voice_pauses as vp
+from models.networks import voice_start as vs
 from models.training import music_gate as tm
 from script_loader import load_script
 
@@ -401,7 +403,7 @@ def test_a_voice_over_the_music_starts_an_idle_performer_after_its_evidence() ->
     without a voice network, nor when it hears no music (a crowd, noise)."""
     d = 64
     music, never = constant_network(10.0), constant_network(-10.0)
-    rows, pausing = steady_and_pausing(int(mg.START_EVIDENCE) + 20, d)
+    rows, pausing = steady_and_pausing(int(vs.START_EVIDENCE) + 20, d)
 
     def hears(x: np.ndarray, voice: np.ndarray, **rule: bool) -> list[bool]:  # idle throughout
         g = mg.MusicGate(np.zeros(d), np.ones(d), never, -60.0, clarity_col=60, stop_params=never,
@@ -409,7 +411,7 @@ def test_a_voice_over_the_music_starts_an_idle_performer_after_its_evidence() ->
         return [g.step(r, False) for r in x]
 
     got = hears(rows, music)
-    assert not any(got[: int(mg.START_EVIDENCE) - 1]) and all(got[int(mg.START_EVIDENCE) - 1:])
+    assert not any(got[: int(vs.START_EVIDENCE) - 1]) and all(got[int(vs.START_EVIDENCE) - 1:])
     assert not any(hears(pausing, music))
     assert not any(hears(rows, music, start_rule=False)) and not any(hears(rows, music, voice_rule=False))
     assert not any(hears(rows, np.zeros(mg.N_PARAMS))) and not any(hears(rows, never))
@@ -579,23 +581,23 @@ def test_the_music_gone_releases_the_voice_over_contexts_hold() -> None:
                 out.append(g.voice_holds())
         return out
 
-    assert mg.FLOOR_DB + 7.0 > vc.GONE_FLOOR_DB and vc.GONE_STEADY < 0.2 < mg.PAUSE_STEADY
+    assert mg.FLOOR_DB + 7.0 > vc.GONE_FLOOR_DB and vc.GONE_STEADY < 0.2 < vp.PAUSE_STEADY
     held = holds(0.2)
     assert len(held) > vc.VOICE_HOLD and all(held[: vc.VOICE_HOLD - 1]) and not any(held[vc.VOICE_HOLD - 1:])
     gone = holds(0.0)
-    assert len(gone) > vc.VOICE_HOLD and sum(gone) <= mg.PAUSE_FRAMES // 2
+    assert len(gone) > vc.VOICE_HOLD and sum(gone) <= vp.PAUSE_FRAMES // 2
 
 
 def test_pause_steadiness_is_the_quietest_quarters_mean() -> None:
-    """:func:`music_gate.pause_steadiness` over a ring of PAUSE_FRAMES: the mean steadiness of the
+    """:func:`voice_pauses.pause_steadiness` over a ring of PAUSE_FRAMES: the mean steadiness of the
     ``1 + (m - 1) // 4`` quietest of the ``m`` frames pushed so far (the last PAUSE_FRAMES)."""
-    n = mg.PAUSE_FRAMES
+    n = vp.PAUSE_FRAMES
     e, s, at = np.zeros(n), np.zeros(n), np.zeros(2)
     rng = np.random.default_rng(2)
     pushed = []
     for _ in range(3 * n):
         pushed.append((float(rng.normal()), float(rng.normal())))
-        got = mg.pause_steadiness(e, s, at, *pushed[-1])
+        got = vp.pause_steadiness(e, s, at, *pushed[-1])
         last = sorted(pushed[-n:])
         k = 1 + (len(last) - 1) // 4
         assert got == pytest.approx(np.mean([v for _, v in last[:k]]))

@@ -66,8 +66,8 @@ features as the engine computes them):
 ``--parts`` picks the parts (default ``recordings,mixes,gaps``). ``--floor-db`` and
 ``--voice-margin`` set the voice-over rule's ``music_gate.FLOOR_DB`` and ``VOICE_MARGIN`` (``inf``:
 that cue always holds; ``--floor-db 0``: the voice network's part off), ``--pause-steady`` its pause
-rule's ``PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off), ``--start-evidence``
-and ``--start-decay`` its voice-over start's ``START_EVIDENCE`` (``inf``: off) and ``START_DECAY``,
+rule's ``voice_pauses.PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off), ``--start-evidence``
+and ``--start-decay`` its voice-over start's ``voice_start.START_EVIDENCE`` (``inf``: off) and ``START_DECAY``,
 ``--voice-hold``, ``--gone-floor-db`` and ``--gone-steady`` the voice-over context's hold and its
 release (``voice_context.VOICE_HOLD``, ``GONE_FLOOR_DB``: ``inf``, never released; ``GONE_STEADY``),
 ``--voice-no`` the veto's threshold (``veto.VOICE_NO``), ``--veto-top`` and ``--voice-no-run``
@@ -180,10 +180,10 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
         return ["(no presence detector: nothing to trace)"]
     rows, music = [], []
     for t in range(len(feats)):
-        kv, kp, ka = pg.voice_frames, pg.pause_frames, pg.agreement.frames
+        kv, kp, ka = pg.voice_frames, pg.pauses.frames, pg.agreement.frames
         w = ig.step(np.asarray(feats[t], np.float32))
         vz = presence_logit(pg.stats, *pg._voice) if pg.has_voice else float("nan")
-        kept = "V" if pg.voice_frames > kv else "P" if pg.pause_frames > kp else "A" if pg.agreement.frames > ka else "-"
+        kept = "V" if pg.voice_frames > kv else "P" if pg.pauses.frames > kp else "A" if pg.agreement.frames > ka else "-"
         music.append(ig.music)
         rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
                     f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.voice_context.count:3d}"
@@ -512,10 +512,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--floor-db", type=float, help="the voice-over rule's FLOOR_DB (models/networks/music_gate.py; "
                    "inf: the voice network alone, 0: the rule off)")
     p.add_argument("--voice-margin", type=float, help="the voice-over rule's VOICE_MARGIN (inf: the floor alone)")
-    p.add_argument("--pause-steady", type=float, help="the voice-over rule's PAUSE_STEADY (inf: the pause rule off)")
+    p.add_argument("--pause-steady", type=float,
+                   help="the pause rule's PAUSE_STEADY (voice_pauses.PAUSE_STEADY; inf: the pause rule off)")
     p.add_argument("--start-evidence", type=float,
-                   help="the voice-over start's START_EVIDENCE, frames (inf: an idle performer starts on its detector alone)")
-    p.add_argument("--start-decay", type=float, help="the voice-over start's START_DECAY (frames a frame without evidence takes off)")
+                   help="the voice-over start's START_EVIDENCE, frames (voice_start.START_EVIDENCE; inf: an idle performer "
+                        "starts on its detector alone)")
+    p.add_argument("--start-decay", type=float,
+                   help="the voice-over start's START_DECAY (voice_start.START_DECAY: frames a frame without evidence takes off)")
     p.add_argument("--voice-hold", type=int, help="frames the voice-over context holds a stop (voice_context.VOICE_HOLD)")
     p.add_argument("--gone-floor-db", type=float, help="the voice-over context's release: voice_context.GONE_FLOOR_DB (inf: never released)")
     p.add_argument("--gone-steady", type=float, help="the voice-over context's release: voice_context.GONE_STEADY (dimensionless)")
@@ -558,14 +561,15 @@ def main(argv: list[str] | None = None) -> int:
     from models.networks import music_gate as gate
     from models.training import music_gate as mg
 
-    from models.networks import agreement, veto, voice_context
+    from models.networks import agreement, veto, voice_context, voice_pauses, voice_start
 
     for arg, const in (("floor_db", "FLOOR_DB"), ("voice_margin", "VOICE_MARGIN"), ("pause_steady", "PAUSE_STEADY"),
                        ("start_evidence", "START_EVIDENCE"), ("start_decay", "START_DECAY"), ("voice_hold", "VOICE_HOLD"),
                        ("gone_floor_db", "GONE_FLOOR_DB"), ("gone_steady", "GONE_STEADY"), ("voice_no", "VOICE_NO"), ("veto_top", "VETO_TOP"),
                        ("voice_no_run", "VOICE_NO_RUN"), ("agree_stop", "AGREE_STOP"), ("agree_voice", "AGREE_VOICE")):
         if getattr(args, arg) is not None:  # a constant set on the module that defines it (models/networks/)
-            setattr(next(m for m in (voice_context, veto, agreement, gate) if hasattr(m, const)), const, getattr(args, arg))
+            where = (voice_context, voice_pauses, voice_start, veto, agreement, gate)
+            setattr(next(m for m in where if hasattr(m, const)), const, getattr(args, arg))
     if args.song_dance is not None:
         from models.networks import idle_gate
 

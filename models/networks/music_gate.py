@@ -54,18 +54,11 @@ the voice: the log energy's range over the last :data:`FLOOR_FRAMES` sounding fr
 music's level; a crowd or noise has no pauses, but there the voice network hears no music).
 ``voice_rule=False`` switches it off.
 
-**The voice-over start** (part of the voice-over rule): the rule above keeps a dancing performer
-dancing but never starts an idle one, whose detector hears a voice over a song as a voice (a
-song that starts under a host; a band that drops under the voice). An idle performer's frame
-also counts as music once both cues have held for long enough: a count of the frames where the
-voice network hears music and the floor holds, up 1 a frame, down :data:`START_DECAY` a frame
-without, reaches :data:`START_EVIDENCE` (1.5 s). ``start_rule=False`` (or ``voice_rule=False``)
-switches it off. **The resume** (part of the start): while the performer dances, the same count
-goes up 1 a frame that the voice-over or the pause rule keeps as music and down :data:`START_DECAY`
-a frame that they do not keep, so a performer that a voice over the music stopped after all starts
-again from what it had heard (a band that stays under a host restarts the dance sooner; a host
-after a song has no voice over the music before it). ``resume_rule=False`` switches it off (the
-count starts from 0 at the stop).
+**The voice-over start** (part of the voice-over rule): an idle performer's frame also counts as
+music once both cues of the rule above have held for 1.5 s, and **the resume**: a performer that a
+voice over the music stopped starts again from what it had heard (:mod:`models.networks.voice_start`,
+composed here). ``start_rule=False`` (or ``voice_rule=False``) switches both off,
+``resume_rule=False`` the resume alone (the count starts from 0 at the stop).
 
 **The three networks agree** (issue 43, back within 1 s of the music): an idle performer that has
 danced in this stream also hears music where the detector, the stop and the voice network all lean to
@@ -85,11 +78,9 @@ after :data:`FRESH_SILENCE` or more silent ones run at the idle time constant wh
 ``fresh_rule=False`` switches it off.
 
 **The music heard in the voice's pauses** (the pause rule, part of the voice-over rule; with
-the steadiness column only). Between a voice's words the music under it is heard alone, and
-music holds its notes; a voice alone pauses into room noise or its own reverberation. A
-dancing performer's frame the stop network hears as no music also counts as music when the
-steadiness column's mean over the quietest quarter of the last :data:`PAUSE_FRAMES` sounding
-frames (:func:`pause_steadiness`) is above :data:`PAUSE_STEADY`. ``pause_rule=False`` (or
+the steadiness column only): a dancing performer's frame the stop network hears as no music also
+counts as music when the steadiness in the quietest quarter of the last 0.67 s holds as music's
+does (:mod:`models.networks.voice_pauses`, composed here). ``pause_rule=False`` (or
 ``voice_rule=False``) switches it off.
 
 **The voice-over context** (part of the voice-over rule; issue 43, the voices at 0 dB): a dance in
@@ -108,6 +99,8 @@ from numba import njit
 from models.networks.agreement import Agreement
 from models.networks.veto import Veto
 from models.networks.voice_context import VoiceContext
+from models.networks.voice_pauses import VoicePauses, pause_steadiness
+from models.networks.voice_start import VoiceStart
 
 #: Statistics the detector reads (see the module docstring).
 N_STATS: int = 12
@@ -149,20 +142,6 @@ START_FRAMES: int = 3
 VOICE_MARGIN: float = 1.0
 FLOOR_FRAMES: int = 30
 FLOOR_DB: float = 18.0
-#: The pause rule (module docstring): the steadiness column's mean over the quietest quarter of
-#: the last PAUSE_FRAMES sounding frames (0.67 s) above PAUSE_STEADY hears the music under a
-#: voice. Chosen on espeak-ng voices over and after training songs (idle_gate.py --parts espeak;
-#: docs/history-listening.md, issue 43).
-PAUSE_FRAMES: int = 20
-PAUSE_STEADY: float = 0.25
-#: The voice-over start (module docstring): an idle performer's frame is evidence of music under
-#: a voice when both cues of the voice-over rule hold (the voice network hears music, the floor
-#: holds); a count up by 1 a frame of evidence and down by START_DECAY a frame without (capped at
-#: START_EVIDENCE) starts the dance on a frame of evidence at START_EVIDENCE (1.5 s of evidence).
-#: Chosen on espeak-ng hosts after training songs (idle_gate.py --parts espeak: at 40 frames one
-#: host held 0.93; docs/history-listening.md, issue 43).
-START_EVIDENCE: float = 45.0
-START_DECAY: float = 0.25
 #: After a silence (module docstring): FRESH_FRAMES sounding frames (0.5 s, as ABSENT_FRAMES) after
 #: FRESH_SILENCE silent ones or more (0.2 s, as TAU_IDLE) run at the idle time constant. Not tuned on
 #: the readers: 30 frames took trance with 1-s breaks to 2.1 % idle (docs/presence.md).
@@ -292,43 +271,19 @@ def floor_range(ring, state, e):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def pause_steadiness(ring_e, ring_s, state, e, s):  # pragma: no cover - compiled
-    """Push log energy ``e`` (dB) and steadiness ``s`` into ``ring_e``, ``ring_s`` (PAUSE_FRAMES,)
-    float64 at ``state[0]`` (the next slot; ``state[1]``: slots filled, both advanced in place) and
-    return the mean steadiness of the quietest quarter of the filled slots (``1 + (m - 1) // 4`` of
-    ``m``): what sounds in a voice's pauses."""
-    n = ring_e.shape[0]
-    i = int(state[0])
-    ring_e[i] = e
-    ring_s[i] = s
-    state[0] = (i + 1) % n
-    m = min(int(state[1]) + 1, n)
-    state[1] = m
-    k = 1 + (m - 1) // 4
-    taken = 0  # bit j: slot j counted (PAUSE_FRAMES <= 63); no allocation, k passes over m slots
-    acc = 0.0
-    for _ in range(k):
-        best = -1
-        for j in range(m):
-            if not (taken >> j) & 1 and (best < 0 or ring_e[j] < ring_e[best]):
-                best = j
-        taken |= 1 << best
-        acc += ring_s[best]
-    return acc / k
-
-
-@njit(cache=True, nogil=True)
 def sound_cues(ring, ring_at, pause_e, pause_s, pause_at, e, s, out):  # pragma: no cover - compiled
     """One sounding frame's cues in one compiled call (log energy ``e`` dB, steadiness ``s``; NaN:
     no steadiness column): ``out[0]`` the :func:`floor_range` of ``ring``, ``out[1]`` the
-    :func:`pause_steadiness` of ``pause_e``, ``pause_s`` (-inf without the column)."""
+    :func:`models.networks.voice_pauses.pause_steadiness` of ``pause_e``, ``pause_s`` (-inf without the
+    column)."""
     out[0] = floor_range(ring, ring_at, e)
     out[1] = pause_steadiness(pause_e, pause_s, pause_at, e, s) if s == s else -np.inf
 
 
-def _switch(part: str, doc: str) -> property:
-    """A gate attribute that reads and sets the ``rule`` switch of its composed ``part``."""
-    return property(lambda g: getattr(g, part).rule, lambda g, on: setattr(getattr(g, part), "rule", bool(on)), doc=doc)
+def _switch(part: str, doc: str, rule: str = "rule") -> property:
+    """A gate attribute that reads and sets the switch ``rule`` of its composed ``part``."""
+    return property(lambda g: getattr(getattr(g, part), rule), lambda g, on: setattr(getattr(g, part), rule, bool(on)),
+                    doc=doc)
 
 
 class MusicGate:
@@ -351,7 +306,8 @@ class MusicGate:
     time constant after a silence (module docstring); veto_rule: False lets an unsure stop network
     keep the dance whatever the voice network hears; context_rule: False switches the voice-over
     context off (module docstring). The attribute ``agree_rule`` (True) switches the three networks'
-    agreement on an idle frame (module docstring); ``agreement.frames`` counts the frames it heard as music.
+    agreement on an idle frame (module docstring); ``agreement.frames``, ``pauses.frames`` and
+    ``voice_start.frames`` count the frames the agreement, the pause rule and the start heard as music.
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
@@ -370,18 +326,16 @@ class MusicGate:
         self.has_voice = voice_params is not None and bool(np.any(np.asarray(voice_params) != 0))
         self._voice = self._network(voice_params) if self.has_voice else self._start
         self.voice_rule = bool(voice_rule)
-        self.pause_rule = bool(pause_rule)
-        self.start_rule = bool(start_rule)
-        self.resume_rule = bool(resume_rule)
         self.fresh_rule = bool(fresh_rule)
         self.context_rule = bool(context_rule)
         self.voice_context = VoiceContext(release=self._scol >= 0)  # a voice heard over this dance before
         self.veto = Veto(self.has_voice, veto_rule)  # the voice network sure of no music (module docstring)
         self.agreement = Agreement(self.has_stop and self.has_voice)  # the three networks agree: an idle frame is music
-        self._stop_z, self._voice_z = self._stop_logit, self._voice_logit  # bound once, not a frame (the callbacks)
-        self._pause_e = np.zeros(PAUSE_FRAMES)  # the last sounding frames' log energy (dB) and steadiness
-        self._pause_s = np.zeros(PAUSE_FRAMES)
-        self._pause_at = np.zeros(2)  # next slot, slots filled
+        self.pauses = VoicePauses(pause_rule)  # the music heard in the voice's pauses (module docstring)
+        self.voice_start = VoiceStart(start_rule, resume_rule)  # the voice-over start and the resume
+        # bound once, not a frame: the callbacks, the pause rule's rings (sound_cues advances them)
+        self._stop_z, self._voice_z, self._over = self._stop_logit, self._voice_logit, self._voice_over
+        self._pause_e, self._pause_s, self._pause_at = self.pauses.ring_e, self.pauses.ring_s, self.pauses.ring_at
         self._ring = np.full(FLOOR_FRAMES, np.nan)  # the last sounding frames' log energy (dB)
         self._ring_at = np.zeros(1)
         self._cues = np.zeros(2)  # sound_cues' output
@@ -405,14 +359,12 @@ class MusicGate:
         self._ring_at[0] = 0.0
         self.floor_db = 0.0  # the log energy's range over the last FLOOR_FRAMES sounding frames
         self.voice_frames = 0  # frames the voice-over rule kept as music
-        self._pause_at[:] = 0.0
         self.pause_steady = -math.inf  # the steadiness in the voice's pauses (-inf: no steadiness column)
-        self.pause_frames = 0  # frames the pause rule kept as music
-        self.evidence = 0.0  # the voice-over start's count (frames, START_EVIDENCE starts)
-        self.start_frames = 0  # frames the voice-over start heard as music
         self.silent = 0  # silent frames in a row
         self.fresh = 0  # sounding frames left at the idle time constant (after a silence)
         self.voice_context.reset()
+        self.pauses.reset()
+        self.voice_start.reset()
         self.veto.reset()
         self.agreement.reset()
 
@@ -439,28 +391,26 @@ class MusicGate:
             self.voice_context.step(False, True, False)  # the voice-over context runs on while idle, nothing kept
             if self.logit > MARGIN_START:
                 return True
-            voiced = self.voice_rule and self.start_rule and self._voice_start()  # its count runs on every such frame
+            voiced = self.voice_rule and self.voice_start.hears(self._over)  # its count runs on every such frame
             return voiced or self.agreement.hears(self.logit, self._stop_z, self._voice_z)
         if self.logit > -MARGIN_STOP:
             # the veto reaches 0 (VETO_TOP while a count runs): most frames of a song skip the call
             if (self.logit <= 0.0 or self.veto.counting) and self.veto.vetoes(self.logit, self.floor_db < FLOOR_DB,
                                                                                self._voice_z):
-                self._resume(False)
+                self.voice_start.resume(False, self.voice_rule)
                 self.voice_context.step(False, False, True)
                 return False  # the stop network unsure, the voice network sure of no music: the veto
-            if self.evidence > 0.0:  # the resume's count runs down (most frames of a song skip the call)
-                self._resume(False)
+            if self.voice_start.evidence > 0.0:  # the resume's count runs down (most frames of a song skip the call)
+                self.voice_start.resume(False, self.voice_rule)
             self.voice_context.step(False, True, True)
             return True
-        if self.voice_rule and self.pause_rule and self.pause_steady > PAUSE_STEADY:
-            self.pause_frames += 1  # the music heard in the voice's pauses: still music
-        elif self.voice_rule and self._voice_over():
+        if not (self.voice_rule and self.pauses.keeps(self.pause_steady)):  # the music heard in the voice's pauses
+            if not (self.voice_rule and self._voice_over()):
+                self.voice_start.resume(False, self.voice_rule)
+                self.voice_context.step(False, False, True)
+                return False
             self.voice_frames += 1  # a voice over the music: still music
-        else:
-            self._resume(False)
-            self.voice_context.step(False, False, True)
-            return False
-        self._resume(True)
+        self.voice_start.resume(True, self.voice_rule)
         self.voice_context.step(True, True, True)
         return True
 
@@ -473,16 +423,11 @@ class MusicGate:
     veto_rule = _switch("veto", "False switches the veto off (:attr:`models.networks.veto.Veto.rule`).")
     agree_rule = _switch("agreement", "False switches the three networks' agreement off "
                          "(:attr:`models.networks.agreement.Agreement.rule`).")
-
-    def _resume(self, kept: bool) -> None:
-        """The resume on a dancing frame: the voice-over start's count up 1 where a rule ``kept`` the
-        frame as music, down START_DECAY where not (module docstring; 0 with the resume off)."""
-        if not (self.voice_rule and self.start_rule and self.resume_rule):
-            self.evidence = 0.0
-        elif kept:
-            self.evidence = min(START_EVIDENCE, self.evidence + 1.0)
-        else:
-            self.evidence = max(0.0, self.evidence - START_DECAY)
+    pause_rule = _switch("pauses", "False switches the pause rule off (:attr:`models.networks.voice_pauses.VoicePauses.rule`).")
+    start_rule = _switch("voice_start", "False switches the voice-over start off, the resume with it "
+                         "(:attr:`models.networks.voice_start.VoiceStart.rule`).")
+    resume_rule = _switch("voice_start", "False switches the resume off "
+                          "(:attr:`models.networks.voice_start.VoiceStart.resume_rule`).", "resume_rule")
 
     def _voice_over(self) -> bool:
         """Both cues of the voice-over rule on this frame: the voice network hears music and the
@@ -496,16 +441,6 @@ class MusicGate:
     def _stop_logit(self) -> float:
         """The stop network's logit on the statistics of the last sounding frame."""
         return presence_logit(self.stats, *self._stop)
-
-    def _voice_start(self) -> bool:
-        """The voice-over start on this idle frame: the evidence count, and whether it has reached
-        START_EVIDENCE (module docstring)."""
-        ev = self._voice_over()
-        self.evidence = min(START_EVIDENCE, self.evidence + 1.0) if ev else max(0.0, self.evidence - START_DECAY)
-        if ev and self.evidence >= START_EVIDENCE:
-            self.start_frames += 1
-            return True
-        return False
 
     def voice_hears(self, margin: float) -> bool:
         """The voice network's logit on the statistics of the last sounding frame lies above ``-margin``
