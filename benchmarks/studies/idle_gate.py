@@ -74,7 +74,8 @@ release (``voice_context.VOICE_HOLD``, ``GONE_FLOOR_DB``: ``inf``, never release
 its reach and threshold while a stop count runs (``VETO_TOP``, ``VOICE_NO_RUN``; ``--veto-top 0
 --voice-no-run 4``: as when none runs), ``--agree-stop`` and ``--agree-voice`` the stop and voice networks'
 thresholds of the three networks' agreement on an idle frame (``agreement.AGREE_STOP``, ``AGREE_VOICE``),
-``--song-dance`` the frames a song's start is danced (``idle_gate.SONG_DANCE``), to measure its parts
+``--song-dance`` the frames a song's start is danced (``idle_gate.SONG_DANCE``) and ``--song-margin`` the
+voice network's margin that guards it (``idle_gate.SONG_MARGIN``), to measure its parts
 alone; ``--off`` switches off the parts that have no constant to set:
 ``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
 settles), ``fresh`` (the statistics keep their time constant after a silence), ``resume`` (the
@@ -583,6 +584,8 @@ def main(argv: list[str] | None = None) -> int:
                    "a false start (false_start.CONFIRM_FRAMES)")
     p.add_argument("--resume-frames", type=int, help="frames after a false start's stop the voice-over start may still "
                    "start the dance (false_start.RESUME_FRAMES)")
+    p.add_argument("--song-margin", type=float, help="a song's start is guarded while the voice network's logit lies above "
+                   "minus this (idle_gate.SONG_MARGIN; 2: as before the false start's doubt)")
     p.add_argument("--song-dance", type=int, help="frames a song's start is danced (idle_gate.SONG_DANCE; 0: as --off song-start)")
     p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
                    "through voids the whole stop count), fresh (the statistics keep their time constant after a silence), resume (the "
@@ -625,10 +628,12 @@ def main(argv: list[str] | None = None) -> int:
                        ("confirm_frames", "CONFIRM_FRAMES"), ("resume_frames", "RESUME_FRAMES")):
         if getattr(args, arg) is not None:  # a constant set on the module that defines it (models/networks/)
             setattr(next(m for m in (voice_context, veto, agreement, false_start, gate) if hasattr(m, const)), const, getattr(args, arg))
-    if args.song_dance is not None:
-        from models.networks import idle_gate
+    from models.networks import idle_gate
 
+    if args.song_dance is not None:
         idle_gate.SONG_DANCE = args.song_dance
+    if args.song_margin is not None:
+        idle_gate.SONG_MARGIN = args.song_margin
     try:
         lm = load_model(args.checkpoint)
         if not getattr(lm.model, "takes_style", False):

@@ -35,9 +35,9 @@ the count of the fill before it). ``void_breaks_only=False``: every break voids 
 the stop network hears as no music: sweetwaltz and nutcracker with the shared readers over them
 at -6 dB stopped 1.3-1.9 s after they started). A start after :data:`SONG_IDLE` idle frames or
 more (or at the stream's start) is a song's start: for :data:`SONG_DANCE` frames after it the
-detector's stop is void (the count starts again) while the voice network still hears some music
-(its logit above ``-music_gate.MARGIN_STOP``, :meth:`MusicGate.voice_hears`; without one, always):
-a false start on applause, noise or a host alone, where it hears none, stops as before. A break
+detector's stop is void (the count starts again) while the voice network is not sure there is no
+music (its logit above ``-``:data:`SONG_MARGIN`, the veto's ``veto.VOICE_NO``, :meth:`MusicGate.voice_hears`;
+without one, always): a false start on applause, noise or a host alone, where it is sure, stops as before. A break
 still stops it (silence idles within 3 s as ever). A restart sooner after a stop (a host the
 detector took for music a moment) stops as before. The guard lasts as long as the voice-over context
 needs dance before it may hold a stop (``voice_context.CONTEXT_FRAMES``, 10 s): with 5 s a song with a
@@ -66,7 +66,8 @@ import numpy as np
 
 from models.networks.dance_jit import gate_ema
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ
-from models.networks.music_gate import ENERGY_COL, FRESH_SILENCE, MARGIN_STOP, START_FRAMES, MusicGate
+from models.networks.music_gate import ENERGY_COL, FRESH_SILENCE, START_FRAMES, MusicGate
+from models.networks.veto import VOICE_NO
 from models.networks.voice_context import CONTEXT_FRAMES
 
 #: Frames without music before the performer starts to settle (0.5 s; with the presence
@@ -105,6 +106,13 @@ BREAK_HOLD: int = 58
 #: 10: docs/presence.md, idle_gate.py --song-dance 270 / 375).
 SONG_IDLE: int = 150
 SONG_DANCE: int = CONTEXT_FRAMES
+#: A song's start is guarded while the voice network's logit lies above -SONG_MARGIN: not sure there is no
+#: music, the veto's threshold (veto.VOICE_NO, 4), not tuned. At MARGIN_STOP (2), before the false start's
+#: doubt (false_start.py), nutcracker's quiet intro under the readers stopped (0 / -6 dB: 3.7 / 1.6 % idle;
+#: 3.4 / 0.8 % at 4), and at 4 without the doubt an espeak-ng host from a stream's start danced 53.6 % of
+#: 30 s instead of 45.3 (the voice-over start restarting what the guard held); at 5 a stream's false
+#: starts on pink noise and a host lasted longer (docs/history-listening.md, idle_gate.py --song-margin).
+SONG_MARGIN: float = VOICE_NO
 #: The quiet return (module docstring): a break that ends on a frame still this many dB or more
 #: under the music's level, heard as no music, voids only what its silent frames counted towards
 #: the stop. Half of BREAK_DB, a round figure, not tuned (docs/presence.md).
@@ -240,7 +248,7 @@ class IdleGate:
         self.danced = min(SONG_DANCE, self.danced + 1)
         if self.run >= (start if present else ABSENT_FRAMES) and not held:
             protect = self.song_start and self.danced < SONG_DANCE and not self.break_frames
-            if present or not (protect and (self.presence is None or self.presence.voice_hears(MARGIN_STOP))):
+            if present or not (protect and (self.presence is None or self.presence.voice_hears(SONG_MARGIN))):
                 if present:  # a start after SONG_IDLE idle frames is a song's start: danced SONG_DANCE frames
                     self.danced = 0 if self.idle_frames >= SONG_IDLE else SONG_DANCE
                 self.music, self.run = present, 0.0
