@@ -321,10 +321,12 @@ def test_a_song_under_a_voice_from_its_first_note_is_guarded_until_the_voice_ove
 
 
 def test_a_false_start_on_noise_at_a_streams_start_is_not_lengthened_by_the_songs_start() -> None:
-    """The song's start protects a dance only while the voice network still hears some music
-    (``MusicGate.voice_hears``): pink noise at -30 dBFS from a stream's start, on which the cold
-    detector starts the dance (not fully idle for 1.4 s; idle_gate.py --parts leadin), is danced no
-    longer with the song's start than without it (unguarded: 5.7 s)."""
+    """The song's start protects a dance only while the voice network is not sure there is no music
+    (``MusicGate.voice_hears``, ``idle_gate.SONG_MARGIN``): pink noise at -30 dBFS from a stream's start,
+    on which the cold detector starts the dance (not fully idle for 1.2 s with the song's start: its
+    guard voids one stop at 0.67 s, the voice network at -3.5, and the dance stops 0.27 s later; 1.3 s
+    without it: the same stop, then the detector starts it again at once), is danced no longer with the
+    song's start than without it (unguarded, the voice network not asked: 5.7 s)."""
     from models.generate import load_model
     from models.features.spectral import extract_features
     from script_loader import load_script
@@ -339,7 +341,7 @@ def test_a_false_start_on_noise_at_a_streams_start_is_not_lengthened_by_the_song
     off._idle.song_start = False
     w_on, w_off = on.listen(feats), off.listen(feats)
     assert (w_off < 1.0).any(), "no false start on this noise: nothing to guard"
-    assert (w_on < 1.0).mean() == (w_off < 1.0).mean()
+    assert (w_on < 1.0).mean() <= (w_off < 1.0).mean()
 
 
 @needs_shared
