@@ -345,6 +345,31 @@ def test_a_false_start_on_noise_at_a_streams_start_is_not_lengthened_by_the_song
 
 
 @needs_shared
+def test_a_song_the_voice_over_start_began_is_guarded_wider_thanks_to_the_voiced_song() -> None:
+    """Issue 43's worst at 0 dB: nutcracker with the shared readers over it as loud as the music (scaled
+    to the whole recording, as idle_gate.py's mix), its first 20 s. The voice-over start begins the dance
+    in its quiet intro; a few seconds in the voice network falls under -4, the song's start's guard
+    (``idle_gate.SONG_MARGIN``) lets the stop through and the dance stops for 2.5 s (idle_gate.py --trace
+    nutcracker@0). A song's start the voice-over start made is guarded while the voice network lies over
+    ``-SONG_MARGIN_VOICED`` (6): idle at most 10 % of the frames after the first 3 s (8.4 %: its late start),
+    over 15 % with ``IdleGate.voiced_song`` off (23.1 %)."""
+    from models.features.spectral import extract_features
+    from models.generate import load_model
+    from script_loader import load_script
+
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    lm = load_model(None)
+    if not lm.model.presence_voice.abs().sum() > 0:
+        pytest.skip(f"{lm.path} has no voice network (refit: python -m models.training.music_gate --voice-network)")
+    song = _recording("nutcracker_sugarplum_kevinmacleod.ogg", 200.0)  # whole: the readers at its RMS level
+    feats = extract_features(ig.with_speech(song, _speech(), 0.0, len(song) // 735)[: 20 * 22050], lm.features)
+    on, off = DanceStream(lm.model, seed=7), DanceStream(lm.model, seed=7)
+    off._idle.voiced_song = False
+    idle_on, idle_off = (float((s.listen(feats)[90:] > 0).mean()) for s in (on, off))
+    assert idle_on <= 0.10 and idle_off > 0.15, (idle_on, idle_off)
+
+
+@needs_shared
 def test_a_performer_a_voice_stopped_over_the_music_resumes_sooner_thanks_to_the_resume() -> None:
     """Issue 43: vibeace with the shared readers over all of it at 0 dB stops near 53.5 s where the
     voice-over rule loses the music; the resume starts it again from the count the rules built while

@@ -75,7 +75,8 @@ its reach and threshold while a stop count runs (``VETO_TOP``, ``VOICE_NO_RUN``;
 --voice-no-run 4``: as when none runs), ``--agree-stop`` and ``--agree-voice`` the stop and voice networks'
 thresholds of the three networks' agreement on an idle frame (``agreement.AGREE_STOP``, ``AGREE_VOICE``),
 ``--song-dance`` the frames a song's start is danced (``idle_gate.SONG_DANCE``) and ``--song-margin`` the
-voice network's margin that guards it (``idle_gate.SONG_MARGIN``), to measure its parts
+voice network's margin that guards it (``idle_gate.SONG_MARGIN``; ``--song-margin-voiced``:
+``SONG_MARGIN_VOICED``, where the voice-over start made the start), to measure its parts
 alone; ``--off`` switches off the parts that have no constant to set:
 ``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
 settles), ``fresh`` (the statistics keep their time constant after a silence), ``resume`` (the
@@ -87,7 +88,8 @@ over the dance before does not hold its stop: ``voice_context.VOICE_HOLD``), ``a
 starts on its detector over ``music_gate.MARGIN_START`` only, not where the three networks agree),
 ``false-start`` (the voice-over start may start the dance again after a dance the stop network never
 heard as music: ``false_start.CONFIRM_FRAMES``, which ``--confirm-frames`` sets, with ``--resume-frames``
-its ``RESUME_FRAMES``). ``--trace`` prints the gate's
+its ``RESUME_FRAMES``), ``voiced-song`` (a song's start the voice-over start made is guarded at
+``idle_gate.SONG_MARGIN`` as any other, not ``SONG_MARGIN_VOICED``). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, through a reader
 after a recording and the next recording's start, or through a gap between songs and the music's
 return (``gap:LABEL``), or through an espeak-ng host after a training song (``espeak:SONG/K``),
@@ -149,7 +151,8 @@ SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_onl
                                         "resume": ("presence", "resume_rule"), "song-start": ("idle", "song_start"),
                                         "quiet-return": ("idle", "quiet_return"), "veto": ("presence", "veto_rule"),
                                         "context": ("presence", "context_rule"),
-                                        "agree": ("presence", "agree_rule"), "false-start": ("false_start", "rule")}
+                                        "agree": ("presence", "agree_rule"), "false-start": ("false_start", "rule"),
+                                        "voiced-song": ("idle", "voiced_song")}
 #: The switches ``--off`` named (set by main).
 OFF: set[str] = set()
 
@@ -586,6 +589,8 @@ def main(argv: list[str] | None = None) -> int:
                    "start the dance (false_start.RESUME_FRAMES)")
     p.add_argument("--song-margin", type=float, help="a song's start is guarded while the voice network's logit lies above "
                    "minus this (idle_gate.SONG_MARGIN; 2: as before the false start's doubt)")
+    p.add_argument("--song-margin-voiced", type=float, help="the same for a song's start the voice-over start made "
+                   "(idle_gate.SONG_MARGIN_VOICED; --off voiced-song: as any other)")
     p.add_argument("--song-dance", type=int, help="frames a song's start is danced (idle_gate.SONG_DANCE; 0: as --off song-start)")
     p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
                    "through voids the whole stop count), fresh (the statistics keep their time constant after a silence), resume (the "
@@ -594,7 +599,8 @@ def main(argv: list[str] | None = None) -> int:
                    "overruled by a sure voice network), context (a voice heard over the dance before does not hold its "
                    "stop for voice_context.VOICE_HOLD frames), agree (an idle performer does not start where the detector, the stop "
                    "and the voice network agree on music, the detector under music_gate.MARGIN_START), false-start (the "
-                   "voice-over start starts the dance again after a dance the stop network never heard as music)")
+                   "voice-over start starts the dance again after a dance the stop network never heard as music), "
+                   "voiced-song (a song's start the voice-over start made is guarded as any other, at idle_gate.SONG_MARGIN)")
     p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
                    "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "
@@ -634,6 +640,8 @@ def main(argv: list[str] | None = None) -> int:
         idle_gate.SONG_DANCE = args.song_dance
     if args.song_margin is not None:
         idle_gate.SONG_MARGIN = args.song_margin
+    if args.song_margin_voiced is not None:
+        idle_gate.SONG_MARGIN_VOICED = args.song_margin_voiced
     try:
         lm = load_model(args.checkpoint)
         if not getattr(lm.model, "takes_style", False):
