@@ -321,10 +321,12 @@ def test_a_song_under_a_voice_from_its_first_note_is_guarded_until_the_voice_ove
 
 
 def test_a_false_start_on_noise_at_a_streams_start_is_not_lengthened_by_the_songs_start() -> None:
-    """The song's start protects a dance only while the voice network still hears some music
-    (``MusicGate.voice_hears``): pink noise at -30 dBFS from a stream's start, on which the cold
-    detector starts the dance (not fully idle for 1.4 s; idle_gate.py --parts leadin), is danced no
-    longer with the song's start than without it (unguarded: 5.7 s)."""
+    """The song's start protects a dance only while the voice network is not sure there is no music
+    (``MusicGate.voice_hears``, ``idle_gate.SONG_MARGIN``): pink noise at -30 dBFS from a stream's start,
+    on which the cold detector starts the dance (not fully idle for 1.2 s with the song's start: its
+    guard voids one stop at 0.67 s, the voice network at -3.5, and the dance stops 0.27 s later; 1.3 s
+    without it: the same stop, then the detector starts it again at once), is danced no longer with the
+    song's start than without it (unguarded, the voice network not asked: 5.7 s)."""
     from models.generate import load_model
     from models.features.spectral import extract_features
     from script_loader import load_script
@@ -339,7 +341,32 @@ def test_a_false_start_on_noise_at_a_streams_start_is_not_lengthened_by_the_song
     off._idle.song_start = False
     w_on, w_off = on.listen(feats), off.listen(feats)
     assert (w_off < 1.0).any(), "no false start on this noise: nothing to guard"
-    assert (w_on < 1.0).mean() == (w_off < 1.0).mean()
+    assert (w_on < 1.0).mean() <= (w_off < 1.0).mean()
+
+
+@needs_shared
+def test_a_song_the_voice_over_start_began_is_guarded_wider_thanks_to_the_voiced_song() -> None:
+    """Issue 43's worst at 0 dB: nutcracker with the shared readers over it as loud as the music (scaled
+    to the whole recording, as idle_gate.py's mix), its first 20 s. The voice-over start begins the dance
+    in its quiet intro; a few seconds in the voice network falls under -4, the song's start's guard
+    (``idle_gate.SONG_MARGIN``) lets the stop through and the dance stops for 2.5 s (idle_gate.py --trace
+    nutcracker@0). A song's start the voice-over start made is guarded while the voice network lies over
+    ``-SONG_MARGIN_VOICED`` (6): idle at most 10 % of the frames after the first 3 s (8.4 %: its late start),
+    over 15 % with ``IdleGate.voiced_song`` off (23.1 %)."""
+    from models.features.spectral import extract_features
+    from models.generate import load_model
+    from script_loader import load_script
+
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    lm = load_model(None)
+    if not lm.model.presence_voice.abs().sum() > 0:
+        pytest.skip(f"{lm.path} has no voice network (refit: python -m models.training.music_gate --voice-network)")
+    song = _recording("nutcracker_sugarplum_kevinmacleod.ogg", 200.0)  # whole: the readers at its RMS level
+    feats = extract_features(ig.with_speech(song, _speech(), 0.0, len(song) // 735)[: 20 * 22050], lm.features)
+    on, off = DanceStream(lm.model, seed=7), DanceStream(lm.model, seed=7)
+    off._idle.voiced_song = False
+    idle_on, idle_off = (float((s.listen(feats)[90:] > 0).mean()) for s in (on, off))
+    assert idle_on <= 0.10 and idle_off > 0.15, (idle_on, idle_off)
 
 
 @needs_shared

@@ -74,7 +74,9 @@ release (``voice_context.VOICE_HOLD``, ``GONE_FLOOR_DB``: ``inf``, never release
 its reach and threshold while a stop count runs (``VETO_TOP``, ``VOICE_NO_RUN``; ``--veto-top 0
 --voice-no-run 4``: as when none runs), ``--agree-stop`` and ``--agree-voice`` the stop and voice networks'
 thresholds of the three networks' agreement on an idle frame (``agreement.AGREE_STOP``, ``AGREE_VOICE``),
-``--song-dance`` the frames a song's start is danced (``idle_gate.SONG_DANCE``), to measure its parts
+``--song-dance`` the frames a song's start is danced (``idle_gate.SONG_DANCE``) and ``--song-margin`` the
+voice network's margin that guards it (``idle_gate.SONG_MARGIN``; ``--song-margin-voiced``:
+``SONG_MARGIN_VOICED``, where the voice-over start made the start), to measure its parts
 alone; ``--off`` switches off the parts that have no constant to set:
 ``break-count`` (a break danced through voids the whole stop count, as before issue 43's slow
 settles), ``fresh`` (the statistics keep their time constant after a silence), ``resume`` (the
@@ -83,10 +85,15 @@ stop a song's start at once: ``idle_gate.SONG_DANCE``), ``quiet-return`` (a brea
 even on a frame still ``idle_gate.RETURN_DB`` under the music, heard as no music), ``veto`` (the voice
 network no longer overrules an unsure stop network: ``veto.VOICE_NO``), ``context`` (a voice heard
 over the dance before does not hold its stop: ``voice_context.VOICE_HOLD``), ``agree`` (an idle performer
-starts on its detector over ``music_gate.MARGIN_START`` only, not where the three networks agree). ``--trace`` prints the gate's
+starts on its detector over ``music_gate.MARGIN_START`` only, not where the three networks agree),
+``false-start`` (the voice-over start may start the dance again after a dance the stop network never
+heard as music: ``false_start.CONFIRM_FRAMES``, which ``--confirm-frames`` sets, with ``--resume-frames``
+its ``RESUME_FRAMES``), ``voiced-song`` (a song's start the voice-over start made is guarded at
+``idle_gate.SONG_MARGIN`` as any other, not ``SONG_MARGIN_VOICED``). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, through a reader
 after a recording and the next recording's start, or through a gap between songs and the music's
 return (``gap:LABEL``), or through an espeak-ng host after a training song (``espeak:SONG/K``),
+or through a case of ``--parts leadin`` from the stream's start (``leadin:CASE``),
 instead of the tables (which network or rule said what).
 
 It also prints the gate's own cost per frame (median and 99th percentile, microseconds).
@@ -139,12 +146,13 @@ SETTLE_TARGET_S: dict[str, float] = {"silence": 3.0, "speech": 2.0}
 SETTLE_TARGET_OTHER_S: float = 2.5
 
 
-#: Parts of the gate ``--off`` switches off: name -> (``IdleGate`` or its ``MusicGate``, attribute).
+#: Parts of the gate ``--off`` switches off: name -> (``IdleGate``, its ``MusicGate`` or that one's ``false_start``, attribute).
 SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_only"), "fresh": ("presence", "fresh_rule"),
                                         "resume": ("presence", "resume_rule"), "song-start": ("idle", "song_start"),
                                         "quiet-return": ("idle", "quiet_return"), "veto": ("presence", "veto_rule"),
                                         "context": ("presence", "context_rule"),
-                                        "agree": ("presence", "agree_rule")}
+                                        "agree": ("presence", "agree_rule"), "false-start": ("false_start", "rule"),
+                                        "voiced-song": ("idle", "voiced_song")}
 #: The switches ``--off`` named (set by main).
 OFF: set[str] = set()
 
@@ -157,6 +165,8 @@ def new_stream(lm, seed: int):
     for name in OFF:
         where, attr = SWITCHES[name]
         part = stream._idle if where == "idle" else stream._idle.presence
+        if part is not None and where == "false_start":  # a part the MusicGate composes
+            part = part.false_start
         if part is not None:
             setattr(part, attr, False)
     return stream
@@ -167,7 +177,8 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
     each (first, last) frame window: time (s), idle weight, music (the gate's state), heard (the
     detector's verdict), the stop or start logit (running mean), the voice network's logit, the
     floor (dB range over 1 s), the pauses' steadiness, kept by the voice-over (V) or pause (P) rule
-    or heard as music by the three networks' agreement (A), the stop count, the break's frames, the log
+    or heard as music by the three networks' agreement (A) or the voice-over start held back by a false
+    start's doubt (D), the stop count, the break's frames, the log
     energy (dB), the voice-over context (frames kept 10 s to 2.5 s ago: ``voice_context.CONTEXT_MIN`` holds
     the stop), and three statistics: the log energy's spread (dB), the pulse clarity, the beat phase's
     coherence. An empty window: every stop of the
@@ -180,10 +191,11 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
         return ["(no presence detector: nothing to trace)"]
     rows, music = [], []
     for t in range(len(feats)):
-        kv, kp, ka = pg.voice_frames, pg.pauses.frames, pg.agreement.frames
+        kv, kp, ka, kd = pg.voice_frames, pg.pauses.frames, pg.agreement.frames, pg.false_start.frames
         w = ig.step(np.asarray(feats[t], np.float32))
         vz = presence_logit(pg.stats, *pg._voice) if pg.has_voice else float("nan")
-        kept = "V" if pg.voice_frames > kv else "P" if pg.pauses.frames > kp else "A" if pg.agreement.frames > ka else "-"
+        kept = ("V" if pg.voice_frames > kv else "P" if pg.pauses.frames > kp else "A" if pg.agreement.frames > ka
+                else "D" if pg.false_start.frames > kd else "-")
         music.append(ig.music)
         rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
                     f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.voice_context.count:3d}"
@@ -294,6 +306,17 @@ def leadin_rows(lm, speech: list, seed: int) -> list[dict]:
     ``speech`` ((name, audio) pairs), :data:`LEADIN_HOSTS` espeak-ng hosts and the gaps' noises
     but silence, 30 s each (speech at -20 dBFS) from a fresh stream's start."""
     from models.features.spectral import extract_features
+
+    rows = []
+    for name, x in leadin_audio(speech):
+        w = new_stream(lm, seed).listen(extract_features(x, lm.features))
+        rows.append({"case": name, "not_idle": float((w < 1.0).mean())})
+    return rows
+
+
+def leadin_audio(speech: list) -> list[tuple[str, np.ndarray]]:
+    """The cases of ``--parts leadin``: (name, audio (n,) float32 at :data:`SR`, whole hops) for each of
+    ``speech`` ((name, audio) pairs) and the espeak-ng hosts at -20 dBFS, and the gaps' noises but silence."""
     from models.training import music_gate as mg
 
     rng = np.random.default_rng(LEADIN_SEED)
@@ -302,14 +325,13 @@ def leadin_rows(lm, speech: list, seed: int) -> list[dict]:
     cases += [(lab, gap_audio(kind, 30.0, lvl, rng, pool)) for lab, kind, lvl in GAPS
               if kind != "silence" and (pool or kind != "crowd")]
     cases += [(f"espeak-ng host {i}", mg.speech(30.0, rng, pool)) for i in range(LEADIN_HOSTS if pool else 0)]
-    rows = []
+    out = []
     for name, x in cases:
         x = x[: len(x) // HOP * HOP]
         if not name.startswith(tuple(k for k, _, _ in GAPS)):
             x = x * 10 ** ((-20.0 - rms_dbfs(x)) / 20)  # a voice at -20 dBFS
-        w = new_stream(lm, seed).listen(extract_features(x.astype(np.float32), lm.features))
-        rows.append({"case": name, "not_idle": float((w < 1.0).mean())})
-    return rows
+        out.append((name, x.astype(np.float32)))
+    return out
 
 
 def excerpt(data: Path, name: str, seconds: float) -> np.ndarray:
@@ -415,6 +437,8 @@ def print_trace(lm, args, recordings: list, speech: list, songs: list) -> int:
         return 0
     if args.trace.startswith("espeak:"):
         return print_espeak_trace(lm, args)
+    if args.trace.startswith("leadin:"):
+        return print_leadin_trace(lm, args, speech)
     name, _, what = args.trace.partition("@")
     shared = [(n, a) for n, a in recordings if n in {f.name for f in args.music.glob("*.ogg")}]
     rec = [(i, n, a) for i, (n, a) in enumerate(shared) if n.startswith(name)]
@@ -448,6 +472,38 @@ def print_trace(lm, args, recordings: list, speech: list, songs: list) -> int:
         print(f"{rname} with the readers over it at {db:g} dB: every stop after 3 s")
         lines = trace(lm, feats, [(0, 0)])
     print("\n".join(lines))
+    return 0
+
+
+def print_leadin_trace(lm, args, speech: list) -> int:
+    """``--trace leadin:CASE``: the gate's state frame by frame through a case of ``--parts leadin``
+    (drawn as :func:`leadin_rows` draws them, e.g. 'leadin:espeak-ng host 1'), every frame it is not
+    fully idle or the false start's doubt holds the voice-over start back, from 1 s before; 2 on a case
+    that is not there."""
+    from models.features.spectral import extract_features
+
+    name = args.trace.removeprefix("leadin:")
+    cases = dict(leadin_audio(speech))
+    if name not in cases:
+        print(f"idle_gate: --trace {args.trace!r}: no case {name!r}; known: {', '.join(cases)}", file=sys.stderr)
+        return 2
+    feats = extract_features(cases[name], lm.features)
+    ig = new_stream(lm, args.seed)._idle
+    w, held_back = np.empty(len(feats)), np.zeros(len(feats), bool)
+    for t in range(len(feats)):
+        k = ig.presence.false_start.frames if ig.presence is not None else 0
+        w[t] = ig.step(np.asarray(feats[t], np.float32))
+        held_back[t] = ig.presence is not None and ig.presence.false_start.frames > k
+    moving = np.flatnonzero((w < 1.0) | held_back)
+    windows = []
+    for t in moving:  # runs of frames not fully idle or held back by the doubt (D), each from 1 s before
+        if windows and t <= windows[-1][1] + 30:
+            windows[-1] = (windows[-1][0], int(t))
+        else:
+            windows.append((max(0, int(t) - 30), int(t)))
+    print(f"{name} from the stream's start ({len(feats) / 30:.0f} s): not fully idle {float((w < 1.0).mean()):.3f} of it, "
+          f"the voice-over start held back by a false start's doubt on {int(held_back.sum())} frames")
+    print("\n".join(trace(lm, feats, windows) if windows else ["(fully idle throughout)"]))
     return 0
 
 
@@ -530,6 +586,14 @@ def main(argv: list[str] | None = None) -> int:
                    "threshold, agreement.AGREE_STOP (inf: the agreement off)")
     p.add_argument("--agree-voice", type=float, help="the three networks' agreement: the voice network's threshold, "
                    "agreement.AGREE_VOICE")
+    p.add_argument("--confirm-frames", type=int, help="frames the stop network must hear as music for a dance not to be "
+                   "a false start (false_start.CONFIRM_FRAMES)")
+    p.add_argument("--resume-frames", type=int, help="frames after a false start's stop the voice-over start may still "
+                   "start the dance (false_start.RESUME_FRAMES)")
+    p.add_argument("--song-margin", type=float, help="a song's start is guarded while the voice network's logit lies above "
+                   "minus this (idle_gate.SONG_MARGIN; 2: as before the false start's doubt)")
+    p.add_argument("--song-margin-voiced", type=float, help="the same for a song's start the voice-over start made "
+                   "(idle_gate.SONG_MARGIN_VOICED; --off voiced-song: as any other)")
     p.add_argument("--song-dance", type=int, help="frames a song's start is danced (idle_gate.SONG_DANCE; 0: as --off song-start)")
     p.add_argument("--off", default="", help="comma-separated parts of the gate to switch off: break-count (a break danced "
                    "through voids the whole stop count), fresh (the statistics keep their time constant after a silence), resume (the "
@@ -537,13 +601,16 @@ def main(argv: list[str] | None = None) -> int:
                    "voids its count even on a quiet frame heard as no music), veto (an unsure stop network is not "
                    "overruled by a sure voice network), context (a voice heard over the dance before does not hold its "
                    "stop for voice_context.VOICE_HOLD frames), agree (an idle performer does not start where the detector, the stop "
-                   "and the voice network agree on music, the detector under music_gate.MARGIN_START)")
+                   "and the voice network agree on music, the detector under music_gate.MARGIN_START), false-start (the "
+                   "voice-over start starts the dance again after a dance the stop network never heard as music), "
+                   "voiced-song (a song's start the voice-over start made is guarded as any other, at idle_gate.SONG_MARGIN)")
     p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
                    "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "
                    "the gap's first 2.5 s and the next recording's first 1.5 s) or gap:LABEL (a gap between songs as the gaps part "
                    "draws it at --gap-s and --seed, e.g. 'gap:crowd -30': its first 3 s and the music's return) or "
-                   "espeak:SONG/K (espeak-ng host K, 0 or 1, after training song SONG of --parts espeak)")
+                   "espeak:SONG/K (espeak-ng host K, 0 or 1, after training song SONG of --parts espeak) or leadin:CASE "
+                   "(a case of --parts leadin from the stream's start, e.g. 'leadin:espeak-ng host 1': every frame not fully idle)")
     args = p.parse_args(argv)
     parts = set(args.parts.split(","))
     off = {o for o in args.off.split(",") if o}
@@ -561,19 +628,24 @@ def main(argv: list[str] | None = None) -> int:
     from models.networks import music_gate as gate
     from models.training import music_gate as mg
 
-    from models.networks import agreement, veto, voice_context, voice_pauses, voice_start
+    from models.networks import agreement, false_start, veto, voice_context, voice_pauses, voice_start
 
     for arg, const in (("floor_db", "FLOOR_DB"), ("voice_margin", "VOICE_MARGIN"), ("pause_steady", "PAUSE_STEADY"),
                        ("start_evidence", "START_EVIDENCE"), ("start_decay", "START_DECAY"), ("voice_hold", "VOICE_HOLD"),
                        ("gone_floor_db", "GONE_FLOOR_DB"), ("gone_steady", "GONE_STEADY"), ("voice_no", "VOICE_NO"), ("veto_top", "VETO_TOP"),
-                       ("voice_no_run", "VOICE_NO_RUN"), ("agree_stop", "AGREE_STOP"), ("agree_voice", "AGREE_VOICE")):
+                       ("voice_no_run", "VOICE_NO_RUN"), ("agree_stop", "AGREE_STOP"), ("agree_voice", "AGREE_VOICE"),
+                       ("confirm_frames", "CONFIRM_FRAMES"), ("resume_frames", "RESUME_FRAMES")):
         if getattr(args, arg) is not None:  # a constant set on the module that defines it (models/networks/)
-            where = (voice_context, voice_pauses, voice_start, veto, agreement, gate)
+            where = (voice_context, voice_pauses, voice_start, veto, agreement, false_start, gate)
             setattr(next(m for m in where if hasattr(m, const)), const, getattr(args, arg))
-    if args.song_dance is not None:
-        from models.networks import idle_gate
+    from models.networks import idle_gate
 
+    if args.song_dance is not None:
         idle_gate.SONG_DANCE = args.song_dance
+    if args.song_margin is not None:
+        idle_gate.SONG_MARGIN = args.song_margin
+    if args.song_margin_voiced is not None:
+        idle_gate.SONG_MARGIN_VOICED = args.song_margin_voiced
     try:
         lm = load_model(args.checkpoint)
         if not getattr(lm.model, "takes_style", False):

@@ -35,9 +35,12 @@ the count of the fill before it). ``void_breaks_only=False``: every break voids 
 the stop network hears as no music: sweetwaltz and nutcracker with the shared readers over them
 at -6 dB stopped 1.3-1.9 s after they started). A start after :data:`SONG_IDLE` idle frames or
 more (or at the stream's start) is a song's start: for :data:`SONG_DANCE` frames after it the
-detector's stop is void (the count starts again) while the voice network still hears some music
-(its logit above ``-music_gate.MARGIN_STOP``, :meth:`MusicGate.voice_hears`; without one, always):
-a false start on applause, noise or a host alone, where it hears none, stops as before. A break
+detector's stop is void (the count starts again) while the voice network is not sure there is no
+music (its logit above ``-``:data:`SONG_MARGIN`, the veto's ``veto.VOICE_NO``, :meth:`MusicGate.voice_hears`;
+without one, always): a false start on applause, noise or a host alone, where it is sure, stops as before.
+A song's start the voice-over start made (``music_gate``: the voice network heard music under a held floor
+for 1.5 s) is guarded while its logit lies above ``-``:data:`SONG_MARGIN_VOICED` (``voiced_song=False``:
+as any other). A break
 still stops it (silence idles within 3 s as ever). A restart sooner after a stop (a host the
 detector took for music a moment) stops as before. The guard lasts as long as the voice-over context
 needs dance before it may hold a stop (``voice_context.CONTEXT_FRAMES``, 10 s): with 5 s a song with a
@@ -66,7 +69,8 @@ import numpy as np
 
 from models.networks.dance_jit import gate_ema
 from models.networks.dance_vq import GATE_MFCC, GATE_TAU, DanceVQ
-from models.networks.music_gate import ENERGY_COL, FRESH_SILENCE, MARGIN_STOP, START_FRAMES, MusicGate
+from models.networks.music_gate import ENERGY_COL, FRESH_SILENCE, START_FRAMES, MusicGate
+from models.networks.veto import VOICE_NO
 from models.networks.voice_context import CONTEXT_FRAMES
 
 #: Frames without music before the performer starts to settle (0.5 s; with the presence
@@ -105,6 +109,20 @@ BREAK_HOLD: int = 58
 #: 10: docs/presence.md, idle_gate.py --song-dance 270 / 375).
 SONG_IDLE: int = 150
 SONG_DANCE: int = CONTEXT_FRAMES
+#: A song's start is guarded while the voice network's logit lies above -SONG_MARGIN: not sure there is no
+#: music, the veto's threshold (veto.VOICE_NO, 4), not tuned. At MARGIN_STOP (2), before the false start's
+#: doubt (false_start.py), nutcracker's quiet intro under the readers stopped (0 / -6 dB: 3.7 / 1.6 % idle;
+#: 3.4 / 0.8 % at 4), and at 4 without the doubt an espeak-ng host from a stream's start danced 53.6 % of
+#: 30 s instead of 45.3 (the voice-over start restarting what the guard held); at 5 a stream's false
+#: starts on pink noise and a host lasted longer (docs/history-listening.md, idle_gate.py --song-margin).
+SONG_MARGIN: float = VOICE_NO
+#: A song's start the voice-over start made (the voice network heard music under a held floor for 1.5 s,
+#: voice_start.START_EVIDENCE) is guarded while its logit lies above -SONG_MARGIN_VOICED: that evidence
+#: outweighs a moment's doubt. Three times MARGIN_STOP, not tuned: 5, 8 and inf read the same on every
+#: part (nutcracker's intro under the readers at 0 dB: 3.4 -> 1.2 % idle); a start of the detector's keeps
+#: SONG_MARGIN, where 5 lengthened false starts on pink noise and a host (docs/history-listening.md,
+#: idle_gate.py --song-margin-voiced).
+SONG_MARGIN_VOICED: float = 6.0
 #: The quiet return (module docstring): a break that ends on a frame still this many dB or more
 #: under the music's level, heard as no music, voids only what its silent frames counted towards
 #: the stop. Half of BREAK_DB, a round figure, not tuned (docs/presence.md).
@@ -122,6 +140,8 @@ class IdleGate:
     ``presence.voice_rule`` switches it on a running gate); void_breaks_only: False voids the
     whole count when any break is danced through; song_start: False lets the detector stop a song's
     start at once; quiet_return: False voids a break's count on any frame that ends it (module docstring).
+    The attribute ``voiced_song`` (True) guards a song's start the voice-over start made at
+    :data:`SONG_MARGIN_VOICED`, not :data:`SONG_MARGIN`.
 
     State (``reset``): ``music`` (bool), ``run`` (frames of disagreement, weighted),
     ``w_idle`` (0..1), ``level`` (dB), ``break_frames`` (the current break's length),
@@ -129,7 +149,7 @@ class IdleGate:
     ``break_kept`` (the count a quiet return keeps: ``run`` before the break and what its audible frames
     heard as no music counted since a frame of it was last heard as music),
     ``idle_frames`` (frames idle in a row), ``danced`` (frames since a song's start, capped at
-    SONG_DANCE), ``forced_idle``.
+    SONG_DANCE), ``voiced`` (the voice-over start made the last start), ``forced_idle``.
     """
 
     def __init__(self, model: DanceVQ, feat_mean: np.ndarray, feat_std: np.ndarray, hold_breaks: bool = True,
@@ -139,6 +159,7 @@ class IdleGate:
         self.quiet_return = bool(quiet_return)
         self.hold_breaks = bool(hold_breaks)
         self.song_start = bool(song_start)
+        self.voiced_song = True  # a song's start the voice-over start made: guarded at SONG_MARGIN_VOICED
         self.void_breaks_only = bool(void_breaks_only)
         self.energy_min, self._gate_b = (float(v) for v in model.gate)
         self._ecol = c.energy_col if 0 <= c.energy_col < c.feature_dim else None
@@ -169,6 +190,7 @@ class IdleGate:
         self.break_kept = 0.0  # the count a quiet return keeps (all but what the break's silent frames counted)
         self.idle_frames = SONG_IDLE  # frames idle in a row: a stream's first start is a song's start
         self.danced = SONG_DANCE  # frames since a song's start (SONG_DANCE: none to protect)
+        self.voiced = False  # the voice-over start made the last start
         self.present = False  # the detector's verdict on the last frame
         self._ema = np.zeros(len(self._gcols))  # the logistic detector's running mean
         if self.presence is not None:
@@ -225,8 +247,10 @@ class IdleGate:
                     self.run = max(self.run, self.break_kept)  # frames counted stays
         if self.presence is not None:
             self.presence.veto.counting = self.music and self.run > 0.0  # the veto's reach (veto.VETO_TOP)
+        heard_by_voice = self.presence.voice_start.frames if self.presence is not None else 0
         present = self._detector(row)
         self.present = present
+        heard_by_voice = self.presence is not None and self.presence.voice_start.frames > heard_by_voice  # voice-over start
         if self.music and not present and not self.break_frames and self.presence is not None:
             held = held or self.presence.voice_holds()  # a voice heard over this dance before: voice_context.VOICE_HOLD
         count = 1.0  # a sure detector counts a frame as more than one (music_gate.SURE_COUNT)
@@ -240,9 +264,11 @@ class IdleGate:
         self.danced = min(SONG_DANCE, self.danced + 1)
         if self.run >= (start if present else ABSENT_FRAMES) and not held:
             protect = self.song_start and self.danced < SONG_DANCE and not self.break_frames
-            if present or not (protect and (self.presence is None or self.presence.voice_hears(MARGIN_STOP))):
+            margin = SONG_MARGIN_VOICED if self.voiced else SONG_MARGIN
+            if present or not (protect and (self.presence is None or self.presence.voice_hears(margin))):
                 if present:  # a start after SONG_IDLE idle frames is a song's start: danced SONG_DANCE frames
                     self.danced = 0 if self.idle_frames >= SONG_IDLE else SONG_DANCE
+                    self.voiced = heard_by_voice and self.voiced_song
                 self.music, self.run = present, 0.0
             else:
                 self.run = 0.0  # a song's start: the detector's stop is void, the count starts again

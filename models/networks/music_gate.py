@@ -97,6 +97,7 @@ import numpy as np
 from numba import njit
 
 from models.networks.agreement import Agreement
+from models.networks.false_start import FalseStart
 from models.networks.veto import Veto
 from models.networks.voice_context import VoiceContext
 from models.networks.voice_pauses import VoicePauses, pause_steadiness
@@ -331,6 +332,7 @@ class MusicGate:
         self.voice_context = VoiceContext(release=self._scol >= 0)  # a voice heard over this dance before
         self.veto = Veto(self.has_voice, veto_rule)  # the voice network sure of no music (module docstring)
         self.agreement = Agreement(self.has_stop and self.has_voice)  # the three networks agree: an idle frame is music
+        self.false_start = FalseStart()  # a dance the stop network never heard as music: false_start.py
         self.pauses = VoicePauses(pause_rule)  # the music heard in the voice's pauses (module docstring)
         self.voice_start = VoiceStart(start_rule, resume_rule)  # the voice-over start and the resume
         # bound once, not a frame: the callbacks, the pause rule's rings (sound_cues advances them)
@@ -367,6 +369,7 @@ class MusicGate:
         self.voice_start.reset()
         self.veto.reset()
         self.agreement.reset()
+        self.false_start.reset()
 
     def step(self, row: np.ndarray, dancing: bool) -> bool:
         """True when frame ``row`` (D,) sounds like music to a performer that is ``dancing``."""
@@ -387,11 +390,13 @@ class MusicGate:
                    float(row[self._scol]) if self._scol >= 0 else math.nan, self._cues)
         self.floor_db, self.pause_steady = float(self._cues[0]), float(self._cues[1])
         self.agreement.has_danced = self.agreement.has_danced or dancing
+        self.false_start.step(dancing, self.logit)
         if not dancing:
             self.voice_context.step(False, True, False)  # the voice-over context runs on while idle, nothing kept
             if self.logit > MARGIN_START:
                 return True
             voiced = self.voice_rule and self.voice_start.hears(self._over)  # its count runs on every such frame
+            voiced = voiced and self.false_start.trusts()  # not after a false start (false_start.py)
             return voiced or self.agreement.hears(self.logit, self._stop_z, self._voice_z)
         if self.logit > -MARGIN_STOP:
             # the veto reaches 0 (VETO_TOP while a count runs): most frames of a song skip the call
