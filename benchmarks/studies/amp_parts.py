@@ -44,20 +44,6 @@ BANDS: tuple[tuple[float, float], ...] = ((0.0, 0.25), (0.25, 0.5), (0.5, 1.0), 
 DEFAULT_PARTS = ("shipped=", "match=stream.SPEED_MATCH=0", "carry=stream.VEL_CAP=0", "decay24=stream.DECAY_FRAMES=24")
 
 
-def band_energy(pos: np.ndarray, band: tuple[float, float], fps: float = 30.0) -> np.ndarray:
-    """The band's energy (J, 3) of positions ``pos`` (T, J, 3) m at ``fps``, summed over frames
-    (m² frames): ``models.evaluation.metrics._band_energy`` per point and axis."""
-    x = pos - pos.mean(axis=0)
-    spec = np.fft.rfft(x, axis=0)
-    freq = np.fft.rfftfreq(len(x), 1.0 / fps)
-    w = np.full(freq.shape, 2.0)
-    w[0] = 1.0
-    if len(x) % 2 == 0:
-        w[-1] = 1.0
-    keep = (freq >= band[0]) & (freq <= band[1])
-    return (w[keep, None, None] * np.abs(spec[keep]) ** 2).sum(axis=0) / len(x)
-
-
 def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], parts: list[tuple], cache: str,
         songs: bool, points: bool) -> None:
     """Print the table (see the module docstring)."""
@@ -66,7 +52,7 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], pa
     import torch
 
     from models.evaluation.evaluate import positions
-    from models.evaluation.metrics import DANCE_BAND, in_place
+    from models.evaluation.metrics import DANCE_BAND, FPS, band_energy_points, in_place
     from models.networks import dance_stream
     from models.networks.dance_jit import joint_speed
     from models.rig.skeleton import POINT_INDEX
@@ -112,7 +98,7 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], pa
 
     lm, clips = validation_clips(data_root, checkpoint, cache)
     real = {c.name: in_place(positions(c.poses)) for c in clips}
-    r_band = {c: {b: band_energy(p, b) for b in (DANCE_BAND,) + BANDS} for c, p in real.items()}
+    r_band = {c: {b: band_energy_points(p, b, FPS) for b in (DANCE_BAND,) + BANDS} for c, p in real.items()}
     names = {i: n for n, i in POINT_INDEX.items()}
 
     def ratio(gen: dict, keys, band, sl=np.s_[...]) -> float:
@@ -133,13 +119,13 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], pa
                         s = Probe(lm.model, seed=seed, feet=feet_on, **kw)
                         with torch.no_grad():
                             pos = in_place(positions(s.push(c.features)))
-                        gen[c.name] = {b: band_energy(pos, b) for b in (DANCE_BAND,) + BANDS}
+                        gen[c.name] = {b: band_energy_points(pos, b, FPS) for b in (DANCE_BAND,) + BANDS}
                         logs += s.log
                         w = np.array(s.idle)
                         idle.append(w > 0.5)
                         cut = int(np.argmax(w <= 0.0)) if (w <= 0.0).any() else 0
-                        dancing[0] += band_energy(pos[cut:], DANCE_BAND).sum()
-                        dancing[1] += band_energy(real[c.name][cut:], DANCE_BAND).sum()
+                        dancing[0] += band_energy_points(pos[cut:], DANCE_BAND, FPS).sum()
+                        dancing[1] += band_energy_points(real[c.name][cut:], DANCE_BAND, FPS).sum()
                 finally:
                     _restore(old)
                 keys = list(gen)

@@ -456,8 +456,8 @@ def in_place(pos: np.ndarray, root: int = 0) -> np.ndarray:
     return out
 
 
-def _band_energy(x: np.ndarray, band: tuple[float, float], fps: float) -> float:
-    """Sum over frames, joints and axes of the squared band part of ``x (T, J, 3)``, m²·frames.
+def band_energy_points(x: np.ndarray, band: tuple[float, float], fps: float) -> np.ndarray:
+    """Per joint and axis ``(J, 3)``, the sum over frames of the squared band part of ``x (T, J, 3)``, m²·frames.
 
     ``x`` minus its mean over time, real FFT along time; by Parseval the energy of
     the band-passed signal is ``sum_k w_k |X_k|² / T`` over the bins ``k`` with
@@ -471,8 +471,13 @@ def _band_energy(x: np.ndarray, band: tuple[float, float], fps: float) -> float:
     if t % 2 == 0:
         weight[-1] = 1.0
     keep = (freq >= band[0]) & (freq <= band[1])
-    power = np.sum(spec[keep].real ** 2 + spec[keep].imag ** 2, axis=(1, 2))
-    return float(np.sum(weight[keep] * power) / t)
+    power = spec[keep].real ** 2 + spec[keep].imag ** 2
+    return np.tensordot(weight[keep], power, axes=1) / t
+
+
+def _band_energy(x: np.ndarray, band: tuple[float, float], fps: float) -> float:
+    """:func:`band_energy_points` summed over joints and axes, m²·frames."""
+    return float(band_energy_points(x, band, fps).sum())
 
 
 def _band(band: tuple[float, float], name: str = "band") -> tuple[float, float]:
