@@ -247,10 +247,8 @@ class IdleGate:
                     self.run = max(self.run, self.break_kept)  # frames counted stays
         if self.presence is not None:
             self.presence.veto.counting = self.music and self.run > 0.0  # the veto's reach (veto.VETO_TOP)
-        heard_by_voice = self.presence.voice_start.frames if self.presence is not None else 0
         present = self._detector(row)
         self.present = present
-        heard_by_voice = self.presence is not None and self.presence.voice_start.frames > heard_by_voice  # voice-over start
         if self.music and not present and not self.break_frames and self.presence is not None:
             held = held or self.presence.voice_holds()  # a voice heard over this dance before: voice_context.VOICE_HOLD
         count = 1.0  # a sure detector counts a frame as more than one (music_gate.SURE_COUNT)
@@ -268,7 +266,7 @@ class IdleGate:
             if present or not (protect and (self.presence is None or self.presence.voice_hears(margin))):
                 if present:  # a start after SONG_IDLE idle frames is a song's start: danced SONG_DANCE frames
                     self.danced = 0 if self.idle_frames >= SONG_IDLE else SONG_DANCE
-                    self.voiced = heard_by_voice and self.voiced_song
+                    self.voiced = self.voiced_song and self.presence is not None and self.presence.voiced
                 self.music, self.run = present, 0.0
             else:
                 self.run = 0.0  # a song's start: the detector's stop is void, the count starts again

@@ -308,7 +308,8 @@ class MusicGate:
     keep the dance whatever the voice network hears; context_rule: False switches the voice-over
     context off (module docstring). The attribute ``agree_rule`` (True) switches the three networks'
     agreement on an idle frame (module docstring); ``agreement.frames``, ``pauses.frames`` and
-    ``voice_start.frames`` count the frames the agreement, the pause rule and the start heard as music.
+    ``voice_start.frames`` count the frames the agreement, the pause rule and the start heard as music;
+    ``voiced`` says whether the voice-over start (trusted, ``false_start.py``) heard the last frame as music.
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
@@ -361,6 +362,7 @@ class MusicGate:
         self._ring_at[0] = 0.0
         self.floor_db = 0.0  # the log energy's range over the last FLOOR_FRAMES sounding frames
         self.voice_frames = 0  # frames the voice-over rule kept as music
+        self.voiced = False  # the voice-over start heard this (idle) frame as music
         self.pause_steady = -math.inf  # the steadiness in the voice's pauses (-inf: no steadiness column)
         self.silent = 0  # silent frames in a row
         self.fresh = 0  # sounding frames left at the idle time constant (after a silence)
@@ -373,6 +375,7 @@ class MusicGate:
 
     def step(self, row: np.ndarray, dancing: bool) -> bool:
         """True when frame ``row`` (D,) sounds like music to a performer that is ``dancing``."""
+        self.voiced = False
         if float(row[ENERGY_COL]) <= self.energy_min:
             self.silent += 1
             return False  # silence: the statistics wait for sound
@@ -396,8 +399,8 @@ class MusicGate:
             if self.logit > MARGIN_START:
                 return True
             voiced = self.voice_rule and self.voice_start.hears(self._over)  # its count runs on every such frame
-            voiced = voiced and self.false_start.trusts()  # not after a false start (false_start.py)
-            return voiced or self.agreement.hears(self.logit, self._stop_z, self._voice_z)
+            self.voiced = voiced and self.false_start.trusts()  # not after a false start (false_start.py)
+            return self.voiced or self.agreement.hears(self.logit, self._stop_z, self._voice_z)
         if self.logit > -MARGIN_STOP:
             # the veto reaches 0 (VETO_TOP while a count runs): most frames of a song skip the call
             if (self.logit <= 0.0 or self.veto.counting) and self.veto.vetoes(self.logit, self.floor_db < FLOOR_DB,

@@ -56,7 +56,7 @@ class VoiceStart:
         if not self.rule:
             return False
         ev = voice_over()
-        self.evidence = min(START_EVIDENCE, self.evidence + 1.0) if ev else max(0.0, self.evidence - START_DECAY)
+        self._count(ev)
         if ev and self.evidence >= START_EVIDENCE:
             self.frames += 1
             return True
@@ -67,7 +67,9 @@ class VoiceStart:
         START_DECAY where not; 0 with the resume, the start or the voice-over rule (``voice_rule``) off."""
         if not (voice_rule and self.rule and self.resume_rule):
             self.evidence = 0.0
-        elif kept:
-            self.evidence = min(START_EVIDENCE, self.evidence + 1.0)
         else:
-            self.evidence = max(0.0, self.evidence - START_DECAY)
+            self._count(kept)
+
+    def _count(self, up: bool) -> None:
+        """The count up 1 (capped at START_EVIDENCE) or down START_DECAY (floored at 0)."""
+        self.evidence = min(START_EVIDENCE, self.evidence + 1.0) if up else max(0.0, self.evidence - START_DECAY)
