@@ -60,6 +60,8 @@ FORMATS: tuple[str, ...] = ("binary", "json")
 WS_PATHS: tuple[str, ...] = ("/", "/ws")
 #: The show desk's path (realtime/desk.py): status messages, no frames; the viewers' token rules.
 DESK_PATH: str = "/desk"
+#: Longest a WebSocket client waits, seconds, while the caller still adds routes (``routes_pending``).
+ROUTES_WAIT_S: float = 10.0
 _DESK = "#desk"  # the route key of desk clients (no performer's path can be it)
 #: Close codes (RFC 6455) sent to refused clients.
 CLOSE_POLICY = 1008  # bad or missing token, unknown format, message rate exceeded
@@ -245,6 +247,10 @@ class WebSocketSink:
         stall_timeout: a client whose queue is full and that has taken no message for
             this many seconds is disconnected (TCP abort; it frees its slot).
         rig, names, fps: described to clients in the hello message.
+        routes_pending: the caller adds its performers' routes after the server listens and
+            calls :meth:`routes_done` when all are in; until then (at most
+            :data:`ROUTES_WAIT_S`) a client of a path not yet routed waits instead of a 404,
+            so a receiver that connects early to ``/ws/bob`` gets bob's hello.
     """
 
     def __init__(
@@ -269,6 +275,7 @@ class WebSocketSink:
         rig: str = "humanoid",
         names: Mapping[str, str] | None = None,
         fps: float = FPS,
+        routes_pending: bool = False,
     ) -> None:
         if max_clients < 1 or queue_frames < 1:
             raise ConfigError("WebSocket max_clients and queue_frames must be at least 1")
@@ -304,6 +311,9 @@ class WebSocketSink:
         self._states: dict[str | None, str] = {}  # the latest state message per route path (None: own stream)
         self._default_route: str | None = None  # the route "/" and "/ws" clients get (None: the server's own)
         self._open_routes = 0
+        self._routes_in = threading.Event()  # set: every route the caller will add is in
+        if not routes_pending:
+            self._routes_in.set()
         self._route_drops: dict[str | None, int] = {}
         self._outbox: deque[tuple[bytes, str | None]] = deque()  # engine thread -> loop (deque ops are atomic)
         self._wake_pending = False
@@ -446,6 +456,10 @@ class WebSocketSink:
         if default:
             self._default_route = path
         return route
+
+    def routes_done(self) -> None:
+        """Every route is in: clients of unknown paths get their 404 now (``routes_pending``)."""
+        self._routes_in.set()
 
     @property
     def routes(self) -> dict[str, WebSocketRoute]:
@@ -774,6 +788,8 @@ class WebSocketSink:
     async def _process_request(self, connection: ServerConnection, request: Request) -> Response | None:
         url = urlsplit(request.path)
         if "websocket" in request.headers.get("Upgrade", "").lower():
+            if not self._routes_in.is_set():  # the caller is still adding routes (and /ws's default)
+                await asyncio.to_thread(self._routes_in.wait, ROUTES_WAIT_S)
             if url.path in WS_PATHS or url.path in self._routes or url.path == DESK_PATH:
                 return None
             known = ", ".join(["/ws", *self._routes])

@@ -393,3 +393,29 @@ def test_the_engine_tells_the_viewer_its_performers_stage_at_start_and_on_contro
     finally:
         eng.wait(10)
         eng.stop()
+
+
+def test_a_client_of_a_performer_path_waits_while_routes_are_being_added(sink_factory):
+    """performer run adds its performers' routes after the server listens: a receiver that
+    connects to /ws/bob in that moment gets bob's hello, and a /ws client alice's (the default),
+    not a 404 or the server's own stream; a path never routed still gets its 404 once all are in."""
+    sink = sink_factory(routes_pending=True)
+    got: dict[str, object] = {}
+
+    def client(path: str) -> None:
+        try:
+            with connect(sink.ws_url.removesuffix("/ws") + path, open_timeout=15) as ws:
+                got[path] = _hello(ws)["performer"]
+        except InvalidStatus as exc:
+            got[path] = exc.response.status_code
+
+    threads = [threading.Thread(target=client, args=(p,)) for p in ("/ws/bob", "/ws", "/ws/nobody")]
+    for t in threads:
+        t.start()
+    time.sleep(0.5)  # the clients are at the door before any route exists
+    sink.route("/ws/alice", "alice", default=True)
+    sink.route("/ws/bob", "bob")
+    sink.routes_done()
+    for t in threads:
+        t.join(20)
+    assert got == {"/ws/bob": "bob", "/ws": "alice", "/ws/nobody": 404}

@@ -258,7 +258,8 @@ def _open_ensemble(cfg, specs, source, fallback):
         ws = cfg.ws_endpoint()
         if ws is not None:
             server = WebSocketSink(*ws, token=cfg.ws_token, viewers_open=cfg.ws_viewers_open,
-                                   max_clients=cfg.ws_max_clients, allowed_origins=cfg.ws_origin or None)
+                                   max_clients=cfg.ws_max_clients, allowed_origins=cfg.ws_origin or None,
+                                   routes_pending=True)  # an early /ws/NAME client waits for its route
         routes = open_routes(cfg, [spec.name for spec in specs])  # --publish: one subject each
         opened += routes
         performers = []
@@ -277,6 +278,8 @@ def _open_ensemble(cfg, specs, source, fallback):
             performers.append(Performer(spec.name, pipe.model, pipe.extractor_factory, sinks,
                                         feature_key=pipe.feature_key, smoothing=spec.smoothing,
                                         offset_ms=spec.offset_ms, phase=spec.phase))
+        if server is not None:
+            server.routes_done()
         engine = Engine(
             source, config=EngineConfig(smoothing=cfg.smoothing, offset_ms=cfg.offset_ms, threads=cfg.threads,
                                         warmup_s=cfg.warmup, duration_s=cfg.duration,
