@@ -521,9 +521,15 @@ def test_ensemble_budget_passes_clean_and_fails_a_planted_regression(tmp_path, c
     to every hop, the whole hop's budget hop_cycle_over_reference_4 fails."""
     budgets = REPO / "benchmarks" / "budgets.toml"
     verdicts, lines = {}, []
-    for name, extra in (("clean", []), ("planted", ["--inject-ms", "1", "--inject-every", "8"]),
-                        ("every hop", ["--inject-ms", "2", "--inject-every", "1"])):
-        out = tmp_path / name.replace(" ", "_")
+    # the clean run twice at most: a ratio of two CPU times on a shared 2-core machine reads
+    # 2.2-2.3 against its 2.6 budget and once read 2.72 (a fresh `make test`, load 0.9);
+    # a real regression fails both tries, as the planted ones below do
+    runs = (("clean", []), ("clean, again", []), ("planted", ["--inject-ms", "1", "--inject-every", "8"]),
+            ("every hop", ["--inject-ms", "2", "--inject-every", "1"]))
+    for name, extra in runs:
+        if name == "clean, again" and verdicts["clean"][0] == 0 and all(x.ok for x in verdicts["clean"][1].values()):
+            continue
+        out = tmp_path / name.replace(" ", "_").replace(",", "")
         code = main(["bench", "ensemble", "--counts", "4", "--no-separate", "--unstaggered", "--seconds", "10",
                      "--out", str(out), "--budgets", str(budgets), *extra])
         printed = capsys.readouterr().out
@@ -535,7 +541,7 @@ def test_ensemble_budget_passes_clean_and_fails_a_planted_regression(tmp_path, c
               f"{m['hop_cycle_over_reference_4']:.2f}; own p99 {m['per_hop_ms_p99_own_4']:.2f}; wall p99 "
               f"{m['per_hop_ms_p99_4']:.2f}; other processes {m['others_busy_percent']:.0f}% of the CPUs")
     print("\n".join(lines))
-    code, v, printed = verdicts["clean"]
+    code, v, printed = verdicts.get("clean, again", verdicts["clean"])
     assert code == 0 and all(x.ok for x in v.values()), printed
     code, v, printed = verdicts["every hop"]  # work on every hop, as an input-stage regression would add
     assert code == 1 and not v["hop_cycle_over_reference_4"].ok, printed
