@@ -98,6 +98,7 @@ from numba import njit
 
 from models.networks.agreement import Agreement
 from models.networks.false_start import FalseStart
+from models.networks.lone_voice import LoneVoice
 from models.networks.veto import Veto
 from models.networks.voice_context import VoiceContext
 from models.networks.voice_pauses import VoicePauses, pause_steadiness
@@ -335,6 +336,7 @@ class MusicGate:
         self.agreement = Agreement(self.has_stop and self.has_voice)  # the three networks agree: an idle frame is music
         self.false_start = FalseStart()  # a dance the stop network never heard as music: false_start.py
         self.pauses = VoicePauses(pause_rule)  # the music heard in the voice's pauses (module docstring)
+        self.lone = LoneVoice()  # no voice heard over a judged dance: a sure voice network overrules the pause rule
         self.voice_start = VoiceStart(start_rule, resume_rule)  # the voice-over start and the resume
         # bound once, not a frame: the callbacks, the pause rule's rings (sound_cues advances them)
         self._stop_z, self._voice_z, self._over = self._stop_logit, self._voice_logit, self._voice_over
@@ -372,10 +374,11 @@ class MusicGate:
         self.veto.reset()
         self.agreement.reset()
         self.false_start.reset()
+        self.lone.reset()
 
     def step(self, row: np.ndarray, dancing: bool) -> bool:
         """True when frame ``row`` (D,) sounds like music to a performer that is ``dancing``."""
-        self.voiced = False
+        self.voiced = self.lone.holding = False
         if float(row[ENERGY_COL]) <= self.energy_min:
             self.silent += 1
             return False  # silence: the statistics wait for sound
@@ -412,7 +415,8 @@ class MusicGate:
                 self.voice_start.resume(False, self.voice_rule)
             self.voice_context.step(False, True, True)
             return True
-        if not (self.voice_rule and self.pauses.keeps(self.pause_steady)):  # the music heard in the voice's pauses
+        # the music heard in the voice's pauses, unless a lone voice (lone_voice.py)
+        if not (self.voice_rule and self.lone.pause_keeps(self.pauses, self.pause_steady, self.voice_context, self._voice_z)):
             if not (self.voice_rule and self._voice_over()):
                 self.voice_start.resume(False, self.voice_rule)
                 self.voice_context.step(False, False, True)
