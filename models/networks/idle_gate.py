@@ -55,7 +55,8 @@ break and the break's audible frames counted (only its silent frames are void), 
 the count) stops the dance as the detector says. ``quiet_return=False`` switches it off.
 
 After :data:`ABSENT_FRAMES` frames without music (a sure detector's frame counting up to
-twice, ``music_gate.SURE_COUNT``) the performer fades over :data:`FADE_FRAMES` into the idle;
+twice, ``music_gate.SURE_COUNT``; a frame the pause rule keeps for a lone voice holds the count, neither
+counting nor clearing it: ``lone_voice.py``) the performer fades over :data:`FADE_FRAMES` into the idle;
 after ``music_gate.START_FRAMES`` (:data:`PRESENT_FRAMES` with the logistic detector) frames
 of music it fades back. ``forced_idle`` holds the idle whatever the music (the show's
 ``/performer/idle``).

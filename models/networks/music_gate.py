@@ -87,6 +87,11 @@ does (:mod:`models.networks.voice_pauses`, composed here). ``pause_rule=False`` 
 which a voice has been heard over the music before holds its stop a while, unless the music is gone
 (:mod:`models.networks.voice_context`, composed here: :meth:`MusicGate.voice_holds`).
 ``context_rule=False`` switches the context off.
+
+**The lone voice** (part of the voice-over rule; issue 43, a host after a song): in a dance the
+voice-over context has judged and heard no voice over, the pause rule does not keep a frame the voice
+network is sure of, and one it leans to holds the stop count (:mod:`models.networks.lone_voice`,
+composed here; ``lone.holding``, read by the idle gate). ``lone.rule = False`` switches it off.
 """
 
 from __future__ import annotations
@@ -310,7 +315,9 @@ class MusicGate:
     context off (module docstring). The attribute ``agree_rule`` (True) switches the three networks'
     agreement on an idle frame (module docstring); ``agreement.frames``, ``pauses.frames`` and
     ``voice_start.frames`` count the frames the agreement, the pause rule and the start heard as music;
-    ``voiced`` says whether the voice-over start (trusted, ``false_start.py``) heard the last frame as music.
+    ``voiced`` says whether the voice-over start (trusted, ``false_start.py``) heard the last frame as music;
+    ``lone`` is the lone voice (``lone_voice.py``: ``lone.rule`` switches it, ``lone.holding`` says the last
+    frame holds the stop count).
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
