@@ -17,6 +17,7 @@ import torch
 
 from models.networks import agreement as ag
 from models.networks import false_start as fs
+from models.networks import lone_voice as lv
 from models.networks import music_gate as mg
 from models.networks import veto
 from models.networks import voice_context as vc
@@ -470,6 +471,36 @@ def test_an_espeak_host_from_a_streams_start_dances_less_thanks_to_the_doubt(lm)
     assert on < 0.30 and off > 0.40, (on, off)
 
 
+def test_espeak_hosts_after_a_song_idle_within_2_s_thanks_to_the_lone_voice(lm, dwm_root) -> None:
+    """Issue 43: espeak-ng hosts 1 after DANCE_W_15 and DANCE_W_17 of ``idle_gate.py --parts espeak`` (its
+    draw: 20 s of the song, 10 s of a host at its level, the next song). The pause rule kept the hosts'
+    first words as music (their vowels hold their pitch as a song's notes) and a steady pause of theirs
+    sent a stop count of 14 back to 0: fully idle 2.23 s after the song. With the lone voice, within 2 s
+    (1.90 / 1.70 s); switched off, over 2 s again."""
+    from models.features.spectral import extract_features
+    from models.networks.dance_stream import DanceStream
+
+    needs_espeak()
+    if float(lm.model.presence_voice.abs().sum()) == 0 or lm.model.config.gate_col < 0:
+        pytest.skip(f"{lm.path} has no voice network or steadiness column (refit: {REFIT} --voice-network)")
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    for host in ("DANCE_W_15/1", "DANCE_W_17/1"):
+        audio, g0, g1, known = ig.espeak_host(dwm_root, host)
+        if audio is None:
+            pytest.skip(f"host {host} not drawn from this dataset's training songs ({', '.join(known)})")
+        feats = extract_features(audio, lm.features)
+
+        def settle(rule: bool) -> float | None:
+            stream = DanceStream(lm.model, seed=7)
+            stream._idle.presence.lone.rule = rule
+            w = stream.listen(feats)
+            idle = np.flatnonzero(w[g0:g1] >= 1.0)
+            return (idle[0] + 1) / 30 if len(idle) else None
+
+        on, off = settle(True), settle(False)
+        assert on is not None and on <= 2.0 and (off is None or off > 2.0), (host, on, off)
+
+
 def test_an_idle_performer_starts_where_the_three_networks_agree_on_music() -> None:
     """The three networks' agreement (issue 43, back within 1 s): a performer that has danced (one frame)
     and is idle again, whose detector leans to music but stays under MARGIN_START (logit +1), with a stop
@@ -573,6 +604,43 @@ def level_network(db: float) -> np.ndarray:
     w2 = np.zeros(mg.HIDDEN)
     w2[0] = 10.0
     return mg.pack(np.zeros(mg.N_STATS), np.ones(mg.N_STATS), w1, b1, w2, 0.0)
+
+
+def test_a_lone_voice_after_a_song_is_not_kept_by_the_pause_rule() -> None:
+    """The lone voice (issue 43: an espeak-ng host after a song): a stop network that hears music at -10 dB
+    and none at -20, a steadiness column (61). A performer dances CONTEXT_FRAMES + 30 frames of music, then
+    a voice alone at -20 dB whose pauses (every fourth frame, 12 dB down) hold their steadiness (0.5: an
+    espeak-ng voice's vowels): the pause rule would keep it. With the voice network sure there is no music
+    (-VOICE_NO - 1) its last frames are not music; with it leaning that way (-VOICE_NO_RUN - 1) they are,
+    and hold the stop count (``lone.holding``); hearing some music (0), neither. As before (kept, no
+    holding) with the lone voice switched off, after a dance shorter than CONTEXT_FRAMES, or where a voice
+    was heard over the music before (frames 100-130, the pause rule keeping them)."""
+    d, scol = 64, 61
+    row = np.random.default_rng(0).normal(size=d).astype(np.float32)
+    sure, leaning = -veto.VOICE_NO - 1.0, -veto.VOICE_NO_RUN - 1.0
+
+    def hears(voice: float, before: int = vc.CONTEXT_FRAMES + 30, voiced: bool = False,
+              rule: bool = True) -> tuple[list[bool], list[bool]]:
+        g = mg.MusicGate(np.zeros(d), np.ones(d), constant_network(10.0), -60.0, clarity_col=60, steadiness_col=scol,
+                         stop_params=level_network(-15.0), voice_params=constant_network(voice))
+        g.lone.rule = rule
+        out, holding = [], []
+        for k in range(before + 60):
+            r = row.copy()
+            alone = k >= before or (voiced and 100 <= k < 130)
+            r[mg.ENERGY_COL] = -10.0 if not alone else -32.0 if k % 4 == 3 else -20.0
+            r[scol] = 0.5
+            out.append(g.step(r, True))
+            holding.append(g.lone.holding)
+        return out[-20:], holding[-20:]
+
+    assert hears(sure) == ([False] * 20, [False] * 20)
+    assert hears(leaning) == ([True] * 20, [True] * 20)
+    kept = ([True] * 20, [False] * 20)
+    assert hears(0.0) == kept
+    assert hears(sure, rule=False) == kept and hears(leaning, rule=False) == kept
+    assert hears(sure, before=vc.CONTEXT_FRAMES - 100) == kept
+    assert hears(sure, voiced=True) == kept
 
 
 def test_a_voice_heard_over_the_dance_before_holds_its_stop() -> None:

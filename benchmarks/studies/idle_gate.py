@@ -89,7 +89,9 @@ starts on its detector over ``music_gate.MARGIN_START`` only, not where the thre
 ``false-start`` (the voice-over start may start the dance again after a dance the stop network never
 heard as music: ``false_start.CONFIRM_FRAMES``, which ``--confirm-frames`` sets, with ``--resume-frames``
 its ``RESUME_FRAMES``), ``voiced-song`` (a song's start the voice-over start made is guarded at
-``idle_gate.SONG_MARGIN`` as any other, not ``SONG_MARGIN_VOICED``). ``--trace`` prints the gate's
+``idle_gate.SONG_MARGIN`` as any other, not ``SONG_MARGIN_VOICED``), ``lone-voice`` (the pause rule keeps a
+frame whatever the voice network hears in a dance the voice-over context heard no voice over:
+``lone_voice.py``). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, through a reader
 after a recording and the next recording's start, or through a gap between songs and the music's
 return (``gap:LABEL``), or through an espeak-ng host after a training song (``espeak:SONG/K``),
@@ -146,12 +148,13 @@ SETTLE_TARGET_S: dict[str, float] = {"silence": 3.0, "speech": 2.0}
 SETTLE_TARGET_OTHER_S: float = 2.5
 
 
-#: Parts of the gate ``--off`` switches off: name -> (``IdleGate``, its ``MusicGate`` or that one's ``false_start``, attribute).
+#: Parts of the gate ``--off`` switches off: name -> (``IdleGate``, its ``MusicGate`` or a part that one composes
+#: (``false_start``, ``lone``), attribute).
 SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_only"), "fresh": ("presence", "fresh_rule"),
                                         "resume": ("presence", "resume_rule"), "song-start": ("idle", "song_start"),
                                         "quiet-return": ("idle", "quiet_return"), "veto": ("presence", "veto_rule"),
                                         "context": ("presence", "context_rule"),
-                                        "agree": ("presence", "agree_rule"), "false-start": ("false_start", "rule"),
+                                        "agree": ("presence", "agree_rule"), "false-start": ("false_start", "rule"), "lone-voice": ("lone", "rule"),
                                         "voiced-song": ("idle", "voiced_song")}
 #: The switches ``--off`` named (set by main).
 OFF: set[str] = set()
@@ -165,8 +168,8 @@ def new_stream(lm, seed: int):
     for name in OFF:
         where, attr = SWITCHES[name]
         part = stream._idle if where == "idle" else stream._idle.presence
-        if part is not None and where == "false_start":  # a part the MusicGate composes
-            part = part.false_start
+        if part is not None and where in ("false_start", "lone"):  # a part the MusicGate composes
+            part = getattr(part, where)
         if part is not None:
             setattr(part, attr, False)
     return stream
@@ -178,7 +181,8 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
     detector's verdict), the stop or start logit (running mean), the voice network's logit, the
     floor (dB range over 1 s), the pauses' steadiness, kept by the voice-over (V) or pause (P) rule
     or heard as music by the three networks' agreement (A) or the voice-over start held back by a false
-    start's doubt (D), the stop count, the break's frames, the log
+    start's doubt (D) or not kept by the pause rule for a lone voice (L, ``lone_voice.py``), the stop count, the
+    break's frames, the log
     energy (dB), the voice-over context (frames kept 10 s to 2.5 s ago: ``voice_context.CONTEXT_MIN`` holds
     the stop), and three statistics: the log energy's spread (dB), the pulse clarity, the beat phase's
     coherence. An empty window: every stop of the
@@ -191,11 +195,11 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
         return ["(no presence detector: nothing to trace)"]
     rows, music = [], []
     for t in range(len(feats)):
-        kv, kp, ka, kd = pg.voice_frames, pg.pauses.frames, pg.agreement.frames, pg.false_start.frames
+        kv, kp, ka, kd, kl = pg.voice_frames, pg.pauses.frames, pg.agreement.frames, pg.false_start.frames, pg.lone.frames
         w = ig.step(np.asarray(feats[t], np.float32))
         vz = presence_logit(pg.stats, *pg._voice) if pg.has_voice else float("nan")
         kept = ("V" if pg.voice_frames > kv else "P" if pg.pauses.frames > kp else "A" if pg.agreement.frames > ka
-                else "D" if pg.false_start.frames > kd else "-")
+                else "D" if pg.false_start.frames > kd else "L" if pg.lone.frames > kl else "-")
         music.append(ig.music)
         rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
                     f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.voice_context.count:3d}"
@@ -507,18 +511,20 @@ def print_leadin_trace(lm, args, speech: list) -> int:
     return 0
 
 
-def print_espeak_trace(lm, args) -> int:
-    """``--trace espeak:SONG/K``: the gate's state frame by frame through host K (0 or 1) after the
-    training song SONG of ``--parts espeak`` (drawn as :func:`espeak_rows` draws them): the gap's
-    first 2.5 s and the next song's first 1.5 s; 2 on a song or host that is not there."""
-    from models.features.spectral import extract_features
+def espeak_host(data: Path, song_k: str) -> tuple[np.ndarray | None, int, int, list[str]]:
+    """Host K (0 or 1) after training song SONG of ``--parts espeak`` (``song_k``: 'SONG/K', drawn as
+    :func:`espeak_rows` draws them): (audio (n,) float32 at :data:`SR`: the song's 20 s, the host at its
+    level, the next song's 20 s; the host's first frame; the next song's first frame; every 'SONG/K'
+    there is). The audio is None where ``song_k`` is none of them."""
     from models.training import music_gate as mg
 
-    song_k = args.trace.removeprefix("espeak:")
     rng = np.random.default_rng(ESPEAK_SEED)
-    names = mg.training_songs(args.data)
+    names = mg.training_songs(data)
     pick = [names[i] for i in rng.choice(len(names), ESPEAK_SONGS, replace=False)]
-    songs = mg.song_audio(args.data, pick)
+    known = [f"{n}/{k}" for n in pick for k in (0, 1)]
+    if song_k not in known:
+        return None, 0, 0, known
+    songs = mg.song_audio(data, pick)
     pool = [mg.utterance(rng) for _ in range(30)]
     for _ in pick:
         mg.speech(70.0, rng, pool)  # the mixes' voices, drawn first
@@ -528,17 +534,27 @@ def print_espeak_trace(lm, args) -> int:
         b = cut(b[len(b) // 2: len(b) // 2 + 20 * SR])
         for k in range(2):
             t = mg.speech(10.0, rng, pool)
-            if f"{name}/{k}" != song_k:
-                continue
-            t = cut(t * 10 ** ((rms_dbfs(a) - rms_dbfs(t)) / 20))
-            feats = extract_features(np.concatenate([a, t, b]).astype(np.float32), lm.features)
-            g0, g1 = len(a) // HOP, (len(a) + len(t)) // HOP
-            print(f"espeak-ng host {k} after {name} (the gap starts at {g0 / 30:.2f} s, the next song at {g1 / 30:.2f} s)")
-            print("\n".join(trace(lm, feats, [(g0 - 3, g0 + 75), (g1 - 3, g1 + 45)])))
-            return 0
-    print(f"idle_gate: --trace {args.trace!r}: no host {song_k!r}; known: "
-          + ", ".join(f"{n}/{k}" for n in pick for k in (0, 1)), file=sys.stderr)
-    return 2
+            if f"{name}/{k}" == song_k:
+                t = cut(t * 10 ** ((rms_dbfs(a) - rms_dbfs(t)) / 20))
+                return np.concatenate([a, t, b]).astype(np.float32), len(a) // HOP, (len(a) + len(t)) // HOP, known
+    return None, 0, 0, known
+
+
+def print_espeak_trace(lm, args) -> int:
+    """``--trace espeak:SONG/K``: the gate's state frame by frame through host K (0 or 1) after the
+    training song SONG of ``--parts espeak`` (:func:`espeak_host`): the gap's first 2.5 s and the next
+    song's first 1.5 s; 2 on a song or host that is not there."""
+    from models.features.spectral import extract_features
+
+    song_k = args.trace.removeprefix("espeak:")
+    audio, g0, g1, known = espeak_host(args.data, song_k)
+    if audio is None:
+        print(f"idle_gate: --trace {args.trace!r}: no host {song_k!r}; known: {', '.join(known)}", file=sys.stderr)
+        return 2
+    name, k = song_k.rsplit("/", 1)
+    print(f"espeak-ng host {k} after {name} (the gap starts at {g0 / 30:.2f} s, the next song at {g1 / 30:.2f} s)")
+    print("\n".join(trace(lm, extract_features(audio, lm.features), [(g0 - 3, g0 + 75), (g1 - 3, g1 + 45)])))
+    return 0
 
 
 def settle_target(gap: str) -> float:
@@ -603,7 +619,9 @@ def main(argv: list[str] | None = None) -> int:
                    "stop for voice_context.VOICE_HOLD frames), agree (an idle performer does not start where the detector, the stop "
                    "and the voice network agree on music, the detector under music_gate.MARGIN_START), false-start (the "
                    "voice-over start starts the dance again after a dance the stop network never heard as music), "
-                   "voiced-song (a song's start the voice-over start made is guarded as any other, at idle_gate.SONG_MARGIN)")
+                   "voiced-song (a song's start the voice-over start made is guarded as any other, at idle_gate.SONG_MARGIN), "
+                   "lone-voice (the pause rule keeps a frame whatever the voice network hears where no voice was heard over the "
+                   "dance: lone_voice.py)")
     p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
                    "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "

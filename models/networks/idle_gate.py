@@ -55,7 +55,8 @@ break and the break's audible frames counted (only its silent frames are void), 
 the count) stops the dance as the detector says. ``quiet_return=False`` switches it off.
 
 After :data:`ABSENT_FRAMES` frames without music (a sure detector's frame counting up to
-twice, ``music_gate.SURE_COUNT``) the performer fades over :data:`FADE_FRAMES` into the idle;
+twice, ``music_gate.SURE_COUNT``; a frame the pause rule keeps for a lone voice holds the count, neither
+counting nor clearing it: ``lone_voice.py``) the performer fades over :data:`FADE_FRAMES` into the idle;
 after ``music_gate.START_FRAMES`` (:data:`PRESENT_FRAMES` with the logistic detector) frames
 of music it fades back. ``forced_idle`` holds the idle whatever the music (the show's
 ``/performer/idle``).
@@ -256,11 +257,12 @@ class IdleGate:
             count = self.presence.stop_count()
         if self.break_frames and self.music and energy > self.energy_min:  # an audible break frame: music clears,
             self.break_kept = 0.0 if present else self.break_kept + count  # no music counts
-        self.run = self.run + count if present != self.music else 0.0
+        hold = self.music and present and self.presence is not None and self.presence.lone.holding  # lone_voice.py
+        self.run = self.run + count if present != self.music else (self.run if hold else 0.0)
         start = PRESENT_FRAMES if self.presence is None else START_FRAMES  # the presence detector's own
         self.idle_frames = 0 if self.music else self.idle_frames + 1
         self.danced = min(SONG_DANCE, self.danced + 1)
-        if self.run >= (start if present else ABSENT_FRAMES) and not held:
+        if self.run >= (start if present else ABSENT_FRAMES) and not held and present != self.music:
             protect = self.song_start and self.danced < SONG_DANCE and not self.break_frames
             margin = SONG_MARGIN_VOICED if self.voiced else SONG_MARGIN
             if present or not (protect and (self.presence is None or self.presence.voice_hears(margin))):

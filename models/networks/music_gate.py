@@ -87,6 +87,11 @@ does (:mod:`models.networks.voice_pauses`, composed here). ``pause_rule=False`` 
 which a voice has been heard over the music before holds its stop a while, unless the music is gone
 (:mod:`models.networks.voice_context`, composed here: :meth:`MusicGate.voice_holds`).
 ``context_rule=False`` switches the context off.
+
+**The lone voice** (part of the voice-over rule; issue 43, a host after a song): in a dance the
+voice-over context has judged and heard no voice over, the pause rule does not keep a frame the voice
+network is sure of, and one it leans to holds the stop count (:mod:`models.networks.lone_voice`,
+composed here; ``lone.holding``, read by the idle gate). ``lone.rule = False`` switches it off.
 """
 
 from __future__ import annotations
@@ -98,6 +103,7 @@ from numba import njit
 
 from models.networks.agreement import Agreement
 from models.networks.false_start import FalseStart
+from models.networks.lone_voice import LoneVoice
 from models.networks.veto import Veto
 from models.networks.voice_context import VoiceContext
 from models.networks.voice_pauses import VoicePauses, pause_steadiness
@@ -309,7 +315,9 @@ class MusicGate:
     context off (module docstring). The attribute ``agree_rule`` (True) switches the three networks'
     agreement on an idle frame (module docstring); ``agreement.frames``, ``pauses.frames`` and
     ``voice_start.frames`` count the frames the agreement, the pause rule and the start heard as music;
-    ``voiced`` says whether the voice-over start (trusted, ``false_start.py``) heard the last frame as music.
+    ``voiced`` says whether the voice-over start (trusted, ``false_start.py``) heard the last frame as music;
+    ``lone`` is the lone voice (``lone_voice.py``: ``lone.rule`` switches it, ``lone.holding`` says the last
+    frame holds the stop count).
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
@@ -335,6 +343,7 @@ class MusicGate:
         self.agreement = Agreement(self.has_stop and self.has_voice)  # the three networks agree: an idle frame is music
         self.false_start = FalseStart()  # a dance the stop network never heard as music: false_start.py
         self.pauses = VoicePauses(pause_rule)  # the music heard in the voice's pauses (module docstring)
+        self.lone = LoneVoice()  # no voice heard over a judged dance: a sure voice network overrules the pause rule
         self.voice_start = VoiceStart(start_rule, resume_rule)  # the voice-over start and the resume
         # bound once, not a frame: the callbacks, the pause rule's rings (sound_cues advances them)
         self._stop_z, self._voice_z, self._over = self._stop_logit, self._voice_logit, self._voice_over
@@ -372,10 +381,11 @@ class MusicGate:
         self.veto.reset()
         self.agreement.reset()
         self.false_start.reset()
+        self.lone.reset()
 
     def step(self, row: np.ndarray, dancing: bool) -> bool:
         """True when frame ``row`` (D,) sounds like music to a performer that is ``dancing``."""
-        self.voiced = False
+        self.voiced = self.lone.holding = False
         if float(row[ENERGY_COL]) <= self.energy_min:
             self.silent += 1
             return False  # silence: the statistics wait for sound
@@ -412,7 +422,8 @@ class MusicGate:
                 self.voice_start.resume(False, self.voice_rule)
             self.voice_context.step(False, True, True)
             return True
-        if not (self.voice_rule and self.pauses.keeps(self.pause_steady)):  # the music heard in the voice's pauses
+        # the music heard in the voice's pauses, unless a lone voice (lone_voice.py)
+        if not (self.voice_rule and self.lone.pause_keeps(self.pauses, self.pause_steady, self.voice_context, self._voice_z)):
             if not (self.voice_rule and self._voice_over()):
                 self.voice_start.resume(False, self.voice_rule)
                 self.voice_context.step(False, False, True)
