@@ -821,7 +821,7 @@ class DanceStream:
             shift = self._handover.base + self._advance(self.seg) - self.seg  # the rows the last movement moved on
             self._stage.handover(shift, None, not self.codes_drawn)  # in place
             self._play(window, 1.0, shift=shift)  # no continuation to play into: its own pace (no contacts known)
-            self._handover.handed(self.seg)
+            self._handover.handed(self.seg, shift + self.seg)
             self.playing_member = None
             self._own_speed = 0.0
             self._commit(draws[0])
@@ -867,7 +867,7 @@ class DanceStream:
         self.playing_member = pairs[i]
         self._play(best, rate, self._bone_limit(best, max(rate, self._rate)), self._contacts[pairs[i]],
                    reached - self.seg, d)
-        self._handover.handed(self.seg + d)
+        self._handover.handed(self.seg + d, reached + d)
         self._own_speed = float(self._member_speed[pairs[i]])
         self._commit(pairs[i][0])
         self._has_cont = True

@@ -17,7 +17,8 @@ handover is at once, as before.
 State (:class:`Handover`, one per stream, ``reset`` with it): ``base``, the row of the player's
 buffer (``DanceStream._played``) the current code step's frame 0 reads (un-warped; ``seg``
 after a handover, moved on by a hold), ``start``, the row of the playing exemplar's frame 0,
-and counts of handovers and holds (for measuring).
+the counts of handovers and holds, and ``rows``, the rows the exemplar last handed over from
+had played (all three for measuring).
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ class Handover:
         self.start = self.seg  # row of the playing exemplar's frame 0
         self.handovers = 0
         self.holds = 0
+        self.rows = 0.0  # rows the exemplar last handed over from had played (its exemplar frames)
 
     def due(self, reached: float, ahead: float, playing: bool) -> int | None:
         """At a code step: ``reached`` the row the last movement has got to, ``ahead`` the exemplar
@@ -63,9 +65,10 @@ class Handover:
         self.base += advanced
         self.holds += 1
 
-    def handed(self, lead: int) -> None:
-        """A handover: the new buffer has ``lead`` rows of the last exemplar (``seg`` + the rows
-        :meth:`due` gave) before the new exemplar's frame 0."""
+    def handed(self, lead: int, at: float) -> None:
+        """A handover at row ``at`` of the last buffer: the new buffer has ``lead`` rows of the
+        last exemplar (``seg`` + the rows :meth:`due` gave) before the new exemplar's frame 0."""
+        self.rows = at - self.start
         self.base = float(self.seg)
         self.start = int(lead)
         self.handovers += 1

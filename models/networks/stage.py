@@ -224,7 +224,7 @@ class Stage:
             self.counts["edge_choices"] += 1
             if travel is not None:
                 ch, sh = math.cos(self.heading), math.sin(self.heading)
-                mx, mz = float(travel[s, 0]), float(travel[s, 1])
+                mx, mz = float(travel[self.seg, 0]), float(travel[self.seg, 1])
                 self.counts["inward_choices"] += (mx * ch + mz * sh) * near[0] + (-mx * sh + mz * ch) * near[1] >= -1e-6
         if first:
             tr[:s] = 0.0
