@@ -82,7 +82,10 @@ BEAT_WEIGHT: float = 1.0
 #: :data:`WARP_CLARITY` (at most 1), so the motion slows into every expected beat and
 #: catches up between them: speed dips (kinematic beats) move onto the music's beats, as
 #: Dancing to Music warps its dance units to the beat. 0 plays every movement at its own pace.
-BEAT_WARP: float = 0.45
+#: 0.5 since the handover waits for an exemplar's recorded frames (handover.py), which took the
+#: jerk the deeper warp adds away first (headline jerk 103.2 at 0.45 before it, 101.4 at 0.5
+#: after; docs/history.md, "The amplitude gap").
+BEAT_WARP: float = 0.5
 #: Frames after the tracker's beat that the warp slows into and the motion matching places a
 #: movement's speed dip on. The whole chain (the tracker's phase, the warp, the movements'
 #: own dips) put the dips early: over the first minute of the 34 training dances, whose
