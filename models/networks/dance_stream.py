@@ -6,8 +6,9 @@ poses (k, POSE_DIM)``, one pose per feature frame at once, 30 fps, no look-ahead
 Every ``seg`` frames (frame ``t = seg * k``) the stream appends audio token ``k`` to its
 window of the last ``window_codes`` tokens (128 frames), asks the code predictor for the
 next code, draws it from the stream's own seeded generator, and plays one of that code's
-real exemplars (the choreographic memory), matched to the motion so far; the frames in
-between read it out. (A code without exemplars would have its ``seg`` poses decoded from
+real exemplars (the choreographic memory), matched to the motion so far, once the playing
+exemplar has played its own ``seg`` recorded frames (:mod:`models.networks.handover`); the
+frames in between read it out. (A code without exemplars would have its ``seg`` poses decoded from
 the last ``decoder_context`` codes; the shipped memory has exemplars for every code.)
 
 **At the music's tempo.** A movement's exemplar is read at ``r`` of its frames a frame,
@@ -493,8 +494,9 @@ class DanceStream:
     (the music decides), "chacha", "rumba" or "waltz"; ``set_style`` changes it from the
     next code (within 267 ms). energy: 0..2, 1 = as the music asks; ``set_energy`` changes
     it the same way. lead_ms: 0..200, the display chain's delay the poses are sent ahead of
-    (``set_lead``, from the next code step on). ``codes_drawn``: the codes played, oldest
-    first (the newest :data:`CODES_KEPT` of a long stream).
+    (``set_lead``, from the next code step on). ``codes_drawn``: the codes drawn, one a code
+    step, oldest first (the newest :data:`CODES_KEPT` of a long stream; a step that holds,
+    models/networks/handover.py, draws one that is not played).
 
     **Lead.** With a lead of L frames (``round(lead_ms * 30 / 1000)``, 0..6) the pose sent
     at audio frame t is the one the performer takes at t + L: every beat-tracker phase
