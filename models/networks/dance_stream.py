@@ -6,9 +6,9 @@ poses (k, POSE_DIM)``, one pose per feature frame at once, 30 fps, no look-ahead
 Every ``seg`` frames (frame ``t = seg * k``) the stream appends audio token ``k`` to its
 window of the last ``window_codes`` tokens (128 frames), asks the code predictor for the
 next code, draws it from the stream's own seeded generator, and plays one of that code's
-real exemplars (the choreographic memory), matched to the motion so far, once the playing
-exemplar has played its own ``seg`` recorded frames (:mod:`models.networks.handover`); the
-frames in between read it out. (A code without exemplars would have its ``seg`` poses decoded from
+real exemplars (the choreographic memory), matched to the motion so far (at once, or with
+:data:`models.networks.handover.ON_FRAMES` once the playing exemplar has played its own ``seg``
+recorded frames); the frames in between read it out. (A code without exemplars would have its ``seg`` poses decoded from
 the last ``decoder_context`` codes; the shipped memory has exemplars for every code.)
 
 **At the music's tempo.** A movement's exemplar is read at ``r`` of its frames a frame,
@@ -83,10 +83,9 @@ BEAT_WEIGHT: float = 1.0
 #: :data:`WARP_CLARITY` (at most 1), so the motion slows into every expected beat and
 #: catches up between them: speed dips (kinematic beats) move onto the music's beats, as
 #: Dancing to Music warps its dance units to the beat. 0 plays every movement at its own pace.
-#: 0.5 since the handover waits for an exemplar's recorded frames (handover.py), which took the
-#: jerk the deeper warp adds away first (headline jerk 103.2 at 0.45 before it, 101.4 at 0.5
-#: after; docs/history.md, "The amplitude gap").
-BEAT_WARP: float = 0.5
+#: With the handover on an exemplar's recorded frames (handover.ON_FRAMES, not shipped) 0.5 keeps
+#: today's jerk and beat hit (docs/history.md, "The amplitude gap").
+BEAT_WARP: float = 0.45
 #: Frames after the tracker's beat that the warp slows into and the motion matching places a
 #: movement's speed dip on. The whole chain (the tracker's phase, the warp, the movements'
 #: own dips) put the dips early: over the first minute of the 34 training dances, whose
@@ -495,8 +494,8 @@ class DanceStream:
     next code (within 267 ms). energy: 0..2, 1 = as the music asks; ``set_energy`` changes
     it the same way. lead_ms: 0..200, the display chain's delay the poses are sent ahead of
     (``set_lead``, from the next code step on). ``codes_drawn``: the codes drawn, one a code
-    step, oldest first (the newest :data:`CODES_KEPT` of a long stream; a step that holds,
-    models/networks/handover.py, draws one that is not played).
+    step, oldest first (the newest :data:`CODES_KEPT` of a long stream; with
+    ``handover.ON_FRAMES`` a step that holds draws one that is not played).
 
     **Lead.** With a lead of L frames (``round(lead_ms * 30 / 1000)``, 0..6) the pose sent
     at audio frame t is the one the performer takes at t + L: every beat-tracker phase
