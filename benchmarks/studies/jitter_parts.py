@@ -6,7 +6,8 @@ The validation dances, the shipped checkpoint's live stream (seeds ``--seeds``) 
 every song left out, the FFT over the whole song). For every seed and stage the variants run one
 after the other in the same process (same load), each a set of constants (``--part NAME=SETS``,
 SETS ``part.CONST=VALUE`` joined by ``,``; part ``stream`` (models/networks/dance_stream.py),
-``stage``, ``feet``, ``tables`` (member_tables.py) or ``handover``; ``nofeet`` as a SET: the feet step off). Default parts:
+``stage``, ``feet``, ``tables`` (member_tables.py) or ``handover``; ``nofeet`` as a SET: the feet
+step off). Default parts:
 
 - ``shipped``: as shipped;
 - ``warp``: the beat warp off (``BEAT_WARP=0``);

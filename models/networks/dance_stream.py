@@ -8,8 +8,9 @@ window of the last ``window_codes`` tokens (128 frames), asks the code predictor
 next code, draws it from the stream's own seeded generator, and plays one of that code's
 real exemplars (the choreographic memory), matched to the motion so far (at once, or with
 :data:`models.networks.handover.ON_FRAMES` once the playing exemplar has played its own ``seg``
-recorded frames); the frames in between read it out. (A code without exemplars would have its ``seg`` poses decoded from
-the last ``decoder_context`` codes; the shipped memory has exemplars for every code.)
+recorded frames); the frames in between read it out. (A code without exemplars would have
+its ``seg`` poses decoded from the last ``decoder_context`` codes; the shipped memory has
+exemplars for every code.)
 
 **At the music's tempo.** A movement's exemplar is read at ``r`` of its frames a frame,
 ``r`` the music's tempo (:class:`models.networks.tempo.TempoFollower`) over the memory's
@@ -1044,8 +1045,8 @@ class DanceStream:
 
     def _warped(self, j: int) -> np.ndarray:
         """The pose (P,) of frame ``j`` of the current movement at its tempo rate and under the
-        beat warp: row ``base + rate * j - lag`` of ``self._played`` (handover.py), between two frames nlerped
-        (``warp_pose``; the lag moves by ``rate * BEAT_WARP * w * cos(theta)`` a frame; see
+        beat warp: row ``base + rate * j - lag`` of ``self._played`` (handover.py), between two
+        frames nlerped (``warp_pose``; the lag moves by ``rate * BEAT_WARP * w * cos(theta)`` a frame; see
         :data:`BEAT_WARP`)."""
         x = self._handover.base + self._advance(j)
         if self._beat_cols is None or BEAT_WARP <= 0.0:  # no beat tracker, or no warp: the movement as it is
