@@ -227,11 +227,11 @@ def test_a_far_handover_draws_the_next_code_then_the_nearest_exemplars(loaded, f
     s = DanceStream(model, seed=0)
     bends = []
     for t in range(len(features)):
-        n = len(s.codes_drawn)
+        n = s._handover.handovers
         s.push(features[t: t + 1])
-        if len(s.codes_drawn) != n and t >= s.seg:  # the played exemplar's own first pose against the motion's
+        if s._handover.handovers != n and t >= s.seg:  # the played exemplar's own first pose against the motion's
             c, j = s.playing_member
-            bends.append(bend_deg(s._members[c, j, 0], s._played[s.seg]))
+            bends.append(bend_deg(s._members[c, j, 0], s._played[s._handover.start]))
     assert np.median(bends) < 15.0 and np.mean(np.array(bends) > 20.0) < 0.3, \
         f"median handover bend {np.median(bends):.1f} degrees a bone"
 

@@ -472,8 +472,9 @@ def test_a_handover_plays_the_chosen_movement_at_its_own_speed_times_the_rate(cl
             _asked[0] = _rate_for(code, member)  # the last before a _play: the tempo's rate for the movement
             return _asked[0]
 
-        def logged_play(window, rate, limit=np.inf, contact=None, _play=play, _s=s, _starts=starts, _asked=asked):
-            _play(window, rate, limit, contact)
+        def logged_play(window, rate, limit=np.inf, contact=None, *where, _play=play, _s=s, _starts=starts,
+                        _asked=asked):
+            _play(window, rate, limit, contact, *where)  # where: the rows it starts after (handover.py)
             _starts.append((_s.frame, min(_asked[0], limit)))
 
         s._rate_for, s._play = logged_rate, logged_play

@@ -6,7 +6,8 @@ The validation dances, the shipped checkpoint's live stream (seeds ``--seeds``) 
 every song left out, the FFT over the whole song). For every seed and stage the variants run one
 after the other in the same process (same load), each a set of constants (``--part NAME=SETS``,
 SETS ``part.CONST=VALUE`` joined by ``,``; part ``stream`` (models/networks/dance_stream.py),
-``stage``, ``feet`` or ``tables`` (member_tables.py); ``nofeet`` as a SET: the feet step off). Default parts:
+``stage``, ``feet``, ``tables`` (member_tables.py) or ``handover``; ``nofeet`` as a SET: the feet
+step off). Default parts:
 
 - ``shipped``: as shipped;
 - ``warp``: the beat warp off (``BEAT_WARP=0``);
@@ -56,7 +57,7 @@ DEFAULT_PARTS = ("shipped=", "warp=stream.BEAT_WARP=0", "tempo=stream.FOLLOW_TEM
 def parse_part(text: str) -> tuple[str, list[tuple[str, str, str]], bool, tuple[float, float] | None]:
     """``NAME=part.CONST=V,...`` -> (name, [(part, const, value)], feet on, (tail z, sigma) or None);
     ValueError on a bad one."""
-    from models.networks import dance_stream, feet, member_tables, stage
+    from models.networks import dance_stream, feet, handover, member_tables, stage
 
     name, _, sets = text.partition("=")
     if not name:
@@ -75,9 +76,11 @@ def parse_part(text: str) -> tuple[str, list[tuple[str, str, str]], bool, tuple[
             tail = (z, sigma, key)
             continue
         part, _, const = key.partition(".")
-        mod = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables}.get(part)
+        mod = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables,
+               "handover": handover}.get(part)
         if mod is None or not const.isupper() or not hasattr(mod, const) or not value:
-            raise ValueError(f"--part {name}: wants stream.|stage.|feet.|tables.CONST=VALUE of an existing constant, got {item!r}")
+            raise ValueError(f"--part {name}: wants stream.|stage.|feet.|tables.|handover.CONST=VALUE of an existing "
+                             f"constant, got {item!r}")
         out.append((part, const, value))
     return name, out, feet_on, tail
 
@@ -97,9 +100,9 @@ def lowpass_windows(windows: np.ndarray, hz: float) -> np.ndarray:
 
 def _apply(sets: list[tuple[str, str, str]]) -> dict:
     """Set the constants; returns what to restore."""
-    from models.networks import dance_stream, feet, member_tables, stage
+    from models.networks import dance_stream, feet, handover, member_tables, stage
 
-    mods = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables}
+    mods = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables, "handover": handover}
     old = {}
     for part, const, value in sets:
         mod = mods[part]
@@ -115,9 +118,9 @@ def _apply(sets: list[tuple[str, str, str]]) -> dict:
 
 
 def _restore(old: dict) -> None:
-    from models.networks import dance_stream, feet, member_tables, stage
+    from models.networks import dance_stream, feet, handover, member_tables, stage
 
-    mods = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables}
+    mods = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables, "handover": handover}
     for (part, const), was in old.items():
         setattr(mods[part], const, was)
 

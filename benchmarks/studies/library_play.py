@@ -147,13 +147,13 @@ def perform(model, feats: np.ndarray, style: str | None = None, windows: np.ndar
     styles = model.member_style.numpy()
     steps, cont, prev, seg = 0, 0, None, model.config.seg
     for t in range(len(feats)):
-        n = len(s.codes_drawn)
+        n = s._handover.handovers  # a new exemplar played (models/networks/handover.py)
         poses[t] = s.push(feats[t: t + 1])[0]
         dance[t] = s.idle_weight == 0.0 and t >= SETTLE
         token[t] = styles[s.playing_member] if s.playing_member is not None else -1
-        if bends is not None and len(s.codes_drawn) != n and s.playing_member is not None and dance[t]:
-            bends.append(bend_deg(s._members[s.playing_member][0], s._played[seg]))
-        if windows is not None and len(s.codes_drawn) != n and s.playing_member is not None:
+        if bends is not None and s._handover.handovers != n and s.playing_member is not None and dance[t]:
+            bends.append(bend_deg(s._members[s.playing_member][0], s._played[s._handover.start]))
+        if windows is not None and s._handover.handovers != n and s.playing_member is not None:
             w = windows[s.playing_member]
             if prev is not None and dance[t]:
                 steps += 1

@@ -6,9 +6,11 @@ poses (k, POSE_DIM)``, one pose per feature frame at once, 30 fps, no look-ahead
 Every ``seg`` frames (frame ``t = seg * k``) the stream appends audio token ``k`` to its
 window of the last ``window_codes`` tokens (128 frames), asks the code predictor for the
 next code, draws it from the stream's own seeded generator, and plays one of that code's
-real exemplars (the choreographic memory), matched to the motion so far; the frames in
-between read it out. (A code without exemplars would have its ``seg`` poses decoded from
-the last ``decoder_context`` codes; the shipped memory has exemplars for every code.)
+real exemplars (the choreographic memory), matched to the motion so far (at once, or with
+:data:`models.networks.handover.ON_FRAMES` once the playing exemplar has played its own ``seg``
+recorded frames); the frames in between read it out. (A code without exemplars would have
+its ``seg`` poses decoded from the last ``decoder_context`` codes; the shipped memory has
+exemplars for every code.)
 
 **At the music's tempo.** A movement's exemplar is read at ``r`` of its frames a frame,
 ``r`` the music's tempo (:class:`models.networks.tempo.TempoFollower`) over the memory's
@@ -46,6 +48,7 @@ from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_bl
 from models.networks.dance_vq import DanceVQ
 from models.networks import feet as feet_part
 from models.networks.feet import FeetLock
+from models.networks.handover import Handover
 from models.networks.stage import SpotStage, Stage, cached_travel
 from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate
 from models.networks import lead as lead_part
@@ -81,6 +84,8 @@ BEAT_WEIGHT: float = 1.0
 #: :data:`WARP_CLARITY` (at most 1), so the motion slows into every expected beat and
 #: catches up between them: speed dips (kinematic beats) move onto the music's beats, as
 #: Dancing to Music warps its dance units to the beat. 0 plays every movement at its own pace.
+#: With the handover on an exemplar's recorded frames (handover.ON_FRAMES, not shipped) 0.5 keeps
+#: today's jerk and beat hit (docs/history.md, "The amplitude gap").
 BEAT_WARP: float = 0.45
 #: Frames after the tracker's beat that the warp slows into and the motion matching places a
 #: movement's speed dip on. The whole chain (the tracker's phase, the warp, the movements'
@@ -489,8 +494,9 @@ class DanceStream:
     (the music decides), "chacha", "rumba" or "waltz"; ``set_style`` changes it from the
     next code (within 267 ms). energy: 0..2, 1 = as the music asks; ``set_energy`` changes
     it the same way. lead_ms: 0..200, the display chain's delay the poses are sent ahead of
-    (``set_lead``, from the next code step on). ``codes_drawn``: the codes played, oldest
-    first (the newest :data:`CODES_KEPT` of a long stream).
+    (``set_lead``, from the next code step on). ``codes_drawn``: the codes drawn, one a code
+    step, oldest first (the newest :data:`CODES_KEPT` of a long stream; with
+    ``handover.ON_FRAMES`` a step that holds draws one that is not played).
 
     **Lead.** With a lead of L frames (``round(lead_ms * 30 / 1000)``, 0..6) the pose sent
     at audio frame t is the one the performer takes at t + L: every beat-tracker phase
@@ -572,6 +578,7 @@ class DanceStream:
         self._onset_col = c.onset_col if 0 <= c.onset_col < c.feature_dim else None
         self._forecast = PhaseForecast()  # the lead's beat forecast (models/networks/lead.py), fed the onsets
         self._decay = hermite_decay(DECAY_FRAMES * self.seg // 8)  # (2, D): match_exemplar's
+        self._handover = Handover(self.seg)  # when the playing exemplar hands over (models/networks/handover.py)
         # Frames of the cycle the next code step's prefix is computed on: all but the code step
         # and the frame half a cycle from it, where the code step of a performer staggered by half
         # a cycle falls (an ensemble of 2 or 4: realtime.engine's stagger). _free[j]: how many
@@ -599,10 +606,10 @@ class DanceStream:
         self._prefix_auto: Prefix | None = None  # the same with the "auto" style, while a style is guided
         self._codes: deque[int] = deque(maxlen=c.decoder_context)
         self._last = c.codebook  # "no code yet"
-        # what plays: seg frames before the current movement, then its exemplar's window (the
-        # movement and its continuation, bent to continue the motion), read at frame
-        # seg + rate * j - lag of the movement's frame j
-        self._played = np.zeros((3 * self.seg, self.pose_dim), np.float32)
+        # what plays: seg frames before the current movement (up to seg more while the last exemplar
+        # plays out its frames: handover.py), then its exemplar's window (the movement and its
+        # continuation, bent to continue the motion), read at row base + rate * j - lag of frame j
+        self._played = np.zeros((4 * self.seg, self.pose_dim), np.float32)
         self._rate = 1.0  # exemplar frames per frame at the end of the current movement (tempo following)
         self._own_speed = 0.0  # the current movement's exemplar's own mean joint speed, m/frame (0: none)
         self._rate_from = 1.0  # ... and at its start
@@ -617,7 +624,8 @@ class DanceStream:
             self._folders.reset()
         self.playing_member: tuple[int, int] | None = None  # (code, exemplar) of the playing movement; None: decoded
         self._idle.reset()  # no music, fully idle: a stream starts at rest and fades in on music
-        self._played_contact = np.zeros((3 * self.seg, 3), np.float32)  # each foot's contact and the lift, as _played
+        self._played_contact = np.zeros((4 * self.seg, 3), np.float32)  # each foot's contact and the lift, as _played
+        self._handover.reset()
         self._at = float(self.seg)  # where in _played the last frame was read
         if self._feet is not None:
             self._feet.reset()
@@ -815,8 +823,10 @@ class DanceStream:
             segment = m.decode_last(np.fromiter(self._codes, np.int64))
             self._codes.pop()
             window = np.concatenate([segment, np.repeat(segment[-1:], self.seg, axis=0)])
-            self._stage.handover(self._advance(self.seg), None, not self.codes_drawn)  # in place
-            self._play(window, 1.0)  # no continuation to play into: its own pace (no contacts known)
+            shift = self._handover.base + self._advance(self.seg) - self.seg  # the rows the last movement moved on
+            self._stage.handover(shift, None, not self.codes_drawn)  # in place
+            self._play(window, 1.0, shift=shift)  # no continuation to play into: its own pace (no contacts known)
+            self._handover.handed(self.seg, shift + self.seg)
             self.playing_member = None
             self._own_speed = 0.0
             self._commit(draws[0])
@@ -826,6 +836,13 @@ class DanceStream:
             self._folders.follow(self.style - STYLE_BASE)
         elif self._folders is not None:  # the folder the drawn code chooses, at once where no dance is seen
             self._own = STYLE_BASE + self._folders.step(draws[0], not self._has_cont or self.idle_weight >= 1.0, tilt)
+        reached = self._handover.base + self._advance(self.seg)  # the row the playing movement has got to
+        d = self._handover.due(reached, self.seg * self._rate, self._has_cont)
+        if d is None:  # the playing exemplar has not played its own frames: it plays on (handover.py)
+            self._handover.hold(self._advance(self.seg))
+            self._rate_from = self._rate
+            self._commit(draws[0])
+            return
         codes = list(dict.fromkeys(draws))
         # a library (self._guard > 0): the next drawn code's exemplars join only where the best so far would
         # bend the motion past the guard, and where none of the drawn codes' does, the nearest of any code's
@@ -836,9 +853,9 @@ class DanceStream:
             best = _unit(cands[0].copy())
         else:  # motion matching among the drawn codes' exemplars, placed on the beat (one compiled call)
             c0 = pairs[0]
-            beat = self._next_beat(self._rate_for(*c0))
+            beat = self._next_beat(self._rate_for(*c0), d)
             frame, clarity = beat if beat is not None else (-1, 0.0)
-            at = self.seg + self._advance(self.seg)  # where the playing movement has got to
+            at = reached + d  # where the playing movement hands over
             cont = np.stack([warp_pose(self._played, at), warp_pose(self._played, at + 1.0)])
             for k, use in enumerate(tries):
                 if k:
@@ -851,9 +868,11 @@ class DanceStream:
         rate = self._rate_for(*pairs[i])
         if self._has_cont and SPEED_MATCH > 0.0:  # the speed the bend adds or takes away, undone
             rate = self._speed_matched(cands[i], best, rate)
-        self._stage.handover(self._advance(self.seg), self._travel[pairs[i]], not self.codes_drawn)
+        self._stage.handover(reached - self.seg, self._travel[pairs[i]], not self.codes_drawn, self.seg + d)
         self.playing_member = pairs[i]
-        self._play(best, rate, self._bone_limit(best, max(rate, self._rate)), self._contacts[pairs[i]])
+        self._play(best, rate, self._bone_limit(best, max(rate, self._rate)), self._contacts[pairs[i]],
+                   reached - self.seg, d)
+        self._handover.handed(self.seg + d, reached + d)
         self._own_speed = float(self._member_speed[pairs[i]])
         self._commit(pairs[i][0])
         self._has_cont = True
@@ -963,23 +982,28 @@ class DanceStream:
         peak = math.degrees(2.0 * math.acos(min(dot, 1.0)))
         return max(1.0, self._bone_cap / peak) if peak > 0.0 else np.inf
 
-    def _play(self, window: np.ndarray, rate: float, limit: float = np.inf, contact: np.ndarray | None = None) -> None:
+    def _play(self, window: np.ndarray, rate: float, limit: float = np.inf, contact: np.ndarray | None = None,
+              shift: float = 0.0, d: int = 0) -> None:
         """Start playing ``window`` (2 seg, P), the next movement and its continuation, at ``rate``
-        (and the rate it takes over from the current movement) at most ``limit``: the seg frames
-        before it are those the current movement would have played next. ``contact`` (2 seg, 3):
-        its exemplar's foot contacts and lift (:func:`models.networks.feet.member_contacts`; None: none known)."""
+        (and the rate it takes over from the current movement) at most ``limit``: the ``seg + d``
+        rows before it are those the current movement would have played next from row ``seg +
+        shift`` (``d``: the rows its exemplar plays on to its own frame seg, handover.py).
+        ``contact`` (2 seg, 3): its exemplar's foot contacts and lift
+        (:func:`models.networks.feet.member_contacts`; None: none known)."""
+        n, e = self.seg + d, self.seg + d + len(window)  # the window's rows: n .. e
         if not self.codes_drawn:  # before the first movement there is only its first pose
-            self._played[: self.seg] = window[0]
-            self._played_contact[: self.seg] = contact[0] if contact is not None else 0.0
+            self._played[:n] = window[0]
+            self._played_contact[:n] = contact[0] if contact is not None else 0.0
         else:
-            at = self._advance(self.seg)  # the current movement's end, seg frames back
-            self._played[: self.seg] = [warp_pose(self._played, at + i) for i in range(self.seg)]
-            lift = (self._contact_at(at + self.seg)[2], self._contact_at(at + self.seg + 1)[2])
-            self._played_contact[: self.seg] = [self._contact_at(at + i) for i in range(self.seg)]
-        self._played[self.seg:] = window
-        self._played_contact[self.seg:] = contact if contact is not None else 0.0
+            self._played[:n] = [warp_pose(self._played, shift + i) for i in range(n)]
+            lift = (self._contact_at(shift + n)[2], self._contact_at(shift + n + 1)[2])
+            self._played_contact[:n] = [self._contact_at(shift + i) for i in range(n)]
+        self._played[n:e] = window
+        self._played[e:] = window[-1]
+        self._played_contact[n:e] = contact if contact is not None else 0.0
+        self._played_contact[e:] = self._played_contact[e - 1]
         if self.codes_drawn and self._has_cont and contact is not None:  # bent as the root's height (feet.bend_lift)
-            feet_part.bend_lift(self._played_contact[self.seg:], *lift, self._decay)
+            feet_part.bend_lift(self._played_contact[n:e], *lift, self._decay)
         rate = min(rate, limit)
         self._rate_from = min(self._rate, limit) if self.codes_drawn else rate
         self._rate = rate
@@ -1003,25 +1027,28 @@ class DanceStream:
         theta, period = danced_beat(math.atan2(csin, ccos) % (2 * math.pi), 15.0 * 2.0 ** logp, self._tempo.period)
         return (theta - 2.0 * math.pi * BEAT_DELAY / period) % (2 * math.pi), period
 
-    def _next_beat(self, rate: float = 1.0) -> tuple[int, float] | None:
+    def _next_beat(self, rate: float = 1.0, d: int = 0) -> tuple[int, float] | None:
         """(frame of the coming movement's exemplar, 0..seg-1, that plays when the beat tracker
-        expects a beat, the movement played at ``rate``; its pulse clarity), or None when no beat
-        falls in it or the features have no beat columns."""
+        expects a beat, the movement played at ``rate`` from ``d`` exemplar rows on; its pulse
+        clarity), or None when no beat falls in it or the features have no beat columns."""
         if self._beat_cols is None:
             return None
         ccos, csin, clarity, logp = (float(self._raw[j]) for j in self._beat_cols)
         if clarity <= 0.0:
             return None
         theta, period = self._danced_phase(ccos, csin, logp)
-        ahead = int(round(rate * (period * (1 - theta / (2 * np.pi)) % max(period, 1.0))))
-        return (ahead, clarity) if ahead < self.seg else None
+        ahead = rate * (period * (1 - theta / (2 * np.pi)) % max(period, 1.0)) - d
+        if ahead < -0.5:  # that beat comes before the exemplar starts: the one after it
+            ahead += rate * max(period, 1.0)
+        ahead = int(round(ahead))
+        return (ahead, clarity) if 0 <= ahead < self.seg else None
 
     def _warped(self, j: int) -> np.ndarray:
         """The pose (P,) of frame ``j`` of the current movement at its tempo rate and under the
-        beat warp: frame ``seg + rate * j - lag`` of ``self._played``, between two frames nlerped
-        (``warp_pose``; the lag moves by ``rate * BEAT_WARP * w * cos(theta)`` a frame; see
+        beat warp: row ``base + rate * j - lag`` of ``self._played`` (handover.py), between two
+        frames nlerped (``warp_pose``; the lag moves by ``rate * BEAT_WARP * w * cos(theta)`` a frame; see
         :data:`BEAT_WARP`)."""
-        x = self.seg + self._advance(j)
+        x = self._handover.base + self._advance(j)
         if self._beat_cols is None or BEAT_WARP <= 0.0:  # no beat tracker, or no warp: the movement as it is
             self._at = x
             return warp_pose(self._played, x)

@@ -157,7 +157,7 @@ def _wrap(a: float) -> float:
 class Stage:
     """World position and heading of one performer on a ``width`` x ``depth`` m stage (see the
     module docstring). State: :attr:`x`, :attr:`z` (m), :attr:`heading` (rad, 0 facing +Z),
-    the playing movement's travel track (``3 seg`` rows of x, z, heading in its own frame),
+    the playing movement's travel track (``4 seg`` rows of x, z, heading in its own frame),
     where it was last read, and :attr:`counts` (edge frames and choices, for measuring). ``reset()`` puts the performer at the centre facing +Z; the stage
     and facing are settings and survive it."""
 
@@ -165,7 +165,7 @@ class Stage:
         self.seg = int(seg)
         self.width, self.depth = parse_stage(stage)
         self.facing = check_facing(facing)
-        self._track = np.zeros((3 * self.seg, 3), np.float64)
+        self._track = np.zeros((4 * self.seg, 3), np.float64)  # up to 2 seg rows of the last movement, its window
         # the handover's velocity carry: row f of a new movement moves by carry[f] times the
         # difference of the last movement's velocity and the new one's where they meet
         # (:data:`CARRY_ROWS`: the old velocity blended into the new by a smoothstep, integrated)
@@ -211,19 +211,20 @@ class Stage:
         self.counts = {"edge_frames": 0, "steered_frames": 0, "edge_choices": 0, "inward_choices": 0}
 
     # -- the player's side ---------------------------------------------------------------
-    def handover(self, at: float, travel: np.ndarray | None, first: bool) -> None:
-        """A new movement starts (``DanceStream._play``): the track's first ``seg`` rows become
-        the last movement's at ``at + i`` (as the pose rows do), then ``travel`` (2 seg, 3:
-        the exemplar's displacement and heading change from its frame 0, or None: in place)
-        carried on from the last movement's value at ``at + seg``. ``first``: nothing played
-        before (the rows before are the new movement's first)."""
-        tr, s = self._track, self.seg
+    def handover(self, at: float, travel: np.ndarray | None, first: bool, lead: int | None = None) -> None:
+        """A new movement starts (``DanceStream._play``): the track's first ``lead`` rows (``seg``
+        unless told; up to ``2 seg``, :mod:`models.networks.handover`) become the last movement's
+        at ``at + i`` (as the pose rows do), then ``travel`` (2 seg, 3: the exemplar's
+        displacement and heading change from its frame 0, or None: in place) carried on from the
+        last movement's value at ``at + lead``. ``first``: nothing played before (the rows before
+        are the new movement's first)."""
+        tr, s = self._track, (self.seg if lead is None else int(lead))
         near = self._near() if self.active and not first else None
         if near is not None:  # counted: a movement chosen near an edge, and whether its own travel heads inwards
             self.counts["edge_choices"] += 1
             if travel is not None:
                 ch, sh = math.cos(self.heading), math.sin(self.heading)
-                mx, mz = float(travel[s, 0]), float(travel[s, 1])
+                mx, mz = float(travel[self.seg, 0]), float(travel[self.seg, 1])
                 self.counts["inward_choices"] += (mx * ch + mz * sh) * near[0] + (-mx * sh + mz * ch) * near[1] >= -1e-6
         if first:
             tr[:s] = 0.0
@@ -234,16 +235,18 @@ class Stage:
             base = self._at(at + s)
             self._read -= at  # the last read, in the new rows
         c, sn = math.cos(base[2]), math.sin(base[2])
+        e = s + 2 * self.seg  # the new movement's rows end; the rows after repeat its last
         if travel is None:
-            tr[s:] = base
+            tr[s:e] = base
         else:  # Ry(base heading) applied to the exemplar's own-frame displacement
-            tr[s:, 0] = base[0] + c * travel[:, 0] + sn * travel[:, 1]
-            tr[s:, 1] = base[1] - sn * travel[:, 0] + c * travel[:, 1]
-            tr[s:, 2] = base[2] + travel[:, 2]
+            tr[s:e, 0] = base[0] + c * travel[:, 0] + sn * travel[:, 1]
+            tr[s:e, 1] = base[1] - sn * travel[:, 0] + c * travel[:, 1]
+            tr[s:e, 2] = base[2] + travel[:, 2]
         if not first:  # the last movement's velocity where they meet, blended into the new one's
-            prev = tr[s - 1]  # the last movement's row at at + seg - 1
+            prev = tr[s - 1]  # the last movement's row at at + lead - 1
             dv = [base[i] - prev[i] - (tr[s + 1, i] - tr[s, i]) for i in range(3)]
-            tr[s:] += self._carry * dv
+            tr[s:e] += self._carry * dv
+        tr[e:] = tr[e - 1]
         if self._prev is not None and not first:  # keep the numbers small: the last read is the new origin
             p = self._at(self._read)
             c, sn = math.cos(p[2]), math.sin(p[2])
