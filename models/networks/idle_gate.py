@@ -260,7 +260,10 @@ class IdleGate:
         start = PRESENT_FRAMES if self.presence is None else START_FRAMES  # the presence detector's own
         self.idle_frames = 0 if self.music else self.idle_frames + 1
         self.danced = min(SONG_DANCE, self.danced + 1)
-        if self.run >= (start if present else ABSENT_FRAMES) and not held:
+        due = self.run >= (start if present else ABSENT_FRAMES) and not held
+        if due and present and self.presence is not None and not self.presence.confirms_start(self.idle_frames < SONG_IDLE):
+            due = False  # the voice network confirms a restart (return_confirm.py): the count runs on
+        if due:
             protect = self.song_start and self.danced < SONG_DANCE and not self.break_frames
             margin = SONG_MARGIN_VOICED if self.voiced else SONG_MARGIN
             if present or not (protect and (self.presence is None or self.presence.voice_hears(margin))):
