@@ -1,22 +1,22 @@
-"""The voice network confirms a return: the idle gate's detector restarts no dance on a voice or a crowd.
+"""The voice network confirms a restart: the idle gate's detector restarts no dance on a voice or a crowd.
 
 Part of :class:`models.networks.music_gate.MusicGate` (issue 43, held: once settled, idle for the rest
 of a gap). After a song, the idle detector may take a reader's word or a crowd's murmur for music for
 three frames (its logit over ``music_gate.MARGIN_START``) and restart the dance: reader 198 2 s into
 its reading after brahms, fatswaller and vibeace (held 0.92-0.93, ``benchmarks/studies/idle_gate.py
---parts readers``), crowd babble at -30 dBFS at 29.0 and 31.6 s of the 20-s gap at seed 10 (held 0.71).
-On those start frames the voice network (fitted to hear music under a voice too) lay at -2.9 to +0.6;
-at every music's return traced (a song after a reader, a gap of silence, crowd or room) it lay at
-+3.1 or more. Once the performer has danced in this stream, the detector's start (the frame on which
-its count reaches ``music_gate.START_FRAMES``) soon after a stop (a restart: fewer than
-``idle_gate.SONG_IDLE`` idle frames) waits until the voice network's logit on that frame is above
-:data:`CONFIRM_VOICE`; the count runs on meanwhile. Not within the first ``music_gate.FRESH_FRAMES``
-sounding frames after ``music_gate.FRESH_SILENCE`` silent ones or more: a sound after a silence is the
-music's return (a song's opening after a 3.5-s silence: the voice network at -1.8 to +0.6 for its first
-0.5 s, back in 1.67 s instead of 0.63 if it waited), not a word or a murmur in a sound that runs on. A
-song's start (after ``SONG_IDLE`` idle frames or more: every gap between songs, the stream's first start)
-stays the detector's alone, and the starts of the voice-over start and of the three networks' agreement
-already need the voice network.
+--parts readers``), crowd babble at -30 dBFS 1.7 s after a stop in the 20-s gap at seed 10 (held 0.71).
+On those start frames the voice network (fitted to hear music under a voice too) lay at -1.3 to +0.6;
+on the start frames of the music's returns traced (a song after a reader or a room tone) at +3.1 or
+more. The detector's start (the frame on which its count reaches ``music_gate.START_FRAMES``) soon
+after a stop (a restart: fewer than ``idle_gate.SONG_IDLE`` idle frames) waits until the voice
+network's logit on that frame is above :data:`CONFIRM_VOICE`; the count runs on meanwhile. Not within
+the first ``music_gate.FRESH_FRAMES`` sounding frames after ``music_gate.FRESH_SILENCE`` silent ones or
+more: a sound after a silence is the music's return (a song's opening after a silence: the voice
+network at -1.8 to +0.6 on its first frames; after a 3.5-s silence back in 1.67 s instead of 0.63 if
+it waited), not a word or a murmur in a sound that runs on. A song's start (after ``SONG_IDLE`` idle
+frames or more: the stream's first start, a song after a gap; room -45's next song starts with the
+voice network at -2.2) stays the detector's alone, and the starts of the voice-over start and of the
+three networks' agreement already need the voice network.
 
 State (30 fps): ``rule`` (False: the confirmation off), ``sounding`` (sounding frames since the last
 silence of ``FRESH_SILENCE`` frames or more, set by the gate) and ``frames`` (start frames it held back).
@@ -28,9 +28,9 @@ from __future__ import annotations
 
 from typing import Callable
 
-#: A detector's start after the stream's first dance waits until the voice network's logit is above
-#: CONFIRM_VOICE: the detector's own start margin (``music_gate.MARGIN_START``), not tuned. The false
-#: restarts' start frames: -2.9 to +0.6; the music's returns: +3.1 or more (module docstring).
+#: A detector's restart waits until the voice network's logit is above CONFIRM_VOICE: the detector's own
+#: start margin (``music_gate.MARGIN_START``), not tuned. The false restarts' start frames: -1.3 to +0.6;
+#: the music's returns: +3.1 or more (module docstring).
 CONFIRM_VOICE: float = 1.5
 
 
