@@ -261,7 +261,8 @@ class IdleGate:
         self.idle_frames = 0 if self.music else self.idle_frames + 1
         self.danced = min(SONG_DANCE, self.danced + 1)
         due = self.run >= (start if present else ABSENT_FRAMES) and not held
-        if due and present and self.presence is not None and not self.presence.confirms_start(self.idle_frames < SONG_IDLE):
+        asks = self.idle_frames < SONG_IDLE or not energy >= self.level + RETURN_DB  # a restart, or no rise (NaN: none)
+        if due and present and self.presence is not None and not self.presence.confirms_start(asks):
             due = False  # the voice network confirms a restart (return_confirm.py): the count runs on
         if due:
             protect = self.song_start and self.danced < SONG_DANCE and not self.break_frames

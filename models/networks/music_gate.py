@@ -65,8 +65,8 @@ danced in this stream also hears music where the detector, the stop and the voic
 music (:mod:`models.networks.agreement`, composed here; ``agree_rule = False`` switches it off; a
 checkpoint without both networks has none).
 
-**The voice network confirms a restart** (issue 43, held): soon after a stop, a start of the detector's
-alone, not right after a silence, waits until the voice network hears music too
+**The voice network confirms a restart** (issue 43, held): soon after a stop, or later without a rise in
+level, a start of the detector's alone, not right after a silence, waits until the voice network hears music too
 (:mod:`models.networks.return_confirm`, composed here: :meth:`MusicGate.confirms_start`;
 ``return_confirm.rule = False`` switches it off).
 
@@ -433,11 +433,12 @@ class MusicGate:
         self.voice_context.step(True, True, True)
         return True
 
-    def confirms_start(self, restart: bool) -> bool:
+    def confirms_start(self, asks: bool) -> bool:
         """The dance may start on this idle frame heard as music (:mod:`models.networks.return_confirm`: a
-        ``restart``, soon after a stop, of the detector's alone, not right after a silence, waits for the
-        voice network)."""
-        return self.return_confirm.confirms(restart and self.detected, self._voice_z, FRESH_FRAMES)
+        start of the detector's alone after the stream's first dance that the idle gate ``asks`` about, a
+        restart or one without a rise in level, not right after a silence, waits for the voice network)."""
+        return self.return_confirm.confirms(asks and self.detected and self.agreement.has_danced, self._voice_z,
+                                            FRESH_FRAMES)
 
     def voice_holds(self) -> bool:
         """The voice-over context holds a dancing performer's stop on this frame
