@@ -91,7 +91,8 @@ heard as music: ``false_start.CONFIRM_FRAMES``, which ``--confirm-frames`` sets,
 its ``RESUME_FRAMES``), ``voiced-song`` (a song's start the voice-over start made is guarded at
 ``idle_gate.SONG_MARGIN`` as any other, not ``SONG_MARGIN_VOICED``), ``lone-voice`` (the pause rule keeps a
 frame whatever the voice network hears in a dance the voice-over context heard no voice over:
-``lone_voice.py``). ``--trace`` prints the gate's
+``lone_voice.py``), ``return-confirm`` (after the stream's first dance the detector starts the dance without the
+voice network: ``return_confirm.CONFIRM_VOICE``, which ``--confirm-voice`` sets). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, through a reader
 after a recording and the next recording's start, or through a gap between songs and the music's
 return (``gap:LABEL``), or through an espeak-ng host after a training song (``espeak:SONG/K``),
@@ -155,7 +156,7 @@ SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_onl
                                         "quiet-return": ("idle", "quiet_return"), "veto": ("presence", "veto_rule"),
                                         "context": ("presence", "context_rule"),
                                         "agree": ("presence", "agree_rule"), "false-start": ("false_start", "rule"), "lone-voice": ("lone", "rule"),
-                                        "voiced-song": ("idle", "voiced_song")}
+                                        "voiced-song": ("idle", "voiced_song"), "return-confirm": ("return_confirm", "rule")}
 #: The switches ``--off`` named (set by main).
 OFF: set[str] = set()
 
@@ -168,7 +169,7 @@ def new_stream(lm, seed: int):
     for name in OFF:
         where, attr = SWITCHES[name]
         part = stream._idle if where == "idle" else stream._idle.presence
-        if part is not None and where in ("false_start", "lone"):  # a part the MusicGate composes
+        if part is not None and where in ("false_start", "lone", "return_confirm"):  # a part the MusicGate composes
             part = getattr(part, where)
         if part is not None:
             setattr(part, attr, False)
@@ -178,11 +179,11 @@ def new_stream(lm, seed: int):
 def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
     """The gate's state frame by frame (a fresh stream on ``feats`` (T, D), :data:`OFF` applied) over
     each (first, last) frame window: time (s), idle weight, music (the gate's state), heard (the
-    detector's verdict), the stop or start logit (running mean), the voice network's logit, the
+    detector's verdict), the stop or start logit (running mean), the stop network's own, the voice network's logit, the
     floor (dB range over 1 s), the pauses' steadiness, kept by the voice-over (V) or pause (P) rule
     or heard as music by the three networks' agreement (A) or the voice-over start held back by a false
-    start's doubt (D) or not kept by the pause rule for a lone voice (L, ``lone_voice.py``), the stop count, the
-    break's frames, the log
+    start's doubt (D) or not kept by the pause rule for a lone voice (L, ``lone_voice.py``) or a detector's start
+    held back until the voice network confirms it (C), the stop count, the break's frames, the log
     energy (dB), the voice-over context (frames kept 10 s to 2.5 s ago: ``voice_context.CONTEXT_MIN`` holds
     the stop), and three statistics: the log energy's spread (dB), the pulse clarity, the beat phase's
     coherence. An empty window: every stop of the
@@ -195,13 +196,16 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
         return ["(no presence detector: nothing to trace)"]
     rows, music = [], []
     for t in range(len(feats)):
-        kv, kp, ka, kd, kl = pg.voice_frames, pg.pauses.frames, pg.agreement.frames, pg.false_start.frames, pg.lone.frames
+        kv, kp, ka, kd = pg.voice_frames, pg.pauses.frames, pg.agreement.frames, pg.false_start.frames
+        kl, kc = pg.lone.frames, pg.return_confirm.frames
         w = ig.step(np.asarray(feats[t], np.float32))
         vz = presence_logit(pg.stats, *pg._voice) if pg.has_voice else float("nan")
+        sz = presence_logit(pg.stats, *pg._stop)
         kept = ("V" if pg.voice_frames > kv else "P" if pg.pauses.frames > kp else "A" if pg.agreement.frames > ka
-                else "D" if pg.false_start.frames > kd else "L" if pg.lone.frames > kl else "-")
+                else "D" if pg.false_start.frames > kd else "L" if pg.lone.frames > kl
+                else "C" if pg.return_confirm.frames > kc else "-")
         music.append(ig.music)
-        rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
+        rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {sz:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
                     f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.voice_context.count:3d}"
                     f" {pg.stats[3]:5.1f} {pg.stats[7]:4.2f} {pg.stats[10]:4.2f}")
     if windows == [(0, 0)]:
@@ -210,7 +214,7 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
             if music[t - 1] and not music[t]:
                 back = next((u for u in range(t, len(music)) if music[u]), len(music) - 1)
                 windows.append((max(0, t - 45), min(len(music) - 1, back + 6)))
-    head = "      s    w m h  logit  voice floor pause k count brk    dB ctx  sprd clar  coh"
+    head = "      s    w m h  logit   stop  voice floor pause k count brk    dB ctx  sprd clar  coh"
     return [line for a, b in windows for line in [f"-- frames {a}-{b}", head, *rows[a: b + 1]]]
 
 
@@ -451,11 +455,11 @@ def print_trace(lm, args, recordings: list, speech: list, songs: list) -> int:
         print(f"idle_gate: --trace {args.trace!r}: no shared recording starts with {name!r} (RECORDING@DB or RECORDING@READER)",
               file=sys.stderr)
         return 2
-    i, rname, audio = rec[0]
-    audio = audio[: len(audio) // HOP * HOP]
-    if reader:
+    i, rname, whole = rec[0]
+    audio = whole[: len(whole) // HOP * HOP]
+    if reader:  # cut as --parts readers cuts (from the whole recording)
         cut = lambda x: x[int(len(x) * args.reader_at): int(len(x) * args.reader_at) + int(args.song_s * SR)]  # noqa: E731
-        a, b = cut(audio), cut(shared[(i + 1) % len(shared)][1])
+        a, b = cut(whole), cut(shared[(i + 1) % len(shared)][1])
         a, b = a[: len(a) // HOP * HOP], b[: len(b) // HOP * HOP]
         talk = reader[0][1] * 10 ** ((rms_dbfs(a) - rms_dbfs(reader[0][1])) / 20)
         talk = talk[: len(talk) // HOP * HOP]
@@ -606,6 +610,8 @@ def main(argv: list[str] | None = None) -> int:
                    "a false start (false_start.CONFIRM_FRAMES)")
     p.add_argument("--resume-frames", type=int, help="frames after a false start's stop the voice-over start may still "
                    "start the dance (false_start.RESUME_FRAMES)")
+    p.add_argument("--confirm-voice", type=float, help="after the stream's first dance, a start of the detector's waits "
+                   "until the voice network's logit is above this (return_confirm.CONFIRM_VOICE; -inf: as --off return-confirm)")
     p.add_argument("--song-margin", type=float, help="a song's start is guarded while the voice network's logit lies above "
                    "minus this (idle_gate.SONG_MARGIN; 2: as before the false start's doubt)")
     p.add_argument("--song-margin-voiced", type=float, help="the same for a song's start the voice-over start made "
@@ -621,7 +627,8 @@ def main(argv: list[str] | None = None) -> int:
                    "voice-over start starts the dance again after a dance the stop network never heard as music), "
                    "voiced-song (a song's start the voice-over start made is guarded as any other, at idle_gate.SONG_MARGIN), "
                    "lone-voice (the pause rule keeps a frame whatever the voice network hears where no voice was heard over the "
-                   "dance: lone_voice.py)")
+                   "dance: lone_voice.py), return-confirm (after the stream's first dance the detector starts the dance "
+                   "without the voice network)")
     p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
                    "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "
@@ -646,15 +653,16 @@ def main(argv: list[str] | None = None) -> int:
     from models.networks import music_gate as gate
     from models.training import music_gate as mg
 
-    from models.networks import agreement, false_start, veto, voice_context, voice_pauses, voice_start
+    from models.networks import agreement, false_start, return_confirm, veto, voice_context, voice_pauses, voice_start
 
     for arg, const in (("floor_db", "FLOOR_DB"), ("voice_margin", "VOICE_MARGIN"), ("pause_steady", "PAUSE_STEADY"),
                        ("start_evidence", "START_EVIDENCE"), ("start_decay", "START_DECAY"), ("voice_hold", "VOICE_HOLD"),
                        ("gone_floor_db", "GONE_FLOOR_DB"), ("gone_steady", "GONE_STEADY"), ("voice_no", "VOICE_NO"), ("veto_top", "VETO_TOP"),
                        ("voice_no_run", "VOICE_NO_RUN"), ("agree_stop", "AGREE_STOP"), ("agree_voice", "AGREE_VOICE"),
-                       ("confirm_frames", "CONFIRM_FRAMES"), ("resume_frames", "RESUME_FRAMES")):
+                       ("confirm_frames", "CONFIRM_FRAMES"), ("resume_frames", "RESUME_FRAMES"),
+                       ("confirm_voice", "CONFIRM_VOICE")):
         if getattr(args, arg) is not None:  # a constant set on the module that defines it (models/networks/)
-            where = (voice_context, voice_pauses, voice_start, veto, agreement, false_start, gate)
+            where = (voice_context, voice_pauses, voice_start, veto, agreement, false_start, return_confirm, gate)
             setattr(next(m for m in where if hasattr(m, const)), const, getattr(args, arg))
     from models.networks import idle_gate
 

@@ -262,7 +262,11 @@ class IdleGate:
         start = PRESENT_FRAMES if self.presence is None else START_FRAMES  # the presence detector's own
         self.idle_frames = 0 if self.music else self.idle_frames + 1
         self.danced = min(SONG_DANCE, self.danced + 1)
-        if self.run >= (start if present else ABSENT_FRAMES) and not held and present != self.music:
+        due = self.run >= (start if present else ABSENT_FRAMES) and not held and present != self.music
+        asks = self.idle_frames < SONG_IDLE or not energy >= self.level + RETURN_DB  # a restart, or no rise (NaN: none)
+        if due and present and self.presence is not None and not self.presence.confirms_start(asks):
+            due = False  # the voice network confirms a restart (return_confirm.py): the count runs on
+        if due:
             protect = self.song_start and self.danced < SONG_DANCE and not self.break_frames
             margin = SONG_MARGIN_VOICED if self.voiced else SONG_MARGIN
             if present or not (protect and (self.presence is None or self.presence.voice_hears(margin))):

@@ -65,6 +65,11 @@ danced in this stream also hears music where the detector, the stop and the voic
 music (:mod:`models.networks.agreement`, composed here; ``agree_rule = False`` switches it off; a
 checkpoint without both networks has none).
 
+**The voice network confirms a restart** (issue 43, held): soon after a stop, or later without a rise in
+level, a start of the detector's alone, not right after a silence, waits until the voice network hears music too
+(:mod:`models.networks.return_confirm`, composed here: :meth:`MusicGate.confirms_start`;
+``return_confirm.rule = False`` switches it off).
+
 **The veto** (issue 43: a crowd after a song): a dancing performer's frame the stop network is
 unsure of is no music when the voice network is sure there is none and the floor holds
 (:mod:`models.networks.veto`, composed here; ``MusicGate.veto.counting``, set by the idle gate, widens its
@@ -104,6 +109,7 @@ from numba import njit
 from models.networks.agreement import Agreement
 from models.networks.false_start import FalseStart
 from models.networks.lone_voice import LoneVoice
+from models.networks.return_confirm import ReturnConfirm
 from models.networks.veto import Veto
 from models.networks.voice_context import VoiceContext
 from models.networks.voice_pauses import VoicePauses, pause_steadiness
@@ -342,6 +348,7 @@ class MusicGate:
         self.veto = Veto(self.has_voice, veto_rule)  # the voice network sure of no music (module docstring)
         self.agreement = Agreement(self.has_stop and self.has_voice)  # the three networks agree: an idle frame is music
         self.false_start = FalseStart()  # a dance the stop network never heard as music: false_start.py
+        self.return_confirm = ReturnConfirm(self.has_voice)  # the voice network confirms a restart: return_confirm.py
         self.pauses = VoicePauses(pause_rule)  # the music heard in the voice's pauses (module docstring)
         self.lone = LoneVoice()  # no voice heard over a judged dance: a sure voice network overrules the pause rule
         self.voice_start = VoiceStart(start_rule, resume_rule)  # the voice-over start and the resume
@@ -372,6 +379,7 @@ class MusicGate:
         self.floor_db = 0.0  # the log energy's range over the last FLOOR_FRAMES sounding frames
         self.voice_frames = 0  # frames the voice-over rule kept as music
         self.voiced = False  # the voice-over start heard this (idle) frame as music
+        self.detected = False  # the detector alone heard this (idle) frame as music
         self.pause_steady = -math.inf  # the steadiness in the voice's pauses (-inf: no steadiness column)
         self.silent = 0  # silent frames in a row
         self.fresh = 0  # sounding frames left at the idle time constant (after a silence)
@@ -382,15 +390,17 @@ class MusicGate:
         self.agreement.reset()
         self.false_start.reset()
         self.lone.reset()
+        self.return_confirm.reset()
 
     def step(self, row: np.ndarray, dancing: bool) -> bool:
         """True when frame ``row`` (D,) sounds like music to a performer that is ``dancing``."""
-        self.voiced = self.lone.holding = False
+        self.voiced = self.detected = self.lone.holding = False
         if float(row[ENERGY_COL]) <= self.energy_min:
             self.silent += 1
             return False  # silence: the statistics wait for sound
         if self.silent >= FRESH_SILENCE and self.fresh_rule:
             self.fresh = FRESH_FRAMES  # after a silence: listen afresh
+        self.return_confirm.sounding = 0 if self.silent >= FRESH_SILENCE else self.return_confirm.sounding + 1
         self.silent = 0
         fast = not dancing or self.fresh > 0
         self.fresh = max(0, self.fresh - 1)
@@ -407,6 +417,7 @@ class MusicGate:
         if not dancing:
             self.voice_context.step(False, True, False)  # the voice-over context runs on while idle, nothing kept
             if self.logit > MARGIN_START:
+                self.detected = True
                 return True
             voiced = self.voice_rule and self.voice_start.hears(self._over)  # its count runs on every such frame
             self.voiced = voiced and self.false_start.trusts()  # not after a false start (false_start.py)
@@ -432,6 +443,13 @@ class MusicGate:
         self.voice_start.resume(True, self.voice_rule)
         self.voice_context.step(True, True, True)
         return True
+
+    def confirms_start(self, asks: bool) -> bool:
+        """The dance may start on this idle frame heard as music (:mod:`models.networks.return_confirm`: a
+        start of the detector's alone after the stream's first dance that the idle gate ``asks`` about, a
+        restart or one without a rise in level, not right after a silence, waits for the voice network)."""
+        return self.return_confirm.confirms(asks and self.detected and self.agreement.has_danced, self._voice_z,
+                                            FRESH_FRAMES)
 
     def voice_holds(self) -> bool:
         """The voice-over context holds a dancing performer's stop on this frame
