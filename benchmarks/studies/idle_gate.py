@@ -26,7 +26,8 @@ features as the engine computes them):
 
 * **Voices and breaks** (``--music`` only; issue 43): each recording with the ``--speech``
   recordings (strung together, looped) laid over it at 0 and -6 dB relative to its RMS level
-  (a rapper or a host over the track: still music), and with its audio cut to silence for 1 s
+  (a rapper or a host over the track: still music; ``--voice-from S``: from S s on, after an
+  instrumental start), and with its audio cut to silence for 1 s
   and for 2 s every 10 s (stop-time breaks); ``idle_sounding`` of each (target at most 0.02).
   The between-songs targets of issue 43: silence idle within 3 s (a song's 2-s break is
   danced through), speech within 2 s, crowd and noise within 2.5 s.
@@ -236,10 +237,12 @@ def gap_audio(kind: str, seconds: float, dbfs: float | None, rng: np.random.Gene
     return mg.plain_noise(seconds, rng, kind, dbfs)
 
 
-def with_speech(audio: np.ndarray, speech: np.ndarray, db: float, sound: int) -> np.ndarray:
-    """``audio`` (n,) with ``speech`` looped over all of it at ``db`` dB relative to the RMS of its
-    first ``sound`` frames (its music, without a silent end)."""
-    talk = np.resize(speech, len(audio))
+def with_speech(audio: np.ndarray, speech: np.ndarray, db: float, sound: int, from_s: float = 0.0) -> np.ndarray:
+    """``audio`` (n,) with ``speech`` looped over it from ``from_s`` seconds on at ``db`` dB relative to
+    the RMS of its first ``sound`` frames (its music, without a silent end)."""
+    k = min(len(audio), int(round(from_s * SR)))
+    talk = np.zeros(len(audio), speech.dtype)
+    talk[k:] = np.resize(speech, len(audio) - k)
     gain = 10 ** ((rms_dbfs(audio[: sound * HOP]) - rms_dbfs(speech) + db) / 20)
     return (audio + gain * talk).astype(np.float32)
 
@@ -583,6 +586,9 @@ def main(argv: list[str] | None = None) -> int:
                         "the stop undone: how long the gate hears no music), leadin (no music from the stream's start), talkover "
                         "(the readers over a recording going on alone after it) "
                         "(default recordings,mixes,gaps)")
+    p.add_argument("--voice-from", type=float, default=0.0, metavar="S",
+                   help="--parts mixes: the readers come in S seconds into each recording, after the performer has "
+                        "danced (a rapper after an instrumental intro; default 0: over all of it)")
     p.add_argument("--reader-at", type=float, default=1 / 3,
                    help="--parts readers: where the 20 s of each recording start, a share of its length (default 1/3)")
     p.add_argument("--floor-db", type=float, help="the voice-over rule's FLOOR_DB (models/networks/music_gate.py; "
@@ -727,7 +733,7 @@ def main(argv: list[str] | None = None) -> int:
         sound, end = music_end(lm, extract_features(audio, lm.features), Path(name).stem)
         row = {"recording": name, "alone": idle_sounding(lm, audio, end, args.seed)}
         for db in MIX_DB:
-            row[f"speech {db:g} dB"] = idle_sounding(lm, with_speech(audio, talk, db, sound), end, args.seed)
+            row[f"speech {db:g} dB"] = idle_sounding(lm, with_speech(audio, talk, db, sound, args.voice_from), end, args.seed)
         for sec in BREAKS_S:
             row[f"breaks {sec:g} s"] = idle_sounding(lm, with_breaks(audio, sec), end, args.seed)
         mix_rows.append(row)
