@@ -27,8 +27,8 @@ from typing import Callable
 
 #: A dancing frame whose stop logit (running mean) lies at or below UNSURE_TOP, the voice-over rule's
 #: cues holding, counts as a voice heard over the music. Half MARGIN_STOP, as the veto's VETO_TOP; 0 and
-#: 0.5 left vibeace under the readers from 12 s at -6 dB at 3.5 % idle, 2 reads as 1 but for choice
-#: (6.2 -> 5.5 %: idle_gate.py --parts mixes --voice-from 12 --unsure-top N; docs/history-listening.md).
+#: 0.5 left vibeace under the readers from 12 s at -6 dB at 3.5 % idle (fishin at 0 dB 0.2 %), 2 reads as 1
+#: (idle_gate.py --parts mixes --voice-from 12 --unsure-top N; docs/history-listening.md).
 UNSURE_TOP: float = 1.0
 
 
