@@ -69,8 +69,8 @@ features as the engine computes them):
 that cue always holds; ``--floor-db 0``: the voice network's part off), ``--pause-steady`` its pause
 rule's ``voice_pauses.PAUSE_STEADY`` (``inf``: off; with ``--floor-db 0`` the whole rule off), ``--start-evidence``
 and ``--start-decay`` its voice-over start's ``voice_start.START_EVIDENCE`` (``inf``: off) and ``START_DECAY``,
-``--voice-hold``, ``--gone-floor-db`` and ``--gone-steady`` the voice-over context's hold and its
-release (``voice_context.VOICE_HOLD``, ``GONE_FLOOR_DB``: ``inf``, never released; ``GONE_STEADY``),
+``--voice-hold``, ``--gone-floor-db``, ``--gone-steady`` and ``--gone-voice`` the voice-over context's hold and its
+release (``voice_context.VOICE_HOLD``, ``GONE_FLOOR_DB``: ``inf``, never released; ``GONE_STEADY``, ``GONE_VOICE``),
 ``--voice-no`` the veto's threshold (``veto.VOICE_NO``), ``--veto-top`` and ``--voice-no-run``
 its reach and threshold while a stop count runs (``VETO_TOP``, ``VOICE_NO_RUN``; ``--veto-top 0
 --voice-no-run 4``: as when none runs), ``--agree-stop`` and ``--agree-voice`` the stop and voice networks'
@@ -93,12 +93,14 @@ its ``RESUME_FRAMES``), ``voiced-song`` (a song's start the voice-over start mad
 ``idle_gate.SONG_MARGIN`` as any other, not ``SONG_MARGIN_VOICED``), ``lone-voice`` (the pause rule keeps a
 frame whatever the voice network hears in a dance the voice-over context heard no voice over:
 ``lone_voice.py``), ``return-confirm`` (after the stream's first dance the detector starts the dance without the
-voice network: ``return_confirm.CONFIRM_VOICE``, which ``--confirm-voice`` sets). ``--trace`` prints the gate's
+voice network: ``return_confirm.CONFIRM_VOICE``, which ``--confirm-voice`` sets), ``unsure-voice`` (the
+voice-over context counts only its rules' kept frames, not a voice heard where the stop network wavers:
+``unsure_voice.UNSURE_TOP``, which ``--unsure-top`` sets). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, through a reader
 after a recording and the next recording's start, or through a gap between songs and the music's
 return (``gap:LABEL``), or through an espeak-ng host after a training song (``espeak:SONG/K``),
-or through a case of ``--parts leadin`` from the stream's start (``leadin:CASE``),
-instead of the tables (which network or rule said what).
+or through a case of ``--parts leadin`` from the stream's start (``leadin:CASE``; a recording with
+the readers, ``RECORDING@DB``, with them from ``--voice-from`` s), instead of the tables (which network or rule said what).
 
 It also prints the gate's own cost per frame (median and 99th percentile, microseconds).
 
@@ -157,7 +159,8 @@ SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_onl
                                         "quiet-return": ("idle", "quiet_return"), "veto": ("presence", "veto_rule"),
                                         "context": ("presence", "context_rule"),
                                         "agree": ("presence", "agree_rule"), "false-start": ("false_start", "rule"), "lone-voice": ("lone", "rule"),
-                                        "voiced-song": ("idle", "voiced_song"), "return-confirm": ("return_confirm", "rule")}
+                                        "voiced-song": ("idle", "voiced_song"), "return-confirm": ("return_confirm", "rule"),
+                                        "unsure-voice": ("unsure", "rule")}
 #: The switches ``--off`` named (set by main).
 OFF: set[str] = set()
 
@@ -170,7 +173,7 @@ def new_stream(lm, seed: int):
     for name in OFF:
         where, attr = SWITCHES[name]
         part = stream._idle if where == "idle" else stream._idle.presence
-        if part is not None and where in ("false_start", "lone", "return_confirm"):  # a part the MusicGate composes
+        if part is not None and where in ("false_start", "lone", "return_confirm", "unsure"):  # a part the MusicGate composes
             part = getattr(part, where)
         if part is not None:
             setattr(part, attr, False)
@@ -184,7 +187,8 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
     floor (dB range over 1 s), the pauses' steadiness, kept by the voice-over (V) or pause (P) rule
     or heard as music by the three networks' agreement (A) or the voice-over start held back by a false
     start's doubt (D) or not kept by the pause rule for a lone voice (L, ``lone_voice.py``) or a detector's start
-    held back until the voice network confirms it (C), the stop count, the break's frames, the log
+    held back until the voice network confirms it (C) or a voice heard where the stop network wavers
+    (U, ``unsure_voice.py``: evidence for the voice-over context), the stop count, the break's frames, the log
     energy (dB), the voice-over context (frames kept 10 s to 2.5 s ago: ``voice_context.CONTEXT_MIN`` holds
     the stop), and three statistics: the log energy's spread (dB), the pulse clarity, the beat phase's
     coherence. An empty window: every stop of the
@@ -198,13 +202,13 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
     rows, music = [], []
     for t in range(len(feats)):
         kv, kp, ka, kd = pg.voice_frames, pg.pauses.frames, pg.agreement.frames, pg.false_start.frames
-        kl, kc = pg.lone.frames, pg.return_confirm.frames
+        kl, kc, ku = pg.lone.frames, pg.return_confirm.frames, pg.unsure.frames
         w = ig.step(np.asarray(feats[t], np.float32))
         vz = presence_logit(pg.stats, *pg._voice) if pg.has_voice else float("nan")
         sz = presence_logit(pg.stats, *pg._stop)
         kept = ("V" if pg.voice_frames > kv else "P" if pg.pauses.frames > kp else "A" if pg.agreement.frames > ka
                 else "D" if pg.false_start.frames > kd else "L" if pg.lone.frames > kl
-                else "C" if pg.return_confirm.frames > kc else "-")
+                else "C" if pg.return_confirm.frames > kc else "U" if pg.unsure.frames > ku else "-")
         music.append(ig.music)
         rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {sz:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
                     f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.voice_context.count:3d}"
@@ -479,8 +483,8 @@ def print_trace(lm, args, recordings: list, speech: list, songs: list) -> int:
             return 2
         sound, _ = music_end(lm, extract_features(audio, lm.features), Path(rname).stem)
         talk = np.concatenate([x for _, x in speech])
-        feats = extract_features(with_speech(audio, talk, db, sound), lm.features)
-        print(f"{rname} with the readers over it at {db:g} dB: every stop after 3 s")
+        feats = extract_features(with_speech(audio, talk, db, sound, args.voice_from), lm.features)
+        print(f"{rname} with the readers over it at {db:g} dB from {args.voice_from:g} s: every stop after 3 s")
         lines = trace(lm, feats, [(0, 0)])
     print("\n".join(lines))
     return 0
@@ -588,7 +592,7 @@ def main(argv: list[str] | None = None) -> int:
                         "(default recordings,mixes,gaps)")
     p.add_argument("--voice-from", type=float, default=0.0, metavar="S",
                    help="--parts mixes: the readers come in S seconds into each recording, after the performer has "
-                        "danced (a rapper after an instrumental intro; default 0: over all of it)")
+                        "danced (a rapper after an instrumental intro; default 0: over all of it); --trace RECORDING@DB too")
     p.add_argument("--reader-at", type=float, default=1 / 3,
                    help="--parts readers: where the 20 s of each recording start, a share of its length (default 1/3)")
     p.add_argument("--floor-db", type=float, help="the voice-over rule's FLOOR_DB (models/networks/music_gate.py; "
@@ -604,6 +608,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--voice-hold", type=int, help="frames the voice-over context holds a stop (voice_context.VOICE_HOLD)")
     p.add_argument("--gone-floor-db", type=float, help="the voice-over context's release: voice_context.GONE_FLOOR_DB (inf: never released)")
     p.add_argument("--gone-steady", type=float, help="the voice-over context's release: voice_context.GONE_STEADY (dimensionless)")
+    p.add_argument("--gone-voice", type=float, help="the voice-over context's release where the voice network is sure of no "
+                   "music: voice_context.GONE_VOICE (its logit at or below minus it, the floor broken; inf: off)")
     p.add_argument("--voice-no", type=float, help="the veto's threshold: veto.VOICE_NO (the voice network's logit at or below minus it)")
     p.add_argument("--veto-top", type=float, help="the veto's reach while a stop count runs: veto.VETO_TOP "
                    "(stop logit; 0 with --voice-no-run 4: as when none runs)")
@@ -618,6 +624,9 @@ def main(argv: list[str] | None = None) -> int:
                    "start the dance (false_start.RESUME_FRAMES)")
     p.add_argument("--confirm-voice", type=float, help="after the stream's first dance, a start of the detector's waits "
                    "until the voice network's logit is above this (return_confirm.CONFIRM_VOICE; -inf: as --off return-confirm)")
+    p.add_argument("--unsure-top", type=float, help="a dancing frame whose stop logit lies at or below this, the voice-over "
+                   "rule's cues holding, is a voice heard over the music for the context (unsure_voice.UNSURE_TOP; -inf: as "
+                   "--off unsure-voice)")
     p.add_argument("--song-margin", type=float, help="a song's start is guarded while the voice network's logit lies above "
                    "minus this (idle_gate.SONG_MARGIN; 2: as before the false start's doubt)")
     p.add_argument("--song-margin-voiced", type=float, help="the same for a song's start the voice-over start made "
@@ -634,7 +643,8 @@ def main(argv: list[str] | None = None) -> int:
                    "voiced-song (a song's start the voice-over start made is guarded as any other, at idle_gate.SONG_MARGIN), "
                    "lone-voice (the pause rule keeps a frame whatever the voice network hears where no voice was heard over the "
                    "dance: lone_voice.py), return-confirm (after the stream's first dance the detector starts the dance "
-                   "without the voice network)")
+                   "without the voice network), unsure-voice (the voice-over context counts only the frames its rules kept, "
+                   "not a voice heard where the stop network wavers: unsure_voice.py)")
     p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
                    "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "
@@ -659,16 +669,17 @@ def main(argv: list[str] | None = None) -> int:
     from models.networks import music_gate as gate
     from models.training import music_gate as mg
 
-    from models.networks import agreement, false_start, return_confirm, veto, voice_context, voice_pauses, voice_start
+    from models.networks import (agreement, false_start, return_confirm, unsure_voice, veto, voice_context, voice_pauses,
+                                 voice_start)
 
     for arg, const in (("floor_db", "FLOOR_DB"), ("voice_margin", "VOICE_MARGIN"), ("pause_steady", "PAUSE_STEADY"),
                        ("start_evidence", "START_EVIDENCE"), ("start_decay", "START_DECAY"), ("voice_hold", "VOICE_HOLD"),
-                       ("gone_floor_db", "GONE_FLOOR_DB"), ("gone_steady", "GONE_STEADY"), ("voice_no", "VOICE_NO"), ("veto_top", "VETO_TOP"),
+                       ("gone_floor_db", "GONE_FLOOR_DB"), ("gone_steady", "GONE_STEADY"), ("gone_voice", "GONE_VOICE"), ("voice_no", "VOICE_NO"), ("veto_top", "VETO_TOP"),
                        ("voice_no_run", "VOICE_NO_RUN"), ("agree_stop", "AGREE_STOP"), ("agree_voice", "AGREE_VOICE"),
                        ("confirm_frames", "CONFIRM_FRAMES"), ("resume_frames", "RESUME_FRAMES"),
-                       ("confirm_voice", "CONFIRM_VOICE")):
+                       ("confirm_voice", "CONFIRM_VOICE"), ("unsure_top", "UNSURE_TOP")):
         if getattr(args, arg) is not None:  # a constant set on the module that defines it (models/networks/)
-            where = (voice_context, voice_pauses, voice_start, veto, agreement, false_start, return_confirm, gate)
+            where = (voice_context, voice_pauses, voice_start, veto, agreement, false_start, return_confirm, unsure_voice, gate)
             setattr(next(m for m in where if hasattr(m, const)), const, getattr(args, arg))
     from models.networks import idle_gate
 

@@ -91,7 +91,9 @@ does (:mod:`models.networks.voice_pauses`, composed here). ``pause_rule=False`` 
 **The voice-over context** (part of the voice-over rule; issue 43, the voices at 0 dB): a dance in
 which a voice has been heard over the music before holds its stop a while, unless the music is gone
 (:mod:`models.networks.voice_context`, composed here: :meth:`MusicGate.voice_holds`).
-``context_rule=False`` switches the context off.
+``context_rule=False`` switches the context off. **A voice heard where the stop network wavers** (issue 43, a
+voice that comes in after an instrumental start) is evidence for the context too (:mod:`models.networks.unsure_voice`,
+composed here; ``unsure_rule = False`` switches it off).
 
 **The lone voice** (part of the voice-over rule; issue 43, a host after a song): in a dance the
 voice-over context has judged and heard no voice over, the pause rule does not keep a frame the voice
@@ -110,6 +112,7 @@ from models.networks.agreement import Agreement
 from models.networks.false_start import FalseStart
 from models.networks.lone_voice import LoneVoice
 from models.networks.return_confirm import ReturnConfirm
+from models.networks.unsure_voice import UnsureVoice
 from models.networks.veto import Veto
 from models.networks.voice_context import VoiceContext
 from models.networks.voice_pauses import VoicePauses, pause_steadiness
@@ -323,7 +326,7 @@ class MusicGate:
     ``voice_start.frames`` count the frames the agreement, the pause rule and the start heard as music;
     ``voiced`` says whether the voice-over start (trusted, ``false_start.py``) heard the last frame as music;
     ``lone`` is the lone voice (``lone_voice.py``: ``lone.rule`` switches it, ``lone.holding`` says the last
-    frame holds the stop count).
+    frame holds the stop count); ``unsure`` the voice heard where the stop network wavers (``unsure_voice.py``).
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
@@ -351,6 +354,7 @@ class MusicGate:
         self.return_confirm = ReturnConfirm(self.has_voice)  # the voice network confirms a restart: return_confirm.py
         self.pauses = VoicePauses(pause_rule)  # the music heard in the voice's pauses (module docstring)
         self.lone = LoneVoice()  # no voice heard over a judged dance: a sure voice network overrules the pause rule
+        self.unsure = UnsureVoice()  # a voice heard where the stop network wavers: the context's evidence too
         self.voice_start = VoiceStart(start_rule, resume_rule)  # the voice-over start and the resume
         # bound once, not a frame: the callbacks, the pause rule's rings (sound_cues advances them)
         self._stop_z, self._voice_z, self._over = self._stop_logit, self._voice_logit, self._voice_over
@@ -390,6 +394,7 @@ class MusicGate:
         self.agreement.reset()
         self.false_start.reset()
         self.lone.reset()
+        self.unsure.reset()
         self.return_confirm.reset()
 
     def step(self, row: np.ndarray, dancing: bool) -> bool:
@@ -431,7 +436,8 @@ class MusicGate:
                 return False  # the stop network unsure, the voice network sure of no music: the veto
             if self.voice_start.evidence > 0.0:  # the resume's count runs down (most frames of a song skip the call)
                 self.voice_start.resume(False, self.voice_rule)
-            self.voice_context.step(False, True, True)
+            # a voice heard where the stop network wavers is evidence for the context (unsure_voice.py)
+            self.voice_context.step(self.voice_rule and self.unsure.hears(self.logit, self._over), True, True)
             return True
         # the music heard in the voice's pauses, unless a lone voice (lone_voice.py)
         if not (self.voice_rule and self.lone.pause_keeps(self.pauses, self.pause_steady, self.voice_context, self._voice_z)):
@@ -455,7 +461,8 @@ class MusicGate:
         """The voice-over context holds a dancing performer's stop on this frame
         (:meth:`models.networks.voice_context.VoiceContext.holds`; never with the voice-over rule or
         ``context_rule`` off)."""
-        return self.voice_rule and self.context_rule and self.voice_context.holds(self.floor_db, self.pause_steady)
+        voice = self._voice_z if self.has_voice else None  # the release where it is sure of no music
+        return self.voice_rule and self.context_rule and self.voice_context.holds(self.floor_db, self.pause_steady, voice)
 
     veto_rule = _switch("veto", "False switches the veto off (:attr:`models.networks.veto.Veto.rule`).")
     agree_rule = _switch("agreement", "False switches the three networks' agreement off "
@@ -463,6 +470,8 @@ class MusicGate:
     pause_rule = _switch("pauses", "False switches the pause rule off (:attr:`models.networks.voice_pauses.VoicePauses.rule`).")
     start_rule = _switch("voice_start", "False switches the voice-over start off, the resume with it "
                          "(:attr:`models.networks.voice_start.VoiceStart.rule`).")
+    unsure_rule = _switch("unsure", "False switches the unsure voice off: the context counts kept frames only "
+                          "(:attr:`models.networks.unsure_voice.UnsureVoice.rule`).")
     resume_rule = _switch("voice_start", "False switches the resume off "
                           "(:attr:`models.networks.voice_start.VoiceStart.resume_rule`).", "resume_rule")
 

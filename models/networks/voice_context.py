@@ -11,8 +11,9 @@ has no voice over the music before the last 2.5 s (what the rules keep of a host
 lies within it) and stops as before; a false start on a host alone dances less than 10 s.
 **The music gone** releases the hold: a frame whose floor is broken by more than
 :data:`GONE_FLOOR_DB` and whose pauses are as unsteady as a voice alone (pause steadiness under
-:data:`GONE_STEADY`) is not held, so a voice going on alone after the song stops as it would
-without the context (a gate without the steadiness column has no release).
+:data:`GONE_STEADY`; a gate without the steadiness column has none of this) or on which the voice network
+is sure there is no music (its logit at or below ``-``:data:`GONE_VOICE`) is not held, so a voice going
+on alone after the song stops as it would without the context.
 
 State (30 fps, sounding frames only: silence leaves it as it is): a ring of the last
 :data:`CONTEXT_FRAMES` frames' "a rule kept it" flags, ``count`` (kept frames from
@@ -22,6 +23,8 @@ when used, so a study may set them on the module (``benchmarks/studies/idle_gate
 """
 
 from __future__ import annotations
+
+from typing import Callable
 
 #: A performer dancing CONTEXT_FRAMES sounding frames or more (10 s) that heard a voice over the music
 #: (CONTEXT_MIN frames or more the voice-over or the pause rule kept, from CONTEXT_FRAMES to CONTEXT_LAG
@@ -47,6 +50,12 @@ VOICE_HOLD: int = 32
 #: steadiness of 0.10 or more; a floor of 21 dB reads the same, a steadiness of 0.1 too but for one talkover.
 GONE_FLOOR_DB: float = 24.0
 GONE_STEADY: float = 0.08
+#: The music gone, too, where the floor is broken (over GONE_FLOOR_DB) and the voice network's logit lies at or
+#: below -GONE_VOICE: sure there is no music. Three times MARGIN_STOP, not tuned: at 4 (the veto's VOICE_NO)
+#: vibeace under the readers at 0 dB lost its held stop at 53.5 s (0.5 -> 3.8 % idle); with the voice heard where
+#: the stop network wavers (unsure_voice.py) a voice going on alone after vibeace at -6 dB idled 1.30 s after the
+#: music without it, 0.97 with it (idle_gate.py --parts mixes,talkover --gone-voice N; inf: off).
+GONE_VOICE: float = 6.0
 
 
 class VoiceContext:
@@ -78,11 +87,17 @@ class VoiceContext:
         self.unheard = 0 if heard else self.unheard + 1
         self.dance_run = self.dance_run + 1 if dancing else 0
 
-    def holds(self, floor_db: float, pause_steady: float) -> bool:
+    def holds(self, floor_db: float, pause_steady: float, voice_logit: Callable[[], float] | None = None) -> bool:
         """The context holds a dancing performer's stop on this frame (floor ``floor_db``: the log
-        energy's range over 1 s, dB; ``pause_steady``: the steadiness in the voice's pauses): it has
+        energy's range over 1 s, dB; ``pause_steady``: the steadiness in the voice's pauses;
+        ``voice_logit()``: the voice network's logit, called only where the floor is broken): it has
         danced CONTEXT_FRAMES sounding frames, a voice was heard over the music before (CONTEXT_MIN kept
         frames) and the music has been unheard for fewer than VOICE_HOLD frames in a row, unless the
-        music is gone (floor above GONE_FLOOR_DB, pause steadiness under GONE_STEADY, with ``release``)."""
-        return (self.dance_run >= CONTEXT_FRAMES and self.count >= CONTEXT_MIN and 0 < self.unheard < VOICE_HOLD
-                and not (self.release and floor_db > GONE_FLOOR_DB and pause_steady < GONE_STEADY))
+        music is gone (floor above GONE_FLOOR_DB and pause steadiness under GONE_STEADY, with ``release``,
+        or the voice network's logit at or below -GONE_VOICE)."""
+        if not (self.dance_run >= CONTEXT_FRAMES and self.count >= CONTEXT_MIN and 0 < self.unheard < VOICE_HOLD):
+            return False
+        if floor_db <= GONE_FLOOR_DB:
+            return True
+        return not ((self.release and pause_steady < GONE_STEADY)
+                    or (voice_logit is not None and voice_logit() <= -GONE_VOICE))
