@@ -50,7 +50,7 @@ class LoneVoice:
         voice network's logit, called only where the pause rule would keep the frame in a judged dance
         without a voice heard over it): whether the frame is kept; sets :attr:`holding`."""
         self.holding = False
-        if not (pauses.rule and pause_steady > voice_pauses.PAUSE_STEADY):
+        if not pauses.would_keep(pause_steady):
             return False
         if (self.rule and context.dance_run >= voice_context.CONTEXT_FRAMES
                 and context.count < voice_context.CONTEXT_MIN):

@@ -73,11 +73,14 @@ class VoicePauses:
         self.ring_at[:] = 0.0  # no slot filled: the rings' old values are not read
         self.frames = 0  # frames the pause rule kept as music
 
+    def would_keep(self, pause_steady: float) -> bool:
+        """The pause rule is on and the steadiness in the voice's pauses (``pause_steady``,
+        :func:`pause_steadiness`; -inf without the steadiness column) is above PAUSE_STEADY."""
+        return self.rule and pause_steady > PAUSE_STEADY
+
     def keeps(self, pause_steady: float) -> bool:
-        """The pause rule keeps this frame as music: on, and the steadiness in the voice's pauses
-        (``pause_steady``, :func:`pause_steadiness`; -inf without the steadiness column) above
-        PAUSE_STEADY; counts ``frames``."""
-        if not (self.rule and pause_steady > PAUSE_STEADY):
+        """The pause rule keeps this frame as music (:meth:`would_keep`); counts ``frames``."""
+        if not self.would_keep(pause_steady):
             return False
         self.frames += 1
         return True
