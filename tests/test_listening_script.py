@@ -167,6 +167,9 @@ def test_perform_is_generate_and_reads_the_idle_weight(shipped):
     assert np.all(own[: 6 * FPS] > 0.0)  # the playing movement's own speed, m/s, from the first code step on
     assert tempo[0] == 0.0 and np.all((60 <= tempo[3 * FPS: 6 * FPS]) & (tempo[3 * FPS: 6 * FPS] <= 170))
     assert rate[0] == 1.0 and np.mean(rate[3 * FPS: 6 * FPS] != 1.0) > 0.5  # the movements follow the heard tempo
+    # the rate as the tempo asks it, and under the speed cap (never faster), before the speed matching
+    asked, capped = trace["rate_asked"], trace["rate_capped"]
+    assert asked[0] == 1.0 and np.all(capped <= asked + 1e-12) and np.mean(asked[3 * FPS: 6 * FPS] != 1.0) > 0.5
 
 
 def test_run_on_a_tiny_synthetic_set(tmp_path, shipped, monkeypatch):

@@ -16,8 +16,10 @@ joint positions resampled in time, linear) reads a band-amplitude ratio above 1 
 (drift under the band's 0.25 Hz moves into it when played faster). ``amp / replay`` divides
 the measured 1.25x-over-0.8x ratio by that replay's ratio: a rate-neutral reading beside the
 target's (which stays the measured ratio). A second table splits each centroid ratio (hold on)
-into the followed tempo's ratio, the playback rate's (what the stream plays, after its caps)
-and the chosen movements' own speed (the choice). ``--force SONG BPM BPM BPM`` also dances
+into the followed tempo's ratio, the playback rate's (what the stream plays) and the chosen
+movements' own speed (the choice); the rate as the tempo asks it (within the rate range, faded
+with the pulse), under the speed cap, and as played (after the speed matching and the bone cap)
+show which step holds it (each the mean over the frames after 3 s). ``--force SONG BPM BPM BPM`` also dances
 SONG with the followed tempo fixed at those three tempi (0.8x, 1.0x, 1.25x; the follower's
 confidence kept): what a reading would give, without a rule that reads it. ``--jumps`` also
 counts, off and on, the followed tempo's jumps of more than half an octave from one frame to
@@ -89,6 +91,8 @@ def _job(args: tuple) -> tuple:
     got = L.score_motion(poses, np.asarray(beats))
     skip = int(L.SETTLE_S * L.FPS)
     got["rate"] = float(trace["rate"][skip:].mean())
+    got["rate_asked"] = float(trace["rate_asked"][skip:].mean())
+    got["rate_capped"] = float(trace["rate_capped"][skip:].mean())
     got["movement_speed"] = float(trace["movement_speed"][skip:].mean())
     rep = {}
     if rate == 1.0:
@@ -130,7 +134,7 @@ def octave_jumps(lm, data: Path, cache, shipped: float) -> dict[str, list[int]]:
 def _row(res: dict, song: str, variant: str, seeds: list[int], L) -> dict:
     """A song's ratios 1.25x over 0.8x (of the means over ``seeds``) for one variant (off's where it is the same)."""
     get = {r: [res.get((song, r, s, variant)) or res[(song, r, s, "off")] for s in seeds] for r in L.STRETCH_RATES}
-    keys = ("centroid_hz", "speed", "amp_m", "rate", "movement_speed", "hit", "hit_half")
+    keys = ("centroid_hz", "speed", "amp_m", "rate", "rate_asked", "rate_capped", "movement_speed", "hit", "hit_half")
     m = {r: {k: float(np.mean([g[0][k] for g in get[r]])) for k in keys} for r in L.STRETCH_RATES}
     lo, hi = m[L.STRETCH_RATES[0]], m[L.STRETCH_RATES[-1]]
     reps = [g[2] for g in get[1.0]]
@@ -138,7 +142,8 @@ def _row(res: dict, song: str, variant: str, seeds: list[int], L) -> dict:
     return {"centroid_ratio": hi["centroid_hz"] / lo["centroid_hz"], "speed_ratio": hi["speed"] / lo["speed"],
             "amp_ratio": hi["amp_m"] / lo["amp_m"], "replay_amp_ratio": rep,
             "movement_speed_ratio": hi["movement_speed"] / lo["movement_speed"],
-            "rate": [m[r]["rate"] for r in L.STRETCH_RATES], "hit": [m[r]["hit"] for r in L.STRETCH_RATES],
+            "rate": [m[r]["rate"] for r in L.STRETCH_RATES], "rate_asked": [m[r]["rate_asked"] for r in L.STRETCH_RATES],
+            "rate_capped": [m[r]["rate_capped"] for r in L.STRETCH_RATES], "hit": [m[r]["hit"] for r in L.STRETCH_RATES],
             "hit_half": [m[r]["hit_half"] for r in L.STRETCH_RATES],
             "centroid_hz": [m[r]["centroid_hz"] for r in L.STRETCH_RATES],
             "bpm": [float(np.median(np.asarray(get[r][0][1])[int(6 * L.FPS):])) for r in L.STRETCH_RATES]}
@@ -214,12 +219,13 @@ def main(argv: list[str] | None = None) -> int:
               f"{n['amp_ratio'] / n['replay_amp_ratio']:.2f} | "
               + " / ".join(f"{x:.0f}" for x in o["bpm"]) + " -> " + " / ".join(f"{x:.0f}" for x in n["bpm"]) + " |")
     print()
-    print("| song (hold on) | followed tempo ratio | playback rate 0.8x / 1.25x (ratio) | chosen movements' own speed "
-          "ratio | centroid ratio |")
-    print("| --- | ---: | ---: | ---: | ---: |")
+    print("| song (hold on) | followed tempo ratio | rate asked 0.8x / 1.25x | under the speed cap | "
+          "playback rate (ratio) | chosen movements' own speed ratio | centroid ratio |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     for song in songs:
         n = out[song]["on"]
-        print(f"| {song} | {n['bpm'][-1] / n['bpm'][0]:.2f} | {n['rate'][0]:.2f} / {n['rate'][-1]:.2f} "
+        print(f"| {song} | {n['bpm'][-1] / n['bpm'][0]:.2f} | {n['rate_asked'][0]:.2f} / {n['rate_asked'][-1]:.2f} | "
+              f"{n['rate_capped'][0]:.2f} / {n['rate_capped'][-1]:.2f} | {n['rate'][0]:.2f} / {n['rate'][-1]:.2f} "
               f"({n['rate'][-1] / n['rate'][0]:.2f}) | {n['movement_speed_ratio']:.2f} | {n['centroid_ratio']:.2f} |")
     for k, (name, *bpms) in enumerate(a.force):
         if name not in out:

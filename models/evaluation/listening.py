@@ -352,7 +352,9 @@ def perform(lm, audio: np.ndarray, seed: int = 0, trace: dict | None = None) -> 
     (the same poses as :func:`models.networks.dance_stream.generate` with ``seed``). A
     ``trace`` dict receives ``tempo_bpm``, ``rate`` and ``movement_speed`` (T,): the stream's
     followed tempo, playback rate and the playing movement's own mean joint speed (m/s at its
-    own pace: what the choice of movement sets) after every frame, and ``codes``: the codes
+    own pace: what the choice of movement sets) after every frame, ``rate_asked`` and
+    ``rate_capped`` (T,): the playing movement's rate as the tempo asked it and under the speed
+    cap, before the speed matching (``DanceStream.rate_split``), and ``codes``: the codes
     drawn, one per movement."""
     from models.features.spectral import extract_features
     from models.networks.dance_stream import DanceStream
@@ -361,12 +363,15 @@ def perform(lm, audio: np.ndarray, seed: int = 0, trace: dict | None = None) -> 
     stream = DanceStream(lm.model, seed=seed)
     poses = np.empty((len(feats), lm.model.config.pose_dim), np.float32)
     w, tempo, rate, own = (np.empty(len(feats)) for _ in range(4))
+    split = np.empty((len(feats), 2))
     for t in range(len(feats)):
         poses[t] = stream.push(feats[t: t + 1])[0]
         w[t], tempo[t], rate[t], own[t] = (stream.idle_weight, stream.tempo_bpm, stream.playback_rate,
                                            stream.movement_speed)
+        split[t] = stream.rate_split
     if trace is not None:
-        trace.update(tempo_bpm=tempo, rate=rate, movement_speed=own, codes=list(stream.codes_drawn))
+        trace.update(tempo_bpm=tempo, rate=rate, movement_speed=own, rate_asked=split[:, 0], rate_capped=split[:, 1],
+                     codes=list(stream.codes_drawn))
     return poses, w
 
 

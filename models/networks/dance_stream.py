@@ -613,6 +613,9 @@ class DanceStream:
         self._rate = 1.0  # exemplar frames per frame at the end of the current movement (tempo following)
         self._own_speed = 0.0  # the current movement's exemplar's own mean joint speed, m/frame (0: none)
         self._rate_from = 1.0  # ... and at its start
+        # the last movement handed to's rate as the tempo asked it (_asked_rate) and under the speed cap
+        # (_rate_for), before the speed matching and the bone cap: where the tempo's rate goes (a study's figure)
+        self.rate_split: tuple[float, float] = (1.0, 1.0)
         self._tempo = TempoFollower(self._fold_hold())
         self._onsets = np.zeros(DENSITY_WINDOW, np.float64)  # the last DENSITY_WINDOW onset strengths, a ring
         self._forecast.reset()
@@ -829,6 +832,7 @@ class DanceStream:
             self._handover.handed(self.seg, shift + self.seg)
             self.playing_member = None
             self._own_speed = 0.0
+            self.rate_split = (1.0, 1.0)
             self._commit(draws[0])
             self._has_cont = False
             return
@@ -866,6 +870,7 @@ class DanceStream:
                 if k + 1 == len(tries) or bend_deg(cands[i, 0], cont[0]) <= self._guard:
                     break
         rate = self._rate_for(*pairs[i])
+        self.rate_split = (self._asked_rate(), rate)  # what the speed matching and the bone cap start from
         if self._has_cont and SPEED_MATCH > 0.0:  # the speed the bend adds or takes away, undone
             rate = self._speed_matched(cands[i], best, rate)
         self._stage.handover(reached - self.seg, self._travel[pairs[i]], not self.codes_drawn, self.seg + d)
@@ -936,14 +941,23 @@ class DanceStream:
         w = min(1.0, self._tempo.confidence / RATE_CONFIDENCE) * max(0.0, 1.0 - abs(self.energy - 1.0))  # the energy control set away from 1 takes over
         return TEMPO_ENERGY * w * math.log(self._ref_period / period)
 
-    def _rate_for(self, code: int, member: int) -> float:
-        """The playback rate of exemplar ``member`` of ``code`` now (:data:`FOLLOW_TEMPO`)."""
+    def _asked_rate(self) -> float:
+        """The playback rate the followed tempo asks for now, within :data:`RATE_RANGE`, before the
+        speed cap (1 without a tempo; towards 1 as the pulse fades)."""
         src = self._ref_period
         period = self._tempo.period
         if not FOLLOW_TEMPO or src <= 0.0 or period <= 0.0:
             return 1.0
         lo, hi = RATE_RANGE
-        r = min(max(src / period, lo), hi) ** min(1.0, self._tempo.confidence / RATE_CONFIDENCE)  # towards 1 as the pulse fades
+        return min(max(src / period, lo), hi) ** min(1.0, self._tempo.confidence / RATE_CONFIDENCE)
+
+    def _rate_for(self, code: int, member: int) -> float:
+        """The playback rate of exemplar ``member`` of ``code`` now (:data:`FOLLOW_TEMPO`): the asked
+        rate (:meth:`_asked_rate`) under the speed cap."""
+        period = self._tempo.period
+        if not FOLLOW_TEMPO or self._ref_period <= 0.0 or period <= 0.0:
+            return 1.0
+        r = self._asked_rate()
         v = self._member_speed[code, member]
         return min(r, max(1.0, self._cap_now(period) / v)) if v > 0 else r
 
