@@ -199,15 +199,6 @@ TEMPO_FREQ: float = 1.0
 #: jerk 1.90x -> 1.48x the dancers'). 0: every movement at its tempo rate, whatever the bend adds.
 SPEED_MATCH: float = 1.0
 SPEED_MATCH_RANGE: tuple[float, float] = (0.5, 2.0)
-#: The speed matching at the top of :data:`RATE_RANGE`: where the tempo asks for the top or more
-#: (157 bpm and over for the shipped memory), its factor slows a movement by no more than the top
-#: lets it speed one up, ``f >= rate / RATE_RANGE[1]`` (rate: under the speed cap). There a
-#: factor over 1 (the bend slows the motion) was cut at the top and one under 1 (the bend adds
-#: motion) kept whole, so the played rate fell below the rate the range allows: vibeace at 1.25x
-#: (162 bpm) asked 1.75, 1.72 under the speed cap, played 1.33 (docs/listening.md, "Tempo").
-#: Below the top the factor is as before (at every rate: the 3x2 stage's raw jitter over 1.3,
-#: docs/history-listening.md). False: the factor within :data:`SPEED_MATCH_RANGE` only.
-SPEED_MATCH_ROOM: bool = True
 #: Gaussian sigma (frames) of the low-pass each exemplar window of the memory is read through
 #: (:func:`_cached_members`; per track, then renormalised): the mocap's frame-to-frame noise,
 #: which a movement sped up by the tempo rate r turns into jerk as r cubed, is taken out
@@ -980,8 +971,6 @@ class DanceStream:
         if v_own <= 0.0 or v_bent <= 0.0:
             return rate
         lo, hi = SPEED_MATCH_RANGE
-        if SPEED_MATCH_ROOM and self._asked_rate() >= RATE_RANGE[1]:  # the tempo asks past the range's top
-            lo = max(lo, min(1.0, rate / RATE_RANGE[1]))  # no slower than the top lets it be made faster
         f = min(max((v_own / v_bent) ** SPEED_MATCH, lo), hi)
         return min(max(rate * f, RATE_RANGE[0]), RATE_RANGE[1])
 
