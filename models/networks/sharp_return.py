@@ -1,0 +1,84 @@
+"""The music's sharp return: an idle performer takes one network's word where the sound comes back sharply.
+
+Part of :class:`models.networks.music_gate.MusicGate` (issue 43, back within 1 s of the music). The three
+networks' agreement (``agreement.py``) needs the detector, the stop and the voice network to lean to music
+at once; at some returns only one of them does for the first 0.5-1 s:
+
+* out of a silence: room tone at -60 dBFS lies under the silence threshold, and the next song opens with a
+  hit, then 0.7 s at -20 to -38 dB; the stop network hears music (+1.6 to +2.5) on the hit's 3 frames, the
+  detector and the voice network do not (``benchmarks/studies/idle_gate.py --parts gaps --seed 9 --trace
+  'gap:room -60'``: back in 1.70 s);
+* on a rise: trance after a reader comes in 18 dB over the reading's level; the voice network hears music
+  (+4.8 to +5.5) from 0.13 s, the stop network its detuned synthesizers at -0.8 to -2.6 (``--trace
+  sweetwaltz@198``: back in 1.07 s).
+
+A silence followed by a sound, or a sound far over the gap's own level, is not how a voice, a crowd or a
+noise goes on (their words and murmurs rise back to their level), so there one network is enough. An
+idle performer that has danced in this stream (``agreement.has_danced``) hears music on a *return frame*
+(one of the first ``music_gate.FRESH_FRAMES`` sounding frames after ``music_gate.FRESH_SILENCE`` silent
+ones or more, or a frame ``idle_gate.RETURN_DB`` or more over the running level, which follows the gap's
+sound while idle: :attr:`SharpReturn.rise`, set by the idle gate) where the stop network's logit is above
+:data:`RETURN_STOP` or the voice network's above :data:`RETURN_VOICE` (the agreement's own thresholds). A
+stream's first start stays the detector's (no gap before it). A gate without both networks has none.
+
+State (30 fps, sounding frames only): ``rule`` (False: the sharp return off), ``rise`` (the frame is a
+rise, set by the idle gate before the frame), ``frames`` (idle frames it heard as music). The constants
+are read when used, so a study may set them on the module (``benchmarks/studies/idle_gate.py``).
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+#: On a return frame the stop network alone hears music above RETURN_STOP, the voice network alone above
+#: RETURN_VOICE: the agreement's AGREE_STOP (``music_gate.MARGIN_START``) and AGREE_VOICE, not tuned.
+RETURN_STOP: float = 1.5
+RETURN_VOICE: float = 5.0
+#: A long break's loud end: its first LOUD_FRAMES frames are music (``music_gate.START_FRAMES``: the dance starts).
+LOUD_FRAMES: int = 3
+
+
+class SharpReturn:
+    """The sharp return's state (module docstring): :meth:`hears` on an idle frame that no other rule
+    starts.
+
+    active: the gate has a stop and a voice network (without both, no sharp return)."""
+
+    def __init__(self, active: bool) -> None:
+        self.active = bool(active)
+        self.rule = True  # False switches the sharp return off
+        self.reset()
+
+    def reset(self) -> None:
+        self.frames = 0  # idle frames the sharp return heard as music
+        self.rise = False  # this frame lies idle_gate.RETURN_DB or more over the running level (set by the idle gate)
+        self.loud = 0  # frames of a long break's loud end left to hear as music
+
+    def see(self, rise: bool, broke: bool, loud_end: bool) -> None:
+        """The idle gate's word on this frame, before the detector: it ``rise``s RETURN_DB or more over the running
+        level, it is a break frame (``broke``), or it ends a break of ``idle_gate.BREAK_HOLD`` frames or more
+        (silence or quiet: the music had gone) back within ``idle_gate.RETURN_DB`` of the level (``loud_end``)."""
+        self.rise = rise
+        self.loud = LOUD_FRAMES if loud_end else 0 if broke else self.loud
+
+    def ends_break(self, has_danced: bool) -> bool:
+        """This idle frame of a performer that ``has_danced`` is one of the first LOUD_FRAMES after a long break's
+        loud end (:meth:`see`): music, whatever the networks hear; counts ``frames``."""
+        if not (self.loud > 0 and self.rule and self.active and has_danced):
+            return False
+        self.loud -= 1
+        self.frames += 1
+        return True
+
+    def hears(self, has_danced: bool, fresh: bool, stop_logit: Callable[[], float],
+              voice_logit: Callable[[], float]) -> bool:
+        """One network hears music on this idle frame of a performer that ``has_danced`` in this stream,
+        a return frame (``fresh``: within ``music_gate.FRESH_FRAMES`` sounding frames of a silence, or
+        :attr:`rise`): the stop network's logit (``stop_logit()``) above RETURN_STOP or the voice network's
+        (``voice_logit()``) above RETURN_VOICE, each called only when needed; counts ``frames``."""
+        if not (self.rule and self.active and has_danced and (fresh or self.rise)):
+            return False
+        if stop_logit() > RETURN_STOP or voice_logit() > RETURN_VOICE:
+            self.frames += 1
+            return True
+        return False
