@@ -592,7 +592,8 @@ def test_an_idle_performer_takes_one_networks_word_on_a_sharp_return() -> None:
     over the gap's level (``sharp_return.rise``). None with the rule off, with both networks under their
     thresholds, without a voice network, or in a stream that has not danced yet. And the first LOUD_FRAMES frames
     after the idle gate says a long break ended back at the music's level (``sharp_return.see``) are music
-    whatever the networks hear, unless a break frame comes first."""
+    whatever the networks hear, unless a break frame comes first; and a detector's start within FRESH_FRAMES of a
+    long break's end is not asked to wait for the voice network (``return_confirm.py``), as after a silence."""
     d = 64
     rows, _ = steady_and_pausing(mg.FRESH_FRAMES + 5, d)
     silent = np.repeat(rows[:1], mg.FRESH_SILENCE, 0)
@@ -637,7 +638,7 @@ def test_an_idle_performer_takes_one_networks_word_on_a_sharp_return() -> None:
             g.step(rows[0], True)
         out = []
         for k, r in enumerate(rows[:8]):
-            g.sharp_return.see(False, k == broken_at, k == 0)
+            g.sharp_return.see(False, k == broken_at, k == 0, True)
             out.append(g.step(r, False))
         return out
 
@@ -645,6 +646,20 @@ def test_an_idle_performer_takes_one_networks_word_on_a_sharp_return() -> None:
     assert loud_end() == [True] * n + [False] * (8 - n)
     assert loud_end(broken_at=1) == [True] + [False] * 7  # a break frame: the return is over
     assert not any(loud_end(rule=False)) and not any(loud_end(danced=False))
+
+    def confirmed(ended: bool, rule: bool = True) -> bool:
+        """A detector's start the gate asks about, the voice network under CONFIRM_VOICE: confirmed right
+        after a long break (``see``'s ``ended``, at a quiet level: no loud end), as after a silence."""
+        g = mg.MusicGate(np.zeros(d), np.ones(d), constant_network(10.0), -60.0, clarity_col=60,
+                         stop_params=stop_no, voice_params=constant_network(rc.CONFIRM_VOICE - 0.5))
+        g.sharp_return.rule = rule
+        g.step(rows[0], True)
+        for k, r in enumerate(rows):
+            g.sharp_return.see(False, False, ended and k == len(rows) - 3, False)
+            g.step(r, False)
+        return g.confirms_start(True)
+
+    assert confirmed(True) and not confirmed(False) and not confirmed(True, rule=False)
 
 
 def test_the_music_after_a_reader_and_after_room_tone_is_danced_within_1_s_thanks_to_the_sharp_return(lm, dwm_root) -> None:

@@ -249,9 +249,9 @@ class IdleGate:
                     self.run = max(self.run, self.break_kept)  # frames counted stays
         if self.presence is not None:
             self.presence.veto.counting = self.music and self.run > 0.0  # the veto's reach (veto.VETO_TOP)
-            long_end = bool(not self.music and was_break >= BREAK_HOLD and not self.break_frames
-                            and energy >= self.level - RETURN_DB)  # a long break (the music gone) ends at its level
-            self.presence.sharp_return.see(energy >= self.level + RETURN_DB, bool(self.break_frames), long_end)
+            ended = not self.music and was_break >= BREAK_HOLD and not self.break_frames  # a long break: the music gone
+            self.presence.sharp_return.see(energy >= self.level + RETURN_DB, bool(self.break_frames), ended,
+                                           energy >= self.level - RETURN_DB)  # at the music's level: sharp_return.py
         present = self._detector(row)
         self.present = present
         if self.music and not present and not self.break_frames and self.presence is not None:

@@ -466,6 +466,7 @@ class MusicGate:
         """The dance may start on this idle frame heard as music (:mod:`models.networks.return_confirm`: a
         start of the detector's alone after the stream's first dance that the idle gate ``asks`` about, a
         restart or one without a rise in level, not right after a silence, waits for the voice network)."""
+        asks = asks and not self.sharp_return.exempts(FRESH_FRAMES)  # right after a long break: the music's return
         return self.return_confirm.confirms(asks and self.detected and self.agreement.has_danced, self._voice_z,
                                             FRESH_FRAMES)
 

@@ -53,13 +53,20 @@ class SharpReturn:
         self.frames = 0  # idle frames the sharp return heard as music
         self.rise = False  # this frame lies idle_gate.RETURN_DB or more over the running level (set by the idle gate)
         self.loud = 0  # frames of a long break's loud end left to hear as music
+        self.since_end = 1 << 30  # sounding frames since a long break ended (at any level)
 
-    def see(self, rise: bool, broke: bool, loud_end: bool) -> None:
-        """The idle gate's word on this frame, before the detector: it ``rise``s RETURN_DB or more over the running
-        level, it is a break frame (``broke``), or it ends a break of ``idle_gate.BREAK_HOLD`` frames or more
-        (silence or quiet: the music had gone) back within ``idle_gate.RETURN_DB`` of the level (``loud_end``)."""
+    def see(self, rise: bool, broke: bool, ended: bool, loud: bool) -> None:
+        """The idle gate's word on an idle frame, before the detector: it ``rise``s RETURN_DB or more over the running
+        level, it is a break frame (``broke``), it ``ended`` a break of ``idle_gate.BREAK_HOLD`` frames or more (silence
+        or quiet: the music had gone), ``loud``: back within ``idle_gate.RETURN_DB`` of the level."""
         self.rise = rise
-        self.loud = LOUD_FRAMES if loud_end else 0 if broke else self.loud
+        self.loud = LOUD_FRAMES if ended and loud else 0 if broke else self.loud
+        self.since_end = 0 if ended else self.since_end + (not broke)
+
+    def exempts(self, fresh_frames: int) -> bool:
+        """A start within ``fresh_frames`` (``music_gate.FRESH_FRAMES``) sounding frames of a long break's end is the
+        music's return, as one right after a silence: the confirmation (``return_confirm.py``) does not ask."""
+        return self.rule and self.active and self.since_end < fresh_frames
 
     def ends_break(self, has_danced: bool) -> bool:
         """This idle frame of a performer that ``has_danced`` is one of the first LOUD_FRAMES after a long break's
