@@ -5,8 +5,8 @@ networks' agreement (``agreement.py``) needs the detector, the stop and the voic
 at once; at some returns only one of them does for the first 0.5-1 s:
 
 * out of a silence: room tone at -60 dBFS lies under the silence threshold, and the next song opens with a
-  hit, then 0.7 s at -20 to -38 dB; the stop network hears music (+1.6 to +2.5) on the hit's 3 frames, the
-  detector and the voice network do not (``benchmarks/studies/idle_gate.py --parts gaps --seed 9 --trace
+  hit, then 0.7 s at -20 to -38 dB; the stop network hears music (+1.6 to +2.5) on the hit's 3 frames (its
+  statistics, frozen through the silence, still partly the song before), the detector and the voice network do not (``benchmarks/studies/idle_gate.py --parts gaps --seed 9 --trace
   'gap:room -60'``: back in 1.70 s);
 * on a rise: trance after a reader comes in 18 dB over the reading's level; the voice network hears music
   (+4.8 to +5.5) from 0.13 s, the stop network its detuned synthesizers at -0.8 to -2.6 (``--trace
@@ -18,12 +18,22 @@ idle performer that has danced in this stream (``agreement.has_danced``) hears m
 (one of the first ``music_gate.FRESH_FRAMES`` sounding frames after ``music_gate.FRESH_SILENCE`` silent
 ones or more, or a frame ``idle_gate.RETURN_DB`` or more over the running level, which follows the gap's
 sound while idle: :attr:`SharpReturn.rise`, set by the idle gate) where the stop network's logit is above
-:data:`RETURN_STOP` or the voice network's above :data:`RETURN_VOICE` (the agreement's own thresholds). A
-stream's first start stays the detector's (no gap before it). A gate without both networks has none.
+:data:`RETURN_STOP` or the voice network's above :data:`RETURN_VOICE` (the agreement's own thresholds).
 
-State (30 fps, sounding frames only): ``rule`` (False: the sharp return off), ``rise`` (the frame is a
-rise, set by the idle gate before the frame), ``frames`` (idle frames it heard as music). The constants
-are read when used, so a study may set them on the module (``benchmarks/studies/idle_gate.py``).
+Room tone at about the silence threshold may leave the statistics holding the room's flickers, not the song
+before (``--gap-s 20 --seed 10``: the stop network at -4.6 to +0.6 on the hit, back 1.70 s). A break (silence,
+or 20 dB under the music's level, ``idle_gate.BREAK_DB``) of ``idle_gate.BREAK_HOLD`` frames or more has
+stopped any dance (the music gone) and leaves the running level at the music's; the frame that ends it back
+within ``idle_gate.RETURN_DB`` of that level starts the dance: its first :data:`LOUD_FRAMES` frames are music
+whatever the networks hear (:meth:`SharpReturn.ends_break`). And a detector's start within ``FRESH_FRAMES``
+sounding frames of a long break's end, at any level, is the music's return, as one right after a silence: the
+confirmation (``return_confirm.py``) does not ask (:meth:`SharpReturn.exempts`). A stream's first start stays
+the detector's (no gap before it). A gate without both networks has none.
+
+State (30 fps): ``rule`` (False: the sharp return off), ``rise`` (the frame is a rise), ``loud`` (frames of a
+long break's loud end left), ``since_end`` (sounding frames since a long break ended), all from the idle gate's
+:meth:`SharpReturn.see` before each frame, and ``frames`` (idle frames it heard as music). The constants
+are read when used.
 """
 
 from __future__ import annotations
