@@ -549,18 +549,14 @@ def test_an_idle_performer_starts_where_the_three_networks_agree_on_music() -> N
     assert not any(hears(lean, stop_yes, voice_yes, danced=False))
 
 
-def test_the_music_after_a_reader_is_danced_within_1_s_thanks_to_the_three_networks_agreeing(lm, dwm_root) -> None:
-    """Issue 43: a reader (LibriSpeech 5703) after 20 s of nutcracker, then pistachio (each from a third
-    in, as ``idle_gate.py --parts readers`` plays them): the detector hears the step from the reader's
-    last quiet (-45 dB) to the piano as spread for 0.6 s, under MARGIN_START, while the stop and voice
-    networks hear music. Fully dancing within 1 s of pistachio's start; 1.30 s with the agreement off."""
+def song_reader_song(lm, dwm_root, song_a: str, reader: str, song_b: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """20 s of shared recording ``song_a`` and of ``song_b`` (each from a third in, as ``idle_gate.py --parts readers``
+    plays them, whole 30-fps frames) and shared reader ``reader`` at ``song_a``'s RMS level, 22050 Hz; skips without
+    the recordings or without the stop and voice networks."""
     from models.features.audio_io import load_audio
-    from models.features.spectral import extract_features
-    from models.networks.dance_stream import DanceStream
 
     shared = dwm_root.parent
-    paths = [shared / "music" / "nutcracker_sugarplum_kevinmacleod.ogg", shared / "speech" / "librispeech_5703-47212-0000.ogg",
-             shared / "music" / "pistachio_ragtime_lenaorsa.ogg"]
+    paths = [shared / "music" / song_a, shared / "speech" / reader, shared / "music" / song_b]
     if not all(p.is_file() for p in paths):
         pytest.skip(f"shared recordings not found: {[str(p) for p in paths if not p.is_file()]}")
     if float(lm.model.presence_voice.abs().sum()) == 0 or float(lm.model.presence_stop.abs().sum()) == 0:
@@ -569,7 +565,19 @@ def test_the_music_after_a_reader_is_danced_within_1_s_thanks_to_the_three_netwo
     a, b = (x[len(x) // 3: len(x) // 3 + 20 * 22050] for x in (a, b))
     a, b = a[: len(a) // HOP * HOP], b[: len(b) // HOP * HOP]
     talk = talk * np.sqrt(np.mean(a.astype(np.float64) ** 2) / np.mean(talk.astype(np.float64) ** 2))
-    talk = talk[: len(talk) // HOP * HOP]
+    return a, talk[: len(talk) // HOP * HOP], b
+
+
+def test_the_music_after_a_reader_is_danced_within_1_s_thanks_to_the_three_networks_agreeing(lm, dwm_root) -> None:
+    """Issue 43: a reader (LibriSpeech 5703) after 20 s of nutcracker, then pistachio (each from a third
+    in, as ``idle_gate.py --parts readers`` plays them): the detector hears the step from the reader's
+    last quiet (-45 dB) to the piano as spread for 0.6 s, under MARGIN_START, while the stop and voice
+    networks hear music. Fully dancing within 1 s of pistachio's start; 1.30 s with the agreement off."""
+    from models.features.spectral import extract_features
+    from models.networks.dance_stream import DanceStream
+
+    a, talk, b = song_reader_song(lm, dwm_root, "nutcracker_sugarplum_kevinmacleod.ogg", "librispeech_5703-47212-0000.ogg",
+                                  "pistachio_ragtime_lenaorsa.ogg")
     feats = extract_features(np.concatenate([a, talk, b]).astype(np.float32), lm.features)
     g1 = (len(a) + len(talk)) // HOP
 
@@ -668,22 +676,11 @@ def test_the_music_after_a_reader_and_after_room_tone_is_danced_within_1_s_thank
     hears music from 0.13 s, the stop network its detuned synthesizers as no music: back in 1.07 s without the
     sharp return, 0.83 s with it. And 10 s of silence (room tone under the silence threshold) between the same
     excerpts of sweetwaltz and trance: back within 1 s with the sharp return too."""
-    from models.features.audio_io import load_audio
     from models.features.spectral import extract_features
     from models.networks.dance_stream import DanceStream
 
-    shared = dwm_root.parent
-    paths = [shared / "music" / "sweetwaltz_setuniman.ogg", shared / "speech" / "librispeech_198-209-0000.ogg",
-             shared / "music" / "trance_mechatribe_assault_kommisar.ogg"]
-    if not all(p.is_file() for p in paths):
-        pytest.skip(f"shared recordings not found: {[str(p) for p in paths if not p.is_file()]}")
-    if float(lm.model.presence_voice.abs().sum()) == 0 or float(lm.model.presence_stop.abs().sum()) == 0:
-        pytest.skip(f"{lm.path} has no stop or voice network (refit: {REFIT} --voice-network)")
-    a, talk, b = (load_audio(p, 22050)[0] for p in paths)
-    a, b = (x[len(x) // 3: len(x) // 3 + 20 * 22050] for x in (a, b))
-    a, b = a[: len(a) // HOP * HOP], b[: len(b) // HOP * HOP]
-    talk = talk * np.sqrt(np.mean(a.astype(np.float64) ** 2) / np.mean(talk.astype(np.float64) ** 2))
-    talk = talk[: len(talk) // HOP * HOP]
+    a, talk, b = song_reader_song(lm, dwm_root, "sweetwaltz_setuniman.ogg", "librispeech_198-209-0000.ogg",
+                                  "trance_mechatribe_assault_kommisar.ogg")
 
     def back(gap: np.ndarray, rule: bool) -> float | None:
         feats = extract_features(np.concatenate([a, gap, b]).astype(np.float32), lm.features)

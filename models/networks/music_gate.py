@@ -414,6 +414,7 @@ class MusicGate:
         if self.silent >= FRESH_SILENCE and self.fresh_rule:
             self.fresh = FRESH_FRAMES  # after a silence: listen afresh
         self.return_confirm.sounding = 0 if self.silent >= FRESH_SILENCE else self.return_confirm.sounding + 1
+        self.sharp_return.sound(self.silent >= FRESH_SILENCE)
         self.silent = 0
         fast = not dancing or self.fresh > 0
         self.fresh = max(0, self.fresh - 1)
@@ -437,8 +438,8 @@ class MusicGate:
             voiced = self.voice_rule and self.voice_start.hears(self._over)  # its count runs on every such frame
             self.voiced = voiced and self.false_start.trusts()  # not after a false start (false_start.py)
             return self.voiced or self.agreement.hears(self.logit, self._stop_z, self._voice_z) or \
-                self.sharp_return.hears(self.agreement.has_danced, self.return_confirm.sounding < FRESH_FRAMES,
-                                        self._stop_z, self._voice_z)  # one network's word on a return
+                self.sharp_return.hears(self.agreement.has_danced, FRESH_FRAMES, self._stop_z,
+                                        self._voice_z)  # one network's word on a return
         if self.logit > -MARGIN_STOP:
             # the veto reaches 0 (VETO_TOP while a count runs): most frames of a song skip the call
             if (self.logit <= 0.0 or self.veto.counting) and self.veto.vetoes(self.logit, self.floor_db < FLOOR_DB,

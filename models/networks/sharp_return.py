@@ -32,7 +32,8 @@ the detector's (no gap before it). A gate without both networks has none.
 
 State (30 fps): ``rule`` (False: the sharp return off), ``rise`` (the frame is a rise), ``loud`` (frames of a
 long break's loud end left), ``since_end`` (sounding frames since a long break ended), all from the idle gate's
-:meth:`SharpReturn.see` before each frame, and ``frames`` (idle frames it heard as music). The constants
+:meth:`SharpReturn.see` before each frame, ``since_silence`` (sounding frames since a silence, from the music
+gate), and ``frames`` (idle frames it heard as music). The constants
 are read when used.
 """
 
@@ -64,6 +65,12 @@ class SharpReturn:
         self.rise = False  # this frame lies idle_gate.RETURN_DB or more over the running level (set by the idle gate)
         self.loud = 0  # frames of a long break's loud end left to hear as music
         self.since_end = 1 << 30  # sounding frames since a long break ended (at any level)
+        self.since_silence = 1 << 30  # sounding frames since a silence (the stream's start is none)
+
+    def sound(self, after_silence: bool) -> None:
+        """A sounding frame (the music gate's word): the first after ``music_gate.FRESH_SILENCE`` silent ones or more
+        (``after_silence``) or not."""
+        self.since_silence = 0 if after_silence else self.since_silence + 1
 
     def see(self, rise: bool, broke: bool, ended: bool, loud: bool) -> None:
         """The idle gate's word on an idle frame, before the detector: it ``rise``s RETURN_DB or more over the running
@@ -87,13 +94,13 @@ class SharpReturn:
         self.frames += 1
         return True
 
-    def hears(self, has_danced: bool, fresh: bool, stop_logit: Callable[[], float],
+    def hears(self, has_danced: bool, fresh_frames: int, stop_logit: Callable[[], float],
               voice_logit: Callable[[], float]) -> bool:
         """One network hears music on this idle frame of a performer that ``has_danced`` in this stream,
-        a return frame (``fresh``: within ``music_gate.FRESH_FRAMES`` sounding frames of a silence, or
+        a return frame (within ``fresh_frames``, ``music_gate.FRESH_FRAMES``, sounding frames of a silence, or
         :attr:`rise`): the stop network's logit (``stop_logit()``) above RETURN_STOP or the voice network's
         (``voice_logit()``) above RETURN_VOICE, each called only when needed; counts ``frames``."""
-        if not (self.rule and self.active and has_danced and (fresh or self.rise)):
+        if not (self.rule and self.active and has_danced and (self.since_silence < fresh_frames or self.rise)):
             return False
         if stop_logit() > RETURN_STOP or voice_logit() > RETURN_VOICE:
             self.frames += 1
