@@ -473,3 +473,65 @@ def test_a_recording_with_two_second_silences_cut_in_is_danced_through() -> None
     off = DanceStream(lm.model, seed=7)
     off._idle.hold_breaks = False
     assert (off.listen(feats)[90:] > 0).mean() > 0.1
+
+
+
+def _gap_case(dwm_root: Path, label: str, seconds: float, seed: int):
+    """(lm, the study module, song a, gap, song b) of ``idle_gate.py --parts gaps --gap-s SECONDS --seed SEED``'s
+    gap ``label``, drawn as the study draws it; skips without espeak-ng (its crowd voices come first in the draw)
+    or without the stop and voice networks."""
+    from models.generate import load_model
+    from models.training import music_gate as mg
+    from script_loader import load_script
+
+    if not mg.espeak_available():
+        pytest.skip("espeak-ng not installed: the gaps part draws its noises after the crowd's voices")
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    lm = load_model(None)
+    if not (lm.model.presence_voice.abs().sum() > 0 and lm.model.presence_stop.abs().sum() > 0):
+        pytest.skip(f"{lm.path} has no stop or voice network")
+    rng = np.random.default_rng(1000 + seed)  # as the gaps part draws them
+    pool = [mg.utterance(rng) for _ in range(24)]
+    cases = [(lab, ig.gap_audio(kind, seconds, lvl, rng, pool)) for lab, kind, lvl in ig.GAPS]
+    i = [lab for lab, _ in cases].index(label)
+    songs = [ig.excerpt(dwm_root, n, 20.0) for n in ig.VAL_DANCES]
+    return lm, ig, songs[i % len(songs)], cases[i][1], songs[(i + 1) % len(songs)]
+
+
+def test_the_song_after_room_tone_under_the_silence_threshold_is_back_within_1_s_thanks_to_the_sharp_return(dwm_root) -> None:
+    """Issue 43, back within 1 s: ``idle_gate.py --parts gaps --gap-s 20 --seed 10``'s room tone at -60 dBFS
+    (about the silence threshold: a long break) before the next validation song, which opens with a hit and
+    then 0.7 s at -20 to -38 dB that no network hears as music. The break's end back at the music's level
+    starts the dance (``sharp_return.LOUD_FRAMES``): back within 1 s; 1.70 s with the sharp return off."""
+    lm, ig, a, gap, b = _gap_case(dwm_root, "room -60", 20.0, 10)
+
+    def back(on: bool) -> float | None:
+        ig.OFF.clear()
+        if not on:
+            ig.OFF.add("sharp-return")
+        try:
+            return ig.run_gap(lm, a, gap, b, 10)["back_s"]
+        finally:
+            ig.OFF.clear()
+
+    on, off = back(True), back(False)
+    assert on is not None and on <= 1.0, on
+    assert off is None or off > 1.0, off
+
+
+def test_a_crowd_after_a_song_is_held_idle_thanks_to_the_voice_network_over_the_stop_margin(dwm_root) -> None:
+    """Issue 43, held: ``idle_gate.py --parts gaps --gap-s 20 --seed 10``'s crowd babble at -30 dBFS. 10 s after
+    the stop the detector and the stop network hear it as music for a moment, the voice network at +1.7 on the
+    detector's start frame: the confirmation (``return_confirm.CONFIRM_VOICE``, 2 = ``MARGIN_STOP``) holds the
+    idle (held 1.0); over ``MARGIN_START`` (1.5) it restarted the dance (held 0.92)."""
+    from models.networks import music_gate as mgate
+    from models.networks import return_confirm as rc
+
+    lm, ig, a, gap, b = _gap_case(dwm_root, "crowd -30", 20.0, 10)
+    assert rc.CONFIRM_VOICE == mgate.MARGIN_STOP
+    assert ig.run_gap(lm, a, gap, b, 10)["held"] == 1.0
+    try:
+        rc.CONFIRM_VOICE = mgate.MARGIN_START
+        assert ig.run_gap(lm, a, gap, b, 10)["held"] < 1.0
+    finally:
+        rc.CONFIRM_VOICE = mgate.MARGIN_STOP

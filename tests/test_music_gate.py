@@ -20,6 +20,7 @@ from models.networks import false_start as fs
 from models.networks import lone_voice as lv
 from models.networks import music_gate as mg
 from models.networks import return_confirm as rc
+from models.networks import sharp_return as sr
 from models.networks import unsure_voice as uv
 from models.networks import veto
 from models.networks import voice_context as vc
@@ -548,18 +549,14 @@ def test_an_idle_performer_starts_where_the_three_networks_agree_on_music() -> N
     assert not any(hears(lean, stop_yes, voice_yes, danced=False))
 
 
-def test_the_music_after_a_reader_is_danced_within_1_s_thanks_to_the_three_networks_agreeing(lm, dwm_root) -> None:
-    """Issue 43: a reader (LibriSpeech 5703) after 20 s of nutcracker, then pistachio (each from a third
-    in, as ``idle_gate.py --parts readers`` plays them): the detector hears the step from the reader's
-    last quiet (-45 dB) to the piano as spread for 0.6 s, under MARGIN_START, while the stop and voice
-    networks hear music. Fully dancing within 1 s of pistachio's start; 1.30 s with the agreement off."""
+def song_reader_song(lm, dwm_root, song_a: str, reader: str, song_b: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """20 s of shared recording ``song_a`` and of ``song_b`` (each from a third in, as ``idle_gate.py --parts readers``
+    plays them, whole 30-fps frames) and shared reader ``reader`` at ``song_a``'s RMS level, 22050 Hz; skips without
+    the recordings or without the stop and voice networks."""
     from models.features.audio_io import load_audio
-    from models.features.spectral import extract_features
-    from models.networks.dance_stream import DanceStream
 
     shared = dwm_root.parent
-    paths = [shared / "music" / "nutcracker_sugarplum_kevinmacleod.ogg", shared / "speech" / "librispeech_5703-47212-0000.ogg",
-             shared / "music" / "pistachio_ragtime_lenaorsa.ogg"]
+    paths = [shared / "music" / song_a, shared / "speech" / reader, shared / "music" / song_b]
     if not all(p.is_file() for p in paths):
         pytest.skip(f"shared recordings not found: {[str(p) for p in paths if not p.is_file()]}")
     if float(lm.model.presence_voice.abs().sum()) == 0 or float(lm.model.presence_stop.abs().sum()) == 0:
@@ -568,7 +565,19 @@ def test_the_music_after_a_reader_is_danced_within_1_s_thanks_to_the_three_netwo
     a, b = (x[len(x) // 3: len(x) // 3 + 20 * 22050] for x in (a, b))
     a, b = a[: len(a) // HOP * HOP], b[: len(b) // HOP * HOP]
     talk = talk * np.sqrt(np.mean(a.astype(np.float64) ** 2) / np.mean(talk.astype(np.float64) ** 2))
-    talk = talk[: len(talk) // HOP * HOP]
+    return a, talk[: len(talk) // HOP * HOP], b
+
+
+def test_the_music_after_a_reader_is_danced_within_1_s_thanks_to_the_three_networks_agreeing(lm, dwm_root) -> None:
+    """Issue 43: a reader (LibriSpeech 5703) after 20 s of nutcracker, then pistachio (each from a third
+    in, as ``idle_gate.py --parts readers`` plays them): the detector hears the step from the reader's
+    last quiet (-45 dB) to the piano as spread for 0.6 s, under MARGIN_START, while the stop and voice
+    networks hear music. Fully dancing within 1 s of pistachio's start; 1.30 s with the agreement off."""
+    from models.features.spectral import extract_features
+    from models.networks.dance_stream import DanceStream
+
+    a, talk, b = song_reader_song(lm, dwm_root, "nutcracker_sugarplum_kevinmacleod.ogg", "librispeech_5703-47212-0000.ogg",
+                                  "pistachio_ragtime_lenaorsa.ogg")
     feats = extract_features(np.concatenate([a, talk, b]).astype(np.float32), lm.features)
     g1 = (len(a) + len(talk)) // HOP
 
@@ -581,6 +590,112 @@ def test_the_music_after_a_reader_is_danced_within_1_s_thanks_to_the_three_netwo
     on, off = back(True), back(False)
     assert on is not None and on <= 1.0, on
     assert off is None or off > 1.0, off
+
+
+def test_an_idle_performer_takes_one_networks_word_on_a_sharp_return() -> None:
+    """The music's sharp return (issue 43, back within 1 s): a performer that has danced (one frame), idle
+    again, whose detector hears no music (logit -5) and only one of the stop (over RETURN_STOP) and the voice
+    network (over RETURN_VOICE) hears music: its first FRESH_FRAMES sounding frames after FRESH_SILENCE silent
+    ones are music, the later ones not; without the silence none, unless the idle gate says the frame rises
+    over the gap's level (``sharp_return.rise``). None with the rule off, with both networks under their
+    thresholds, without a voice network, or in a stream that has not danced yet. And the first LOUD_FRAMES frames
+    after the idle gate says a long break ended back at the music's level (``sharp_return.see``) are music
+    whatever the networks hear, unless a break frame comes first; and a detector's start within FRESH_FRAMES of a
+    long break's end is not asked to wait for the voice network (``return_confirm.py``), as after a silence."""
+    d = 64
+    rows, _ = steady_and_pausing(mg.FRESH_FRAMES + 5, d)
+    silent = np.repeat(rows[:1], mg.FRESH_SILENCE, 0)
+    silent[:, mg.ENERGY_COL] = -100.0
+    deaf = constant_network(-5.0)
+    stop_yes, stop_no = constant_network(sr.RETURN_STOP + 0.5), constant_network(sr.RETURN_STOP - 0.5)
+    voice_yes, voice_no = constant_network(sr.RETURN_VOICE + 0.5), constant_network(sr.RETURN_VOICE - 0.5)
+
+    def hears(stop: np.ndarray, voice: np.ndarray, silence: bool = True, rise: bool = False, rule: bool = True,
+              danced: bool = True) -> list[bool]:  # idle after one danced frame (or none), then the rows
+        g = mg.MusicGate(np.zeros(d), np.ones(d), deaf, -60.0, clarity_col=60, stop_params=stop, voice_params=voice)
+        g.sharp_return.rule = rule
+        for r in rows[: mg.FRESH_FRAMES]:  # the stream's start, idle (the detector deaf)
+            g.step(r, False)
+        if danced:
+            g.step(rows[0], True)
+        for r in rows[:2]:  # idle, sounding on: no return
+            assert not g.step(r, False)
+        for r in silent if silence else []:
+            g.step(r, False)
+        out = []
+        for r in rows:
+            g.sharp_return.rise = rise  # as the idle gate sets it before each frame
+            out.append(g.step(r, False))
+        return out
+
+    n = mg.FRESH_FRAMES
+    for stop, voice in ((stop_yes, voice_no), (stop_no, voice_yes)):
+        assert hears(stop, voice) == [True] * n + [False] * (len(rows) - n)
+        assert not any(hears(stop, voice, silence=False)) and all(hears(stop, voice, silence=False, rise=True))
+        assert not any(hears(stop, voice, rule=False)) and not any(hears(stop, voice, danced=False))
+    assert not any(hears(stop_no, voice_no)) and not any(hears(stop_no, voice_no, rise=True))
+    assert not any(hears(stop_yes, np.zeros(mg.N_PARAMS)))
+
+    def loud_end(broken_at: int | None = None, rule: bool = True, danced: bool = True) -> list[bool]:
+        """Deaf networks; the idle gate says the first frame ends a long break at the music's level."""
+        g = mg.MusicGate(np.zeros(d), np.ones(d), deaf, -60.0, clarity_col=60, stop_params=stop_no, voice_params=voice_no)
+        g.sharp_return.rule = rule
+        for r in rows[: mg.FRESH_FRAMES]:
+            g.step(r, False)
+        if danced:
+            g.step(rows[0], True)
+        out = []
+        for k, r in enumerate(rows[:8]):
+            g.sharp_return.see(False, k == broken_at, k == 0, True)
+            out.append(g.step(r, False))
+        return out
+
+    n = sr.LOUD_FRAMES
+    assert loud_end() == [True] * n + [False] * (8 - n)
+    assert loud_end(broken_at=1) == [True] + [False] * 7  # a break frame: the return is over
+    assert not any(loud_end(rule=False)) and not any(loud_end(danced=False))
+
+    def confirmed(ended: bool, rule: bool = True) -> bool:
+        """A detector's start the gate asks about, the voice network under CONFIRM_VOICE: confirmed right
+        after a long break (``see``'s ``ended``, at a quiet level: no loud end), as after a silence."""
+        g = mg.MusicGate(np.zeros(d), np.ones(d), constant_network(10.0), -60.0, clarity_col=60,
+                         stop_params=stop_no, voice_params=constant_network(rc.CONFIRM_VOICE - 0.5))
+        g.sharp_return.rule = rule
+        g.step(rows[0], True)
+        for k, r in enumerate(rows):
+            g.sharp_return.see(False, False, ended and k == len(rows) - 3, False)
+            g.step(r, False)
+        return g.confirms_start(True)
+
+    assert confirmed(True) and not confirmed(False) and not confirmed(True, rule=False)
+
+
+def test_the_music_after_a_reader_and_after_room_tone_is_danced_within_1_s_thanks_to_the_sharp_return(lm, dwm_root) -> None:
+    """Issue 43, back within 1 s: LibriSpeech 198 after 20 s of sweetwaltz, then trance (each from a third in,
+    as ``idle_gate.py --parts readers`` plays them): trance comes in 18 dB over the reading, the voice network
+    hears music from 0.13 s, the stop network its detuned synthesizers as no music: back in 1.07 s without the
+    sharp return, 0.83 s with it. And 10 s of silence (room tone under the silence threshold) between the same
+    excerpts of sweetwaltz and trance: back within 1 s with the sharp return too."""
+    from models.features.spectral import extract_features
+    from models.networks.dance_stream import DanceStream
+
+    a, talk, b = song_reader_song(lm, dwm_root, "sweetwaltz_setuniman.ogg", "librispeech_198-209-0000.ogg",
+                                  "trance_mechatribe_assault_kommisar.ogg")
+
+    def back(gap: np.ndarray, rule: bool) -> float | None:
+        feats = extract_features(np.concatenate([a, gap, b]).astype(np.float32), lm.features)
+        g1 = (len(a) + len(gap)) // HOP
+        stream = DanceStream(lm.model, seed=0)
+        stream._idle.presence.sharp_return.rule = rule
+        w = stream.listen(feats)
+        return (int(np.argmax(w[g1:] <= 0)) + 1) / 30 if (w[g1:] <= 0).any() else None
+
+    on, off = back(talk, True), back(talk, False)
+    assert on is not None and on <= 1.0, on
+    assert off is None or off > 1.0, off
+    silence = np.zeros(10 * 22050 // HOP * HOP, np.float32)
+    on = back(silence, True)
+    assert on is not None and on <= 1.0, on
 
 
 def test_the_music_heard_in_the_voices_pauses_is_music() -> None:

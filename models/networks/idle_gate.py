@@ -236,6 +236,7 @@ class IdleGate:
         """Advance by one feature frame ``row`` (D,); the idle weight after it (0 dancing, 1 idle)."""
         held = False
         energy = float(row[self._ecol]) if self._ecol is not None else math.inf  # log frame energy, dB
+        was_break = self.break_frames
         if self.hold_breaks and self._ecol is not None:
             was = self.break_frames
             if not was:
@@ -248,6 +249,9 @@ class IdleGate:
                     self.run = max(self.run, self.break_kept)  # frames counted stays
         if self.presence is not None:
             self.presence.veto.counting = self.music and self.run > 0.0  # the veto's reach (veto.VETO_TOP)
+            ended = not self.music and was_break >= BREAK_HOLD and not self.break_frames  # a long break: the music gone
+            self.presence.sharp_return.see(energy >= self.level + RETURN_DB, bool(self.break_frames), ended,
+                                           energy >= self.level - RETURN_DB)  # at the music's level: sharp_return.py
         present = self._detector(row)
         self.present = present
         if self.music and not present and not self.break_frames and self.presence is not None:

@@ -65,6 +65,11 @@ danced in this stream also hears music where the detector, the stop and the voic
 music (:mod:`models.networks.agreement`, composed here; ``agree_rule = False`` switches it off; a
 checkpoint without both networks has none).
 
+**The music's sharp return** (issue 43, back within 1 s): right after a silence, or on a frame far over the
+gap's level, an idle performer that has danced takes the stop or the voice network's word alone
+(:mod:`models.networks.sharp_return`, composed here; ``sharp_return.rule = False`` switches it off; ``sharp_return.rise``
+is set by the idle gate).
+
 **The voice network confirms a restart** (issue 43, held): soon after a stop, or later without a rise in
 level, a start of the detector's alone, not right after a silence, waits until the voice network hears music too
 (:mod:`models.networks.return_confirm`, composed here: :meth:`MusicGate.confirms_start`;
@@ -112,6 +117,7 @@ from models.networks.agreement import Agreement
 from models.networks.false_start import FalseStart
 from models.networks.lone_voice import LoneVoice
 from models.networks.return_confirm import ReturnConfirm
+from models.networks.sharp_return import SharpReturn
 from models.networks.unsure_voice import UnsureVoice
 from models.networks.veto import Veto
 from models.networks.voice_context import VoiceContext
@@ -352,6 +358,7 @@ class MusicGate:
         self.agreement = Agreement(self.has_stop and self.has_voice)  # the three networks agree: an idle frame is music
         self.false_start = FalseStart()  # a dance the stop network never heard as music: false_start.py
         self.return_confirm = ReturnConfirm(self.has_voice)  # the voice network confirms a restart: return_confirm.py
+        self.sharp_return = SharpReturn(self.has_stop and self.has_voice)  # one network's word on a return: sharp_return.py
         self.pauses = VoicePauses(pause_rule)  # the music heard in the voice's pauses (module docstring)
         self.lone = LoneVoice()  # no voice heard over a judged dance: a sure voice network overrules the pause rule
         self.unsure = UnsureVoice()  # a voice heard where the stop network wavers: the context's evidence too
@@ -396,6 +403,7 @@ class MusicGate:
         self.lone.reset()
         self.unsure.reset()
         self.return_confirm.reset()
+        self.sharp_return.reset()
 
     def step(self, row: np.ndarray, dancing: bool) -> bool:
         """True when frame ``row`` (D,) sounds like music to a performer that is ``dancing``."""
@@ -406,6 +414,7 @@ class MusicGate:
         if self.silent >= FRESH_SILENCE and self.fresh_rule:
             self.fresh = FRESH_FRAMES  # after a silence: listen afresh
         self.return_confirm.sounding = 0 if self.silent >= FRESH_SILENCE else self.return_confirm.sounding + 1
+        self.sharp_return.sound(self.silent >= FRESH_SILENCE)
         self.silent = 0
         fast = not dancing or self.fresh > 0
         self.fresh = max(0, self.fresh - 1)
@@ -421,12 +430,16 @@ class MusicGate:
         self.false_start.step(dancing, self.logit)
         if not dancing:
             self.voice_context.step(False, True, False)  # the voice-over context runs on while idle, nothing kept
+            if self.sharp_return.ends_break(self.agreement.has_danced):
+                return True  # a long break's loud end: the music is back (sharp_return.py; no confirmation asked)
             if self.logit > MARGIN_START:
                 self.detected = True
                 return True
             voiced = self.voice_rule and self.voice_start.hears(self._over)  # its count runs on every such frame
             self.voiced = voiced and self.false_start.trusts()  # not after a false start (false_start.py)
-            return self.voiced or self.agreement.hears(self.logit, self._stop_z, self._voice_z)
+            return self.voiced or self.agreement.hears(self.logit, self._stop_z, self._voice_z) or \
+                self.sharp_return.hears(self.agreement.has_danced, FRESH_FRAMES, self._stop_z,
+                                        self._voice_z)  # one network's word on a return
         if self.logit > -MARGIN_STOP:
             # the veto reaches 0 (VETO_TOP while a count runs): most frames of a song skip the call
             if (self.logit <= 0.0 or self.veto.counting) and self.veto.vetoes(self.logit, self.floor_db < FLOOR_DB,
@@ -454,6 +467,7 @@ class MusicGate:
         """The dance may start on this idle frame heard as music (:mod:`models.networks.return_confirm`: a
         start of the detector's alone after the stream's first dance that the idle gate ``asks`` about, a
         restart or one without a rise in level, not right after a silence, waits for the voice network)."""
+        asks = asks and not self.sharp_return.exempts(FRESH_FRAMES)  # right after a long break: the music's return
         return self.return_confirm.confirms(asks and self.detected and self.agreement.has_danced, self._voice_z,
                                             FRESH_FRAMES)
 

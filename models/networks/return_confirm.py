@@ -6,7 +6,7 @@ three frames (its logit over ``music_gate.MARGIN_START``) and restart the dance:
 its reading after brahms, fatswaller and vibeace (held 0.92-0.93, ``benchmarks/studies/idle_gate.py
 --parts readers``), crowd babble at -30 dBFS 1.7 s and 7.5 s after a stop in the 20-s gap at seed 10
 (held 0.71). On those start frames the voice network (fitted to hear music under a voice too) lay at
--2.9 to +0.6; on the start frames of the music's returns traced after a reader at +3.1 or more. The
+-2.9 to +0.6 (+1.7 on a later one of the crowd's, 10 s after the stop); on the start frames of the music's returns traced after a reader at +3.1 or more. The
 detector's start (the frame on which its count reaches ``music_gate.START_FRAMES``) after the stream's
 first dance waits until the voice network's logit on that frame is above :data:`CONFIRM_VOICE`, the
 count running on meanwhile, where the gate asks it to (``idle_gate``): soon after a stop (a restart:
@@ -31,10 +31,13 @@ from __future__ import annotations
 
 from typing import Callable
 
-#: A detector's start the gate asks about waits until the voice network's logit is above CONFIRM_VOICE: the
-#: detector's own start margin (``music_gate.MARGIN_START``), not tuned. The false restarts' start frames: -2.9
-#: to +0.6; the music's returns after a reader: +3.1 or more (module docstring).
-CONFIRM_VOICE: float = 1.5
+#: A detector's start the gate asks about waits until the voice network's logit is above CONFIRM_VOICE:
+#: ``music_gate.MARGIN_STOP``, as sure of music as the stop network must be of none. The false restarts' start
+#: frames: -2.9 to +0.6, and +1.7 (crowd -30, 20-s gap at seed 10, 10 s after the stop: held 0.92 at 1.5, the
+#: detector's own start margin ``MARGIN_START``); the music's returns after a reader: +3.1 or more; the lowest
+#: a song's return asked about at 1.5 (crowd -45, 10-s gap at seed 8: +1.50, a long break's loud end now,
+#: ``sharp_return.py``). Set on that crowd: docs/presence.md.
+CONFIRM_VOICE: float = 2.0
 
 
 class ReturnConfirm:
