@@ -623,6 +623,35 @@ def level_network(db: float) -> np.ndarray:
     return mg.pack(np.zeros(mg.N_STATS), np.ones(mg.N_STATS), w1, b1, w2, 0.0)
 
 
+def test_an_espeak_host_after_a_song_idles_within_2_s_thanks_to_the_songs_end(lm, dwm_root) -> None:
+    """Issue 43: espeak-ng host 0 after DANCE_W_6 of ``idle_gate.py --parts espeak``. The voice network reads
+    the host's first words as a voice over music (-3 to +2.5) and the voice-over and pause rules kept 1.0 s of
+    them: fully idle 2.20 s after the song. The stop network fell from sure music to none within the
+    statistics' time constant: with the song's end the rules keep none of them, within 2 s (1.23 s);
+    switched off, over 2 s again."""
+    from models.features.spectral import extract_features
+    from models.networks.dance_stream import DanceStream
+
+    needs_espeak()
+    if float(lm.model.presence_voice.abs().sum()) == 0 or lm.model.config.gate_col < 0:
+        pytest.skip(f"{lm.path} has no voice network or steadiness column (refit: {REFIT} --voice-network)")
+    ig = load_script("benchmarks/studies/idle_gate.py")
+    audio, g0, g1, known = ig.espeak_host(dwm_root, "DANCE_W_6/0")
+    if audio is None:
+        pytest.skip(f"host DANCE_W_6/0 not drawn from this dataset's training songs ({', '.join(known)})")
+    feats = extract_features(audio, lm.features)
+
+    def settle(rule: bool) -> float | None:
+        stream = DanceStream(lm.model, seed=7)
+        stream._idle.presence.song_end.rule = rule
+        w = stream.listen(feats)
+        idle = np.flatnonzero(w[g0:g1] >= 1.0)
+        return (idle[0] + 1) / 30 if len(idle) else None
+
+    on, off = settle(True), settle(False)
+    assert on is not None and on <= 2.0 and (off is None or off > 2.0), (on, off)
+
+
 def test_a_lone_voice_after_a_song_is_not_kept_by_the_pause_rule() -> None:
     """The lone voice (issue 43: an espeak-ng host after a song): a stop network that hears music at -10 dB
     and none at -20, a steadiness column (61). A performer dances CONTEXT_FRAMES + 30 frames of music, then
@@ -641,6 +670,7 @@ def test_a_lone_voice_after_a_song_is_not_kept_by_the_pause_rule() -> None:
         g = mg.MusicGate(np.zeros(d), np.ones(d), constant_network(10.0), -60.0, clarity_col=60, steadiness_col=scol,
                          stop_params=level_network(-15.0), voice_params=constant_network(voice))
         g.lone.rule = rule
+        g.song_end.rule = False  # the song's end would keep none of the voice's frames (its own test, below)
         out, holding = [], []
         for k in range(before + 60):
             r = row.copy()
@@ -658,6 +688,39 @@ def test_a_lone_voice_after_a_song_is_not_kept_by_the_pause_rule() -> None:
     assert hears(sure, rule=False) == kept and hears(leaning, rule=False) == kept
     assert hears(sure, before=vc.CONTEXT_FRAMES - 100) == kept
     assert hears(sure, voiced=True) == kept
+
+
+def test_a_voice_after_a_song_that_stopped_at_once_is_not_kept_by_the_voice_over_rule() -> None:
+    """The song's end (issue 43: an espeak-ng host after a song): a stop network whose logit is 10 tanh((level
+    + 15 dB) / 2.5 dB) (music at -10 dB, none at -20), a voice network that always hears music, the floor held
+    (the level steady). A performer dances CONTEXT_FRAMES + 30 frames of music, then a voice alone at -20 dB:
+    the stop network falls from sure music to none within the time constant, and the voice-over rule no
+    longer keeps the voice's frames. Kept as before with the song's end switched off, where the music fades
+    out over 200 frames (the fall takes longer), after a dance shorter than CONTEXT_FRAMES, or where a voice
+    was heard over the music before (frames 100-130, the voice-over rule keeping them)."""
+    d = 64
+    row = np.random.default_rng(0).normal(size=d).astype(np.float32)
+    w1, b1, w2 = np.zeros((mg.HIDDEN, mg.N_STATS)), np.zeros(mg.HIDDEN), np.zeros(mg.HIDDEN)
+    w1[0, 8], b1[0], w2[0] = 10.0 / 2.5, 15.0 / 2.5, 10.0  # statistic 8: the running level / 10
+    stop = mg.pack(np.zeros(mg.N_STATS), np.ones(mg.N_STATS), w1, b1, w2, 0.0)
+
+    def hears(before: int = vc.CONTEXT_FRAMES + 30, fade: int = 0, voiced: bool = False, rule: bool = True) -> list[bool]:
+        g = mg.MusicGate(np.zeros(d), np.ones(d), constant_network(10.0), -60.0, clarity_col=60,
+                         stop_params=stop, voice_params=constant_network(0.0))
+        g.song_end.rule = rule
+        out = []
+        for k in range(before + fade + 60):
+            r = row.copy()
+            r[mg.ENERGY_COL] = -20.0 if k >= before + fade or (voiced and 100 <= k < 130) else \
+                -10.0 - 10.0 * max(0, k - before) / max(1, fade)
+            out.append(g.step(r, True))
+        return out[-20:]
+
+    assert hears() == [False] * 20
+    assert hears(rule=False) == [True] * 20
+    assert hears(fade=200) == [True] * 20
+    assert hears(before=vc.CONTEXT_FRAMES - 100) == [True] * 20
+    assert hears(voiced=True) == [True] * 20
 
 
 def test_a_voice_heard_over_the_dance_before_holds_its_stop() -> None:
