@@ -14,12 +14,13 @@ quieter passage under a voice falls slower (fatswaller under the shared readers 
 voice's condition, ``lone_voice.py``: ``voice_context.CONTEXT_FRAMES`` danced, under
 ``voice_context.CONTEXT_MIN`` kept frames 10 to 2.5 s ago), after such a fall and until the stop
 network hears music again (its logit over 0) the voice-over and pause rules keep no frame the voice
-network does not lean to music on (its logit at or under ``veto.VOICE_NO_RUN``, the veto's threshold while a
-count runs, mirrored; :meth:`SongEnd.ended`): the host's first words count towards the stop. Where it leans
-to music the rules keep the frame as before: the shared readers over fishin at 0 dB (12.7-13.0 s, the voice
-network at +2.6 to +4.7) took a song's quiet bar for a fall, and the count reached 14.99 of 15. A silence starts the fall's
-window again (a song's silent break is the break hold's, ``idle_gate.py``: the statistics wait through
-it and listen afresh after it), and the stop ends the song's end.
+network does not lean to music on (its logit at or under ``veto.VOICE_NO_RUN``, the veto's threshold
+while a count runs, mirrored; :meth:`SongEnd.ended`): the host's first words count towards the stop.
+Where it leans to music the rules keep the frame as before: without that, the shared readers over fishin
+at 0 dB (12.7-13.0 s, the voice network at +2.6 to +4.7) took a quiet bar for a fall, and the stop count
+reached 14.99 of 15. A silence starts the fall's window again (a song's silent break is the break hold's,
+``idle_gate.py``: the statistics wait through it and listen afresh after it; counted across it, pistachio
+with 2-s breaks idled 1.2 % instead of 0.6), and the stop ends the song's end.
 
 State (30 fps, sounding frames): ``rule`` (False: the song's end off), ``since_sure`` (sounding frames
 danced since the stop network's running logit last lay at SURE_TOP or over, without a silence between),
