@@ -489,33 +489,40 @@ def test_an_espeak_host_from_a_streams_start_dances_less_thanks_to_the_doubt(lm)
     assert on < 0.30 and off > 0.40, (on, off)
 
 
-def test_espeak_hosts_after_a_song_idle_within_2_s_thanks_to_the_lone_voice(lm, dwm_root) -> None:
-    """Issue 43: espeak-ng hosts 1 after DANCE_W_15 and DANCE_W_17 of ``idle_gate.py --parts espeak`` (its
-    draw: 20 s of the song, 10 s of a host at its level, the next song). The pause rule kept the hosts'
-    first words as music (their vowels hold their pitch as a song's notes) and a steady pause of theirs
-    sent a stop count of 14 back to 0: fully idle 2.23 s after the song. With the lone voice, within 2 s
-    (1.90 / 1.70 s); switched off, over 2 s again."""
+def espeak_host_settles(lm, dwm_root, host: str, part: str) -> tuple[float | None, float | None]:
+    """Seconds from the song's end to fully idle (None: never) for espeak-ng host ``host`` ('SONG/K', drawn as
+    ``idle_gate.py --parts espeak`` draws it: 20 s of the song, 10 s of a host at its level, the next song), with
+    the rule of the gate's composed ``part`` (``lone``, ``song_end``) on and off. Skips without espeak-ng, the
+    voice network and the steadiness column, or the host."""
     from models.features.spectral import extract_features
     from models.networks.dance_stream import DanceStream
 
     needs_espeak()
     if float(lm.model.presence_voice.abs().sum()) == 0 or lm.model.config.gate_col < 0:
         pytest.skip(f"{lm.path} has no voice network or steadiness column (refit: {REFIT} --voice-network)")
-    ig = load_script("benchmarks/studies/idle_gate.py")
+    audio, g0, g1, known = load_script("benchmarks/studies/idle_gate.py").espeak_host(dwm_root, host)
+    if audio is None:
+        pytest.skip(f"host {host} not drawn from this dataset's training songs ({', '.join(known)})")
+    feats = extract_features(audio, lm.features)
+
+    def settle(rule: bool) -> float | None:
+        stream = DanceStream(lm.model, seed=7)
+        getattr(stream._idle.presence, part).rule = rule
+        w = stream.listen(feats)
+        idle = np.flatnonzero(w[g0:g1] >= 1.0)
+        return (idle[0] + 1) / 30 if len(idle) else None
+
+    return settle(True), settle(False)
+
+
+def test_espeak_hosts_after_a_song_idle_within_2_s_thanks_to_the_lone_voice(lm, dwm_root) -> None:
+    """Issue 43: espeak-ng hosts 1 after DANCE_W_15 and DANCE_W_17 of ``idle_gate.py --parts espeak`` (its
+    draw: 20 s of the song, 10 s of a host at its level, the next song). The pause rule kept the hosts'
+    first words as music (their vowels hold their pitch as a song's notes) and a steady pause of theirs
+    sent a stop count of 14 back to 0: fully idle 2.23 s after the song. With the lone voice, within 2 s
+    (1.90 / 1.70 s); switched off, over 2 s again."""
     for host in ("DANCE_W_15/1", "DANCE_W_17/1"):
-        audio, g0, g1, known = ig.espeak_host(dwm_root, host)
-        if audio is None:
-            pytest.skip(f"host {host} not drawn from this dataset's training songs ({', '.join(known)})")
-        feats = extract_features(audio, lm.features)
-
-        def settle(rule: bool) -> float | None:
-            stream = DanceStream(lm.model, seed=7)
-            stream._idle.presence.lone.rule = rule
-            w = stream.listen(feats)
-            idle = np.flatnonzero(w[g0:g1] >= 1.0)
-            return (idle[0] + 1) / 30 if len(idle) else None
-
-        on, off = settle(True), settle(False)
+        on, off = espeak_host_settles(lm, dwm_root, host, "lone")
         assert on is not None and on <= 2.0 and (off is None or off > 2.0), (host, on, off)
 
 
@@ -738,6 +745,16 @@ def level_network(db: float) -> np.ndarray:
     return mg.pack(np.zeros(mg.N_STATS), np.ones(mg.N_STATS), w1, b1, w2, 0.0)
 
 
+def test_an_espeak_host_after_a_song_idles_within_2_s_thanks_to_the_songs_end(lm, dwm_root) -> None:
+    """Issue 43: espeak-ng host 0 after DANCE_W_6 of ``idle_gate.py --parts espeak``. The voice network reads
+    the host's first words as a voice over music (-3 to +2.5) and the voice-over and pause rules kept 1.0 s of
+    them: fully idle 2.20 s after the song. The stop network fell from sure music to none within the
+    statistics' time constant: with the song's end the rules keep them no longer, within 2 s (1.37 s);
+    switched off, over 2 s again."""
+    on, off = espeak_host_settles(lm, dwm_root, "DANCE_W_6/0", "song_end")
+    assert on is not None and on <= 2.0 and (off is None or off > 2.0), (on, off)
+
+
 def test_a_lone_voice_after_a_song_is_not_kept_by_the_pause_rule() -> None:
     """The lone voice (issue 43: an espeak-ng host after a song): a stop network that hears music at -10 dB
     and none at -20, a steadiness column (61). A performer dances CONTEXT_FRAMES + 30 frames of music, then
@@ -756,6 +773,7 @@ def test_a_lone_voice_after_a_song_is_not_kept_by_the_pause_rule() -> None:
         g = mg.MusicGate(np.zeros(d), np.ones(d), constant_network(10.0), -60.0, clarity_col=60, steadiness_col=scol,
                          stop_params=level_network(-15.0), voice_params=constant_network(voice))
         g.lone.rule = rule
+        g.song_end.rule = False  # the song's end would keep none of the voice's frames (its own test, below)
         out, holding = [], []
         for k in range(before + 60):
             r = row.copy()
@@ -773,6 +791,39 @@ def test_a_lone_voice_after_a_song_is_not_kept_by_the_pause_rule() -> None:
     assert hears(sure, rule=False) == kept and hears(leaning, rule=False) == kept
     assert hears(sure, before=vc.CONTEXT_FRAMES - 100) == kept
     assert hears(sure, voiced=True) == kept
+
+
+def test_a_voice_after_a_song_that_stopped_at_once_is_not_kept_by_the_voice_over_rule() -> None:
+    """The song's end (issue 43: an espeak-ng host after a song): a stop network whose logit is 10 tanh((level
+    + 15 dB) / 2.5 dB) (music at -10 dB, none at -20), a voice network that always hears music, the floor held
+    (the level steady). A performer dances CONTEXT_FRAMES + 30 frames of music, then a voice alone at -20 dB:
+    the stop network falls from sure music to none within the time constant, and the voice-over rule no
+    longer keeps the voice's frames. Kept as before with the song's end switched off, where the music fades
+    out over 200 frames (the fall takes longer), after a dance shorter than CONTEXT_FRAMES, or where a voice
+    was heard over the music before (frames 100-130, the voice-over rule keeping them)."""
+    d = 64
+    row = np.random.default_rng(0).normal(size=d).astype(np.float32)
+    w1, b1, w2 = np.zeros((mg.HIDDEN, mg.N_STATS)), np.zeros(mg.HIDDEN), np.zeros(mg.HIDDEN)
+    w1[0, 8], b1[0], w2[0] = 10.0 / 2.5, 15.0 / 2.5, 10.0  # statistic 8: the running level / 10
+    stop = mg.pack(np.zeros(mg.N_STATS), np.ones(mg.N_STATS), w1, b1, w2, 0.0)
+
+    def hears(before: int = vc.CONTEXT_FRAMES + 30, fade: int = 0, voiced: bool = False, rule: bool = True) -> list[bool]:
+        g = mg.MusicGate(np.zeros(d), np.ones(d), constant_network(10.0), -60.0, clarity_col=60,
+                         stop_params=stop, voice_params=constant_network(0.0))
+        g.song_end.rule = rule
+        out = []
+        for k in range(before + fade + 60):
+            r = row.copy()
+            r[mg.ENERGY_COL] = -20.0 if k >= before + fade or (voiced and 100 <= k < 130) else \
+                -10.0 - 10.0 * max(0, k - before) / max(1, fade)
+            out.append(g.step(r, True))
+        return out[-20:]
+
+    assert hears() == [False] * 20
+    assert hears(rule=False) == [True] * 20
+    assert hears(fade=200) == [True] * 20
+    assert hears(before=vc.CONTEXT_FRAMES - 100) == [True] * 20
+    assert hears(voiced=True) == [True] * 20
 
 
 def test_a_voice_heard_over_the_dance_before_holds_its_stop() -> None:

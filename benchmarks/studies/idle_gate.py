@@ -95,7 +95,8 @@ frame whatever the voice network hears in a dance the voice-over context heard n
 ``lone_voice.py``), ``return-confirm`` (after the stream's first dance the detector starts the dance without the
 voice network: ``return_confirm.CONFIRM_VOICE``, which ``--confirm-voice`` sets), ``unsure-voice`` (the
 voice-over context counts only its rules' kept frames, not a voice heard where the stop network wavers:
-``unsure_voice.UNSURE_TOP``, which ``--unsure-top`` sets). ``--trace`` prints the gate's
+``unsure_voice.UNSURE_TOP``, which ``--unsure-top`` sets), ``host`` (the voice-over and pause rules keep a host's
+words after a song that stopped at once: ``song_end.py``). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, through a reader
 after a recording and the next recording's start, or through a gap between songs and the music's
 return (``gap:LABEL``), or through an espeak-ng host after a training song (``espeak:SONG/K``),
@@ -153,14 +154,15 @@ SETTLE_TARGET_OTHER_S: float = 2.5
 
 
 #: Parts of the gate ``--off`` switches off: name -> (``IdleGate``, its ``MusicGate`` or a part that one composes
-#: (``false_start``, ``lone``), attribute).
+#: (``false_start``, ``lone``, ``return_confirm``, ``unsure``, ``sharp_return``, ``song_end``), attribute).
 SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_only"), "fresh": ("presence", "fresh_rule"),
                                         "resume": ("presence", "resume_rule"), "song-start": ("idle", "song_start"),
                                         "quiet-return": ("idle", "quiet_return"), "veto": ("presence", "veto_rule"),
                                         "context": ("presence", "context_rule"),
                                         "agree": ("presence", "agree_rule"), "false-start": ("false_start", "rule"), "lone-voice": ("lone", "rule"),
                                         "voiced-song": ("idle", "voiced_song"), "return-confirm": ("return_confirm", "rule"),
-                                        "unsure-voice": ("unsure", "rule"), "sharp-return": ("sharp_return", "rule")}
+                                        "unsure-voice": ("unsure", "rule"), "sharp-return": ("sharp_return", "rule"),
+                                        "host": ("song_end", "rule")}
 #: The switches ``--off`` named (set by main).
 OFF: set[str] = set()
 
@@ -173,7 +175,8 @@ def new_stream(lm, seed: int):
     for name in OFF:
         where, attr = SWITCHES[name]
         part = stream._idle if where == "idle" else stream._idle.presence
-        if part is not None and where in ("false_start", "lone", "return_confirm", "unsure", "sharp_return"):  # a part the MusicGate composes
+        if part is not None and where in ("false_start", "lone", "return_confirm", "unsure", "sharp_return",
+                                          "song_end"):  # a part the MusicGate composes
             part = getattr(part, where)
         if part is not None:
             setattr(part, attr, False)
@@ -189,7 +192,8 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
     start's doubt (D) or not kept by the pause rule for a lone voice (L, ``lone_voice.py``) or a detector's start
     held back until the voice network confirms it (C) or a voice heard where the stop network wavers
     (U, ``unsure_voice.py``: evidence for the voice-over context) or heard as music by one network on a sharp return
-    (R, ``sharp_return.py``), the stop count, the break's frames, the log
+    (R, ``sharp_return.py``) or not kept by the voice-over and pause rules after a song's end (E, ``song_end.py``),
+    the stop count, the break's frames, the log
     energy (dB), the voice-over context (frames kept 10 s to 2.5 s ago: ``voice_context.CONTEXT_MIN`` holds
     the stop), and three statistics: the log energy's spread (dB), the pulse clarity, the beat phase's
     coherence. An empty window: every stop of the
@@ -204,13 +208,14 @@ def trace(lm, feats: np.ndarray, windows: list[tuple[int, int]]) -> list[str]:
     for t in range(len(feats)):
         kv, kp, ka, kd = pg.voice_frames, pg.pauses.frames, pg.agreement.frames, pg.false_start.frames
         kl, kc, ku, kr = pg.lone.frames, pg.return_confirm.frames, pg.unsure.frames, pg.sharp_return.frames
+        ke = pg.song_end.frames
         w = ig.step(np.asarray(feats[t], np.float32))
         vz = presence_logit(pg.stats, *pg._voice) if pg.has_voice else float("nan")
         sz = presence_logit(pg.stats, *pg._stop)
         kept = ("V" if pg.voice_frames > kv else "P" if pg.pauses.frames > kp else "A" if pg.agreement.frames > ka
                 else "D" if pg.false_start.frames > kd else "L" if pg.lone.frames > kl
                 else "C" if pg.return_confirm.frames > kc else "U" if pg.unsure.frames > ku
-                else "R" if pg.sharp_return.frames > kr else "-")
+                else "R" if pg.sharp_return.frames > kr else "E" if pg.song_end.frames > ke else "-")
         music.append(ig.music)
         rows.append(f"{t / 30:7.2f} {w:4.2f} {int(ig.music)} {int(ig.present)} {pg.logit:6.2f} {sz:6.2f} {vz:6.2f} {pg.floor_db:5.1f} "
                     f"{pg.pause_steady:5.2f} {kept} {ig.run:5.2f} {ig.break_frames:3d} {float(feats[t][ENERGY]):6.1f} {pg.voice_context.count:3d}"
@@ -648,7 +653,8 @@ def main(argv: list[str] | None = None) -> int:
                    "without the voice network), unsure-voice (the voice-over context counts only the frames its rules kept, "
                    "not a voice heard where the stop network wavers: unsure_voice.py), sharp-return (an idle performer does not "
                    "take the stop or the voice network's word alone right after a silence or on a rise over the gap's level: "
-                   "sharp_return.py)")
+                   "sharp_return.py), host (the voice-over and pause rules keep a host's words after a song that stopped at "
+                   "once: song_end.py)")
     p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
                    "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "

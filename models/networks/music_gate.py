@@ -104,6 +104,11 @@ composed here; ``unsure_rule = False`` switches it off).
 voice-over context has judged and heard no voice over, the pause rule does not keep a frame the voice
 network is sure of, and one it leans to holds the stop count (:mod:`models.networks.lone_voice`,
 composed here; ``lone.holding``, read by the idle gate). ``lone.rule = False`` switches it off.
+
+**The song's end** (part of the voice-over rule; issue 43, a host after a song): in such a dance, after the
+stop network fell from sure music to none within the statistics' time constant, the voice-over and pause
+rules keep no frame the voice network does not lean to music on until the stop network hears music again
+(:mod:`models.networks.song_end`, composed here; ``song_end.rule = False`` switches it off).
 """
 
 from __future__ import annotations
@@ -118,6 +123,7 @@ from models.networks.false_start import FalseStart
 from models.networks.lone_voice import LoneVoice
 from models.networks.return_confirm import ReturnConfirm
 from models.networks.sharp_return import SharpReturn
+from models.networks.song_end import SongEnd
 from models.networks.unsure_voice import UnsureVoice
 from models.networks.veto import Veto
 from models.networks.voice_context import VoiceContext
@@ -332,7 +338,8 @@ class MusicGate:
     ``voice_start.frames`` count the frames the agreement, the pause rule and the start heard as music;
     ``voiced`` says whether the voice-over start (trusted, ``false_start.py``) heard the last frame as music;
     ``lone`` is the lone voice (``lone_voice.py``: ``lone.rule`` switches it, ``lone.holding`` says the last
-    frame holds the stop count); ``unsure`` the voice heard where the stop network wavers (``unsure_voice.py``).
+    frame holds the stop count); ``song_end`` the song's end (``song_end.py``: ``song_end.rule`` switches it);
+    ``unsure`` the voice heard where the stop network wavers (``unsure_voice.py``).
     """
 
     def __init__(self, feat_mean: np.ndarray, feat_std: np.ndarray, params: np.ndarray, energy_min: float,
@@ -361,6 +368,7 @@ class MusicGate:
         self.sharp_return = SharpReturn(self.has_stop and self.has_voice)  # one network's word on a return: sharp_return.py
         self.pauses = VoicePauses(pause_rule)  # the music heard in the voice's pauses (module docstring)
         self.lone = LoneVoice()  # no voice heard over a judged dance: a sure voice network overrules the pause rule
+        self.song_end = SongEnd(round(tau_music), MARGIN_STOP)  # a song that stopped at once: song_end.py
         self.unsure = UnsureVoice()  # a voice heard where the stop network wavers: the context's evidence too
         self.voice_start = VoiceStart(start_rule, resume_rule)  # the voice-over start and the resume
         # bound once, not a frame: the callbacks, the pause rule's rings (sound_cues advances them)
@@ -401,6 +409,7 @@ class MusicGate:
         self.agreement.reset()
         self.false_start.reset()
         self.lone.reset()
+        self.song_end.reset()
         self.unsure.reset()
         self.return_confirm.reset()
         self.sharp_return.reset()
@@ -410,6 +419,7 @@ class MusicGate:
         self.voiced = self.detected = self.lone.holding = False
         if float(row[ENERGY_COL]) <= self.energy_min:
             self.silent += 1
+            self.song_end.silence()
             return False  # silence: the statistics wait for sound
         if self.silent >= FRESH_SILENCE and self.fresh_rule:
             self.fresh = FRESH_FRAMES  # after a silence: listen afresh
@@ -428,6 +438,7 @@ class MusicGate:
         self.floor_db, self.pause_steady = float(self._cues[0]), float(self._cues[1])
         self.agreement.has_danced = self.agreement.has_danced or dancing
         self.false_start.step(dancing, self.logit)
+        self.song_end.step(dancing, self.logit)
         if not dancing:
             self.voice_context.step(False, True, False)  # the voice-over context runs on while idle, nothing kept
             if self.sharp_return.ends_break(self.agreement.has_danced):
@@ -452,6 +463,10 @@ class MusicGate:
             # a voice heard where the stop network wavers is evidence for the context (unsure_voice.py)
             self.voice_context.step(self.voice_rule and self.unsure.hears(self.logit, self._over), True, True)
             return True
+        if self.voice_rule and self.song_end.ended(self.voice_context, self._voice_z):  # a host after a song (song_end.py)
+            self.voice_start.resume(False, self.voice_rule)
+            self.voice_context.step(False, False, True)
+            return False
         # the music heard in the voice's pauses, unless a lone voice (lone_voice.py)
         if not (self.voice_rule and self.lone.pause_keeps(self.pauses, self.pause_steady, self.voice_context, self._voice_z)):
             if not (self.voice_rule and self._voice_over()):
