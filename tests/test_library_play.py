@@ -238,9 +238,11 @@ def test_a_far_handover_draws_the_next_code_then_the_nearest_exemplars(loaded, f
 
 def test_auto_plays_every_folder_of_a_library(loaded, features):
     """Under auto the music chooses the library folder (models/networks/library_folders.py): streams of
-    seeds 0-2 over the bundled clip play both folders' exemplars (swing 344 of the 1,620 dancing
-    frames; seed 1 moves twice while dancing). Switched off (FOLDER_CHOICE False) the far-handover
-    guard kept every stream in the folder it started in: all 1,620 sway."""
+    seeds 0-7 over the bundled clip play both folders' exemplars and move between them while dancing
+    (on an AVX-512 Xeon: swing 796 of the 4,320 dancing frames, 7 moves at 6 of the 8 seeds; which
+    seed moves when follows the CPU's floating point, so the test pools eight streams: seeds 0-2 alone
+    read swing 344 of 1,620 on another machine, 40 on this one). Switched off (FOLDER_CHOICE False)
+    the far-handover guard keeps every stream in the folder it started in: all 4,320 sway, no move."""
     from models.data.library import clip_tracks
     from models.networks.dance_stream import DanceStream
     from models.networks.library_player import STYLE_BASE, library_model
@@ -248,7 +250,7 @@ def test_auto_plays_every_folder_of_a_library(loaded, features):
     tracks = [clip_tracks(swinging_dance(1, height=0.6)), clip_tracks(swinging_dance(2))]
     model = library_model(loaded.model, [p for p, _ in tracks], [t for _, t in tracks], ["swing", "sway"])
     played, moved = [], 0
-    for seed in (0, 1, 2):
+    for seed in range(8):
         s, own = DanceStream(model, seed=seed), []
         for t in range(len(features)):
             s.push(features[t: t + 1])
@@ -257,7 +259,7 @@ def test_auto_plays_every_folder_of_a_library(loaded, features):
         moved += int(np.sum(np.diff(own) != 0))
         played += own
     share = {f: float(np.mean(np.array(played) == STYLE_BASE + i)) for i, f in enumerate(("swing", "sway"))}
-    assert len(played) > 600 and min(share.values()) >= 0.05 and moved >= 1, (share, moved)
+    assert len(played) > 1600 and min(share.values()) >= 0.05 and moved >= 3, (share, moved)
 
 
 def test_the_folder_choice_moves_at_once_unseen_and_on_evidence_while_dancing():
