@@ -98,7 +98,7 @@ demo: setup
 	$(BIN)/performer run --audio models/assets/clip.ogg --loop --duration $(DEMO_SECONDS)
 
 test: setup browser-deps
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=25
 
 test-fast: setup browser-deps
 	$(BIN)/python -m pytest -q -m "not slow"
