@@ -116,7 +116,7 @@ def test_desk_shows_tempo_music_and_level(browser, show, tmp_path):
     state = wait_state(page, f"s.status && s.status.performers[0].music && "
                              f"Math.abs(s.status.performers[0].tempo_bpm - {CLIP_BPM}) < {0.03 * CLIP_BPM}")
     took = time.monotonic() - t0
-    # 2 s asked, the page load first: a guard, not the figure (quiet, 2-4 s in all; 10.4 s while three
+    # 2 s asked, the page load first: a guard, not the figure (10.4 s in all while three
     # other jobs held both cores, which failed a 5-s bound here)
     assert took < 20.0, f"the desk showed the tempo {took:.1f} s after the page opened"
     p = performer(state)
