@@ -852,12 +852,13 @@ class DanceStream:
         # bend the motion past the guard, and where none of the drawn codes' does, the nearest of any code's
         tries = [codes[:n] for n in range(1, len(codes) + 1)] + [None] if self._guard > 0.0 else [codes]
         pairs, cands, dips, z = self._candidates(self._pairs(tries[0]))
+        asked = self._asked_rate()  # the rate the followed tempo asks now, before each exemplar's speed cap
         if not self._has_cont:  # the first movement starts from its own pose
             i = 0
             best = _unit(cands[0].copy())
         else:  # motion matching among the drawn codes' exemplars, placed on the beat (one compiled call)
             c0 = pairs[0]
-            beat = self._next_beat(self._rate_for(*c0), d)
+            beat = self._next_beat(self._rate_for(*c0, asked), d)
             frame, clarity = beat if beat is not None else (-1, 0.0)
             at = reached + d  # where the playing movement hands over
             cont = np.stack([warp_pose(self._played, at), warp_pose(self._played, at + 1.0)])
@@ -869,8 +870,8 @@ class DanceStream:
                                          self.seg, VEL_CAP, bias)  # match_exemplar's quaternions are unit already
                 if k + 1 == len(tries) or bend_deg(cands[i, 0], cont[0]) <= self._guard:
                     break
-        rate = self._rate_for(*pairs[i])
-        self.rate_split = (self._asked_rate(), rate)  # what the speed matching and the bone cap start from
+        rate = self._rate_for(*pairs[i], asked)
+        self.rate_split = (asked, rate)  # what the speed matching and the bone cap start from
         if self._has_cont and SPEED_MATCH > 0.0:  # the speed the bend adds or takes away, undone
             rate = self._speed_matched(cands[i], best, rate)
         self._stage.handover(reached - self.seg, self._travel[pairs[i]], not self.codes_drawn, self.seg + d)
@@ -951,15 +952,15 @@ class DanceStream:
         lo, hi = RATE_RANGE
         return min(max(src / period, lo), hi) ** min(1.0, self._tempo.confidence / RATE_CONFIDENCE)
 
-    def _rate_for(self, code: int, member: int) -> float:
+    def _rate_for(self, code: int, member: int, asked: float | None = None) -> float:
         """The playback rate of exemplar ``member`` of ``code`` now (:data:`FOLLOW_TEMPO`): the asked
-        rate (:meth:`_asked_rate`) under the speed cap."""
-        period = self._tempo.period
-        if not FOLLOW_TEMPO or self._ref_period <= 0.0 or period <= 0.0:
-            return 1.0
-        r = self._asked_rate()
+        rate (``asked``, else :meth:`_asked_rate`; 1 without a tempo) under the speed cap, which
+        only slows a rate over 1 (so a rate over 1 implies a followed tempo and a period)."""
+        r = self._asked_rate() if asked is None else asked
+        if r <= 1.0:
+            return r
         v = self._member_speed[code, member]
-        return min(r, max(1.0, self._cap_now(period) / v)) if v > 0 else r
+        return min(r, max(1.0, self._cap_now(self._tempo.period) / v)) if v > 0 else r
 
     def _speed_matched(self, own: np.ndarray, bent: np.ndarray, rate: float) -> float:
         """``rate`` times ``(v_own / v_bent) ** SPEED_MATCH`` (within :data:`SPEED_MATCH_RANGE`, then
