@@ -468,8 +468,8 @@ def test_a_handover_plays_the_chosen_movement_at_its_own_speed_times_the_rate(cl
         starts: list = []
         play, rate_for, asked = s._play, s._rate_for, [1.0]
 
-        def logged_rate(code, member, _rate_for=rate_for, _asked=asked):
-            _asked[0] = _rate_for(code, member)  # the last before a _play: the tempo's rate for the movement
+        def logged_rate(code, member, rate=None, *, _rate_for=rate_for, _asked=asked):
+            _asked[0] = _rate_for(code, member, rate)  # the last before a _play: the tempo's rate for the movement
             return _asked[0]
 
         def logged_play(window, rate, limit=np.inf, contact=None, *where, _play=play, _s=s, _starts=starts,
