@@ -601,6 +601,9 @@ class DanceStream:
         self.frame = 0
         self.nonfinite_frames = 0
         self._hist = np.zeros((self.seg, self._fd), np.float32)
+        # the coming token's audio MLP first layer, summed a frame at a time (its bias + _embed_rows frames)
+        self._embed_acc = self._predictor.embed_start()
+        self._embed_rows = 0
         self._tokens: deque[np.ndarray] = deque(maxlen=c.window_codes)  # embedded (audio + previous code)
         self._prefix: Prefix | None = None  # the next code step's window but its last token, computed ahead
         self._prefix_auto: Prefix | None = None  # the same with the "auto" style, while a style is guided
@@ -794,7 +797,11 @@ class DanceStream:
         m, pred = self.model, self._predictor
         guided = bool(self._pstyle) and STYLE_GUIDANCE != 1.0
         with single_thread_blas():
-            token = pred.embed(self._hist.reshape(-1), self._last)
+            if self._embed_rows == self.seg - 1:  # its first seg - 1 frames were added as they came
+                token = pred.embed_last(self._embed_acc, self._hist[-1], self._last)
+            else:  # the stream's first token
+                token = pred.embed(self._hist.reshape(-1), self._last)
+            self._embed_rows = 0
             prefix = self._prefix
             if prefix is None or prefix.style != self._pstyle:  # the first step, or the style changed since
                 prefix = Prefix(pred, list(self._tokens), self._pstyle)
@@ -1148,6 +1155,13 @@ class DanceStream:
                 self._forecast.push(float(x[i, self._onset_col]))
             row = self._ahead(x[i]) if self._lead and self._beat_cols is not None else x[i]
             push_history(self._hist, row, self._feat_mean, self._feat_std)  # its first _fd columns, standardised
+            j = t % self.seg
+            if j:  # the coming token's first layer, a frame at a time (NumpyPredictor.embed_frame)
+                if j == 1:
+                    self._embed_acc, self._embed_rows = self._predictor.embed_start(), 0
+                if self._embed_rows == j - 1:
+                    self._predictor.embed_frame(self._embed_acc, self._hist[-1], j - 1)
+                    self._embed_rows = j
             self._raw = row
             if self._beat_cols is not None:  # the tempo (the period is the same ahead or not)
                 if self._onset_col is not None:
