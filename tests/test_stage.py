@@ -131,6 +131,42 @@ def test_stream_equals_the_whole_song_in_any_chunking_on_a_stage():
     assert np.abs(whole[:, [0, 2]]).max() > 0.1
 
 
+def test_a_handover_read_on_the_frame_before_is_what_it_reads_at_its_code_step(monkeypatch):
+    """On the frame before a code step the stream reads what the coming handover reads of the playing
+    movement (DanceStream._read_ahead: the rows before the new movement, their contacts and lifts,
+    the next two poses; Stage.read_ahead: the track's rows), so the code step only takes them: every
+    handover but the first does, and the poses are bit for bit those of a stream that reads them at
+    its code step (a turning walker on a 3x2 stage, facing free and the audience)."""
+    m = walking_model(speed=0.03, turn=0.03, sway=0.3)
+    x = music(400)
+    taken = {"stream": 0, "stage": 0}
+    ahead_for, handover = DanceStream._ahead_for, Stage.handover
+
+    def counted(self, reached, d):
+        got = ahead_for(self, reached, d)
+        taken["stream"] += got is not None
+        return got
+
+    def stage_counted(self, at, travel, first, lead=None):
+        taken["stage"] += self._ahead is not None and not first
+        return handover(self, at, travel, first, lead)
+
+    for facing in ("free", "audience"):
+        monkeypatch.setattr(DanceStream, "_ahead_for", counted)
+        monkeypatch.setattr(Stage, "handover", stage_counted)
+        taken.update(stream=0, stage=0)
+        s = DanceStream(m, seed=4, stage="3x2", facing=facing)
+        got = np.concatenate([s.push(x[i:i + 1]) for i in range(len(x))])
+        steps = len(s.codes_drawn)
+        assert taken["stream"] == 2 * (steps - 1) and taken["stage"] == steps - 1  # _ahead_for: twice a step
+        monkeypatch.setattr(DanceStream, "_read_ahead", lambda self: None)  # each handover reads its own rows
+        monkeypatch.setattr(Stage, "handover", handover)
+        own = DanceStream(m, seed=4, stage="3x2", facing=facing)
+        np.testing.assert_array_equal(got, np.concatenate([own.push(x[i:i + 1]) for i in range(len(x))]))
+        monkeypatch.undo()
+    assert np.abs(got[:, [0, 2]]).max() > 0.1
+
+
 def test_the_idle_stands_still_and_home_walks_back_to_the_centre():
     m = walking_model(speed=0.02, turn=0.0)
     s = DanceStream(m, seed=0, stage="6x5")

@@ -633,6 +633,7 @@ class DanceStream:
         self._played_contact = np.zeros((4 * self.seg, 3), np.float32)  # each foot's contact and the lift, as _played
         self._handover.reset()
         self._at = float(self.seg)  # where in _played the last frame was read
+        self._rows_ahead: tuple | None = None  # what the next handover reads of the playing movement (_read_ahead)
         if self._feet is not None:
             self._feet.reset()
         self._feet_used = False  # the feet part has stepped since the reset (FEET_IN_PLACE)
@@ -835,7 +836,7 @@ class DanceStream:
             window = np.concatenate([segment, np.repeat(segment[-1:], self.seg, axis=0)])
             shift = self._handover.base + self._advance(self.seg) - self.seg  # the rows the last movement moved on
             self._stage.handover(shift, None, not self.codes_drawn)  # in place
-            self._play(window, 1.0, shift=shift)  # no continuation to play into: its own pace (no contacts known)
+            self._play(window, 1.0, shift=shift, ahead=self._ahead_for(shift + self.seg, 0))  # its own pace (no contacts known)
             self._handover.handed(self.seg, shift + self.seg)
             self.playing_member = None
             self._own_speed = 0.0
@@ -868,7 +869,9 @@ class DanceStream:
             beat = self._next_beat(self._rate_for(*c0, asked), d)
             frame, clarity = beat if beat is not None else (-1, 0.0)
             at = reached + d  # where the playing movement hands over
-            cont = np.stack([warp_pose(self._played, at), warp_pose(self._played, at + 1.0)])
+            ahead = self._ahead_for(reached, d)
+            cont = ahead[4] if ahead is not None else np.stack([warp_pose(self._played, at),
+                                                                warp_pose(self._played, at + 1.0)])
             for k, use in enumerate(tries):
                 if k:
                     pairs, cands, dips, z = self._candidates(self._pairs(use) if use else self._nearest(cont[0]))
@@ -884,7 +887,7 @@ class DanceStream:
         self._stage.handover(reached - self.seg, self._travel[pairs[i]], not self.codes_drawn, self.seg + d)
         self.playing_member = pairs[i]
         self._play(best, rate, self._bone_limit(best, max(rate, self._rate)), self._contacts[pairs[i]],
-                   reached - self.seg, d)
+                   reached - self.seg, d, self._ahead_for(reached, d))
         self._handover.handed(self.seg + d, reached + d)
         self._own_speed = float(self._member_speed[pairs[i]])
         self._commit(pairs[i][0])
@@ -1005,17 +1008,22 @@ class DanceStream:
         return max(1.0, self._bone_cap / peak) if peak > 0.0 else np.inf
 
     def _play(self, window: np.ndarray, rate: float, limit: float = np.inf, contact: np.ndarray | None = None,
-              shift: float = 0.0, d: int = 0) -> None:
+              shift: float = 0.0, d: int = 0, ahead: tuple | None = None) -> None:
         """Start playing ``window`` (2 seg, P), the next movement and its continuation, at ``rate``
         (and the rate it takes over from the current movement) at most ``limit``: the ``seg + d``
         rows before it are those the current movement would have played next from row ``seg +
         shift`` (``d``: the rows its exemplar plays on to its own frame seg, handover.py).
         ``contact`` (2 seg, 3): its exemplar's foot contacts and lift
-        (:func:`models.networks.feet.member_contacts`; None: none known)."""
+        (:func:`models.networks.feet.member_contacts`; None: none known). ``ahead``: those rows,
+        contacts and lifts as :meth:`_read_ahead` read them on the frame before (None: read them now)."""
         n, e = self.seg + d, self.seg + d + len(window)  # the window's rows: n .. e
         if not self.codes_drawn:  # before the first movement there is only its first pose
             self._played[:n] = window[0]
             self._played_contact[:n] = contact[0] if contact is not None else 0.0
+        elif ahead is not None:  # read on the frame before (_read_ahead): the same rows
+            self._played[:n] = ahead[2]
+            self._played_contact[:n] = ahead[3]
+            lift = ahead[5]
         else:
             self._played[:n] = [warp_pose(self._played, shift + i) for i in range(n)]
             lift = (self._contact_at(shift + n)[2], self._contact_at(shift + n + 1)[2])
@@ -1034,6 +1042,30 @@ class DanceStream:
         """Exemplar frames the current movement has played by its frame ``j``: the rate moves
         linearly from ``_rate_from`` (frame 0) towards ``_rate`` (frame seg)."""
         return j * self._rate_from + (self._rate - self._rate_from) * j * (j - 1) / (2 * self.seg)
+
+    def _read_ahead(self) -> None:
+        """On the frame before a code step (after its own read): what the coming handover reads of
+        the playing movement, which no frame changes until then: the ``seg`` rows before the new
+        movement (from row ``reached - seg``: ``_play``'s), their contacts and the two lifts after
+        them, the motion's next two poses at ``reached`` (the matching's), and the stage's rows
+        (:meth:`Stage.read_ahead`). The code step then only takes them (:meth:`_ahead_for`); the
+        values are those it would read itself. Only for a handover at once (``d`` = 0)."""
+        reached = self._handover.base + self._advance(self.seg)
+        shift, n = reached - self.seg, self.seg
+        rows = np.array([warp_pose(self._played, shift + i) for i in range(n)])
+        contact = [self._contact_at(shift + i) for i in range(n)]
+        lift = (self._contact_at(shift + n)[2], self._contact_at(shift + n + 1)[2])
+        cont = np.stack([warp_pose(self._played, reached), warp_pose(self._played, reached + 1.0)])
+        self._stage.read_ahead(shift, n)
+        self._rows_ahead = (self.frame + 1, reached, rows, contact, cont, lift)
+
+    def _ahead_for(self, reached: float, d: int) -> tuple | None:
+        """:meth:`_read_ahead`'s reading (frame, reached, rows, contacts, next poses, lifts) when it
+        is this code step's, read at ``reached``, for a handover at once (``d`` 0); else None."""
+        ahead = self._rows_ahead
+        if ahead is None or d != 0 or ahead[0] != self.frame or ahead[1] != reached:
+            return None
+        return ahead
 
     def _commit(self, code: int) -> None:
         """Record ``code`` as played (``self._play`` has started its movement)."""
@@ -1199,6 +1231,8 @@ class DanceStream:
                     pose = self._feet.step(pose, 0.0, 0.0, 0.0)
                     self._feet_used = True
             out[i] = pose
+            if (t + 1) % self.seg == 0 and self.codes_drawn:  # the next frame is a code step
+                self._read_ahead()
             self.frame += 1
         if k == 0:
             return out

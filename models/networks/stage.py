@@ -204,6 +204,7 @@ class Stage:
         self._track[:] = 0.0
         self._prev: tuple[float, float, float] | None = None  # the track's value read last frame
         self._read = 0.0  # where it was read
+        self._ahead: tuple | None = None  # (at, rows, base) of the next handover, read ahead (read_ahead)
         self._homing = False
         self._home_w = 0.0
         # counts for measuring (benchmarks/studies/stage_travel.py): frames near an edge and those
@@ -226,13 +227,18 @@ class Stage:
                 ch, sh = math.cos(self.heading), math.sin(self.heading)
                 mx, mz = float(travel[self.seg, 0]), float(travel[self.seg, 1])
                 self.counts["inward_choices"] += (mx * ch + mz * sh) * near[0] + (-mx * sh + mz * ch) * near[1] >= -1e-6
+        ahead, self._ahead = self._ahead, None
         if first:
             tr[:s] = 0.0
             base = (0.0, 0.0, 0.0)
         else:
-            for i in range(s):
-                tr[i] = self._at(at + i)
-            base = self._at(at + s)
+            if ahead is not None and ahead[0] == at and len(ahead[1]) == s:  # read the frame before: the same rows
+                tr[:s] = ahead[1]
+                base = ahead[2]
+            else:
+                for i in range(s):
+                    tr[i] = self._at(at + i)
+                base = self._at(at + s)
             self._read -= at  # the last read, in the new rows
         c, sn = math.cos(base[2]), math.sin(base[2])
         e = s + 2 * self.seg  # the new movement's rows end; the rows after repeat its last
@@ -254,6 +260,13 @@ class Stage:
             tr[:, 0], tr[:, 1] = c * dx - sn * dz, sn * dx + c * dz
             tr[:, 2] -= p[2]
             self._prev = (0.0, 0.0, 0.0)
+
+    def read_ahead(self, at: float, lead: int) -> None:
+        """On the frame before a code step: the track's rows :meth:`handover` (``at``, ``lead``) will
+        read, read now (no frame writes the track before it), so the code step only copies them.
+        A handover at another row or lead reads its own."""
+        rows = [self._at(at + i) for i in range(lead)] if at >= 0.0 else []  # at >= 0: no row read is one written
+        self._ahead = (at, rows, self._at(at + lead)) if rows else None
 
     def _at(self, x: float) -> tuple[float, float, float]:
         """The track at fractional row ``x`` (linear between rows, as warp_pose reads the root)."""
