@@ -559,3 +559,43 @@ def joint_speed(window, n, parents, offsets):  # pragma: no cover - compiled
                 e += c * c
             total += math.sqrt(e)
     return total / (n * npt)
+
+
+# -- the stage's track at a handover (models/networks/stage.py, Stage.handover) --------------------
+
+
+@njit(cache=True, nogil=True)
+def place_travel(tr, s, rows, base0, base1, base2, c, sn, travel, carry, carried):  # pragma: no cover - compiled
+    """The stage track ``tr`` (R, 3) float64 from row ``s``: ``rows`` rows of the new movement's
+    ``travel`` (rows, 3; none: its rows all ``base``) turned by the base heading (``c``, ``sn`` its
+    cosine and sine) and carried on from ``base``; with ``carried``, the last movement's velocity
+    where they meet blended in (``carry`` (rows, 3)); the rows after repeat the last. Stage.handover's
+    NumPy arithmetic, element by element in float64 (the same values, bit for bit)."""
+    e = s + rows
+    for f in range(rows):
+        if travel.shape[0]:
+            tr[s + f, 0] = base0 + c * travel[f, 0] + sn * travel[f, 1]
+            tr[s + f, 1] = base1 - sn * travel[f, 0] + c * travel[f, 1]
+            tr[s + f, 2] = base2 + travel[f, 2]
+        else:
+            tr[s + f, 0], tr[s + f, 1], tr[s + f, 2] = base0, base1, base2
+    if carried:
+        d0 = base0 - tr[s - 1, 0] - (tr[s + 1, 0] - tr[s, 0])
+        d1 = base1 - tr[s - 1, 1] - (tr[s + 1, 1] - tr[s, 1])
+        d2 = base2 - tr[s - 1, 2] - (tr[s + 1, 2] - tr[s, 2])
+        for f in range(rows):
+            tr[s + f, 0] += carry[f, 0] * d0
+            tr[s + f, 1] += carry[f, 1] * d1
+            tr[s + f, 2] += carry[f, 2] * d2
+    for r in range(e, tr.shape[0]):
+        tr[r, 0], tr[r, 1], tr[r, 2] = tr[e - 1, 0], tr[e - 1, 1], tr[e - 1, 2]
+
+
+@njit(cache=True, nogil=True)
+def reorigin_track(tr, p0, p1, p2, c, sn):  # pragma: no cover - compiled
+    """The track ``tr`` (R, 3) float64 in place with (``p0``, ``p1``) its origin and ``p2`` its zero
+    heading (``c``, ``sn`` that heading's cosine and sine): Stage.handover's NumPy arithmetic, bit for bit."""
+    for r in range(tr.shape[0]):
+        dx, dz = tr[r, 0] - p0, tr[r, 1] - p1
+        tr[r, 0], tr[r, 1] = c * dx - sn * dz, sn * dx + c * dz
+        tr[r, 2] -= p2

@@ -38,6 +38,7 @@ import math
 import numpy as np
 
 from models.errors import ConfigError, short_repr
+from models.networks.dance_jit import place_travel, reorigin_track
 from models.timebase import FPS
 
 #: The stage a screen or a small stage suits (width x depth, metres), which ``performer
@@ -92,6 +93,8 @@ FACING_CONE: float = math.radians(35.0)
 HOME_SPEED: float = 0.6
 HOME_RAMP: float = 0.5
 HOME_DONE: float = 0.02
+#: :func:`~models.networks.dance_jit.place_travel`'s "no travel" (a movement in place).
+_NO_TRAVEL = np.zeros((0, 3))
 
 
 def parse_stage(value) -> tuple[float, float]:
@@ -241,24 +244,14 @@ class Stage:
                 base = self._at(at + s)
             self._read -= at  # the last read, in the new rows
         c, sn = math.cos(base[2]), math.sin(base[2])
-        e = s + 2 * self.seg  # the new movement's rows end; the rows after repeat its last
-        if travel is None:
-            tr[s:e] = base
-        else:  # Ry(base heading) applied to the exemplar's own-frame displacement
-            tr[s:e, 0] = base[0] + c * travel[:, 0] + sn * travel[:, 1]
-            tr[s:e, 1] = base[1] - sn * travel[:, 0] + c * travel[:, 1]
-            tr[s:e, 2] = base[2] + travel[:, 2]
-        if not first:  # the last movement's velocity where they meet, blended into the new one's
-            prev = tr[s - 1]  # the last movement's row at at + lead - 1
-            dv = [base[i] - prev[i] - (tr[s + 1, i] - tr[s, i]) for i in range(3)]
-            tr[s:e] += self._carry * dv
-        tr[e:] = tr[e - 1]
+        # rows s .. s + 2 seg: Ry(base heading) applied to the exemplar's own-frame displacement (or base
+        # in place), then, but for the first, the last movement's velocity where they meet blended into
+        # the new one's (from the last movement's row at at + lead - 1); the rows after repeat the last
+        place_travel(tr, s, 2 * self.seg, *base, c, sn,
+                     _NO_TRAVEL if travel is None else np.ascontiguousarray(travel, np.float64), self._carry, not first)
         if self._prev is not None and not first:  # keep the numbers small: the last read is the new origin
             p = self._at(self._read)
-            c, sn = math.cos(p[2]), math.sin(p[2])
-            dx, dz = tr[:, 0] - p[0], tr[:, 1] - p[1]
-            tr[:, 0], tr[:, 1] = c * dx - sn * dz, sn * dx + c * dz
-            tr[:, 2] -= p[2]
+            reorigin_track(tr, *p, math.cos(p[2]), math.sin(p[2]))
             self._prev = (0.0, 0.0, 0.0)
 
     def read_ahead(self, at: float, lead: int) -> None:
