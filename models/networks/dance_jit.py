@@ -513,6 +513,24 @@ def warp_pose(played, x):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def bone_rotations(window, f, parents, g):  # pragma: no cover - compiled
+    """Each bone's world rotation in frame ``f`` of poses ``window`` (F, P) float32 into ``g`` (J, 4)
+    float64: its quaternion renormalised, composed with its parent's (``parents``: bones first, each
+    after its parent, -1 the root). On float64 scalars, no array made per bone (joint_speed's FK)."""
+    for j in range(g.shape[0]):
+        c = 3 + 4 * j
+        qx, qy, qz, qw = np.float64(window[f, c]), np.float64(window[f, c + 1]), np.float64(window[f, c + 2]), \
+            np.float64(window[f, c + 3])
+        s = qx * qx + qy * qy + qz * qz + qw * qw
+        s = math.sqrt(s) if s > 1e-18 else 1.0
+        qx, qy, qz, qw = qx / s, qy / s, qz / s, qw / s
+        p = parents[j]
+        if p >= 0:
+            qx, qy, qz, qw = _qmul(g[p, 0], g[p, 1], g[p, 2], g[p, 3], qx, qy, qz, qw)
+        g[j, 0], g[j, 1], g[j, 2], g[j, 3] = qx, qy, qz, qw
+
+
+@njit(cache=True, nogil=True)
 def joint_speed(window, n, parents, offsets):  # pragma: no cover - compiled
     """Mean joint speed (m a frame) of the first ``n`` frames of pose ``window`` (F, P) float32
     by forward kinematics: ``parents`` (J + E,) int64 each point's parent (bones first, -1 the
@@ -525,17 +543,7 @@ def joint_speed(window, n, parents, offsets):  # pragma: no cover - compiled
     pos = np.zeros((n, npt, 3))
     g = np.zeros((nb, 4))
     for f in range(n):
-        for j in range(nb):
-            c = 3 + 4 * j
-            qx, qy, qz, qw = np.float64(window[f, c]), np.float64(window[f, c + 1]), np.float64(window[f, c + 2]), \
-                np.float64(window[f, c + 3])
-            s = qx * qx + qy * qy + qz * qz + qw * qw
-            s = math.sqrt(s) if s > 1e-18 else 1.0
-            qx, qy, qz, qw = qx / s, qy / s, qz / s, qw / s
-            p = parents[j]
-            if p >= 0:
-                qx, qy, qz, qw = _qmul(g[p, 0], g[p, 1], g[p, 2], g[p, 3], qx, qy, qz, qw)
-            g[j, 0], g[j, 1], g[j, 2], g[j, 3] = qx, qy, qz, qw
+        bone_rotations(window, f, parents, g)
         for i in range(npt):
             p = parents[i]
             if p < 0:
