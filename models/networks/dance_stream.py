@@ -797,37 +797,36 @@ class DanceStream:
     def _next_code(self) -> None:
         m, pred = self.model, self._predictor
         guided = bool(self._pstyle) and STYLE_GUIDANCE != 1.0
-        with single_thread_blas():
-            if self._embed_rows == self.seg - 1:  # its first seg - 1 frames were added as they came
-                token = pred.embed_last(self._embed_acc, self._hist[-1], self._last)
-            else:  # the stream's first token
-                token = pred.embed(self._hist.reshape(-1), self._last)
-            self._embed_rows = 0
-            prefix = self._prefix
-            if prefix is None or prefix.style != self._pstyle:  # the first step, or the style changed since
-                prefix = Prefix(pred, list(self._tokens), self._pstyle)
-            logits = pred.logits_after(prefix, token)
-            if guided:  # classifier-free guidance towards the requested style
-                auto = self._prefix_auto if self._prefix_auto is not None else Prefix(pred, list(self._tokens), 0)
-                base = pred.logits_after(auto, token)
-                logits = base + STYLE_GUIDANCE * (logits - base)
-            if self._chooser is not None:  # library_player chooser="match": the music's descriptors choose
-                logits = self._chooser(self._hist, self._tempo.period)
-            if self.style and STYLE_PRIOR != 0.0:  # codes the requested style's dancers use
-                logits = logits + STYLE_PRIOR * self._style_prior[:, self.style]
-            bias = self._energy_bias  # read once: the control thread may swap it
-            if bias is not None:  # livelier or calmer codes (set_energy)
-                logits = logits + bias
-            tilt = self._tempo_tilt()
-            if tilt != 0.0:  # livelier codes at a faster tempo, calmer at a slower one (TEMPO_ENERGY)
-                logits = logits + np.float32(tilt) * self._tempo_z
-            if REPEAT_PENALTY > 0.0 and len(self.codes_drawn) >= REPEAT_FREE:
-                logits = self._repeat_penalty(logits)
-            self._tokens.append(token)
-            # the next step's window but its newest token is known now: its layers run on the frames between
-            nxt = list(self._tokens)[-(pred.window - 1):]
-            self._prefix = Prefix(pred, nxt, self._pstyle)
-            self._prefix_auto = Prefix(pred, nxt, 0) if guided else None
+        if self._embed_rows == self.seg - 1:  # its first seg - 1 frames were added as they came
+            token = pred.embed_last(self._embed_acc, self._hist[-1], self._last)
+        else:  # the stream's first token
+            token = pred.embed(self._hist.reshape(-1), self._last)
+        self._embed_rows = 0
+        prefix = self._prefix
+        if prefix is None or prefix.style != self._pstyle:  # the first step, or the style changed since
+            prefix = Prefix(pred, list(self._tokens), self._pstyle)
+        auto = (self._prefix_auto if self._prefix_auto is not None else Prefix(pred, list(self._tokens), 0)) \
+            if guided else None
+        if prefix.done and (auto is None or auto.done) and self._chooser is None:  # the new rows: compiled, no BLAS
+            logits = self._logits(token, prefix, auto)
+        else:  # a window's pieces not computed ahead, or a library's chooser: BLAS products
+            with single_thread_blas():
+                logits = self._logits(token, prefix, auto)
+        if self.style and STYLE_PRIOR != 0.0:  # codes the requested style's dancers use
+            logits = logits + STYLE_PRIOR * self._style_prior[:, self.style]
+        bias = self._energy_bias  # read once: the control thread may swap it
+        if bias is not None:  # livelier or calmer codes (set_energy)
+            logits = logits + bias
+        tilt = self._tempo_tilt()
+        if tilt != 0.0:  # livelier codes at a faster tempo, calmer at a slower one (TEMPO_ENERGY)
+            logits = logits + np.float32(tilt) * self._tempo_z
+        if REPEAT_PENALTY > 0.0 and len(self.codes_drawn) >= REPEAT_FREE:
+            logits = self._repeat_penalty(logits)
+        self._tokens.append(token)
+        # the next step's window but its newest token is known now: its layers run on the frames between
+        nxt = list(self._tokens)[-(pred.window - 1):]
+        self._prefix = Prefix(pred, nxt, self._pstyle)
+        self._prefix_auto = Prefix(pred, nxt, 0) if guided else None
         draws = [m.sample(logits, self.rng) for _ in range(self._draws)]
         if int(self._counts[draws[0]]) == 0:  # no exemplars (members = 0): the decoder writes the movement
             self._codes.append(draws[0])  # the decoder reads the new code
@@ -836,7 +835,8 @@ class DanceStream:
             window = np.concatenate([segment, np.repeat(segment[-1:], self.seg, axis=0)])
             shift = self._handover.base + self._advance(self.seg) - self.seg  # the rows the last movement moved on
             self._stage.handover(shift, None, not self.codes_drawn)  # in place
-            self._play(window, 1.0, shift=shift, ahead=self._ahead_for(shift + self.seg, 0))  # its own pace (no contacts known)
+            ahead = self._ahead_for(shift + self.seg, 0)
+            self._play(window, 1.0, shift=shift, ahead=ahead)  # no continuation to play into: its own pace, no contacts
             self._handover.handed(self.seg, shift + self.seg)
             self.playing_member = None
             self._own_speed = 0.0
@@ -893,6 +893,18 @@ class DanceStream:
         self._commit(pairs[i][0])
         self._has_cont = True
 
+    def _logits(self, token: np.ndarray, prefix: Prefix, auto: Prefix | None) -> np.ndarray:
+        """The predictor's logits (K,) of the window ``prefix`` + ``token``, guided away from ``auto``'s
+        (the same window in "auto": classifier-free guidance; None: unguided), or a library's chooser's."""
+        pred = self._predictor
+        logits = pred.logits_after(prefix, token)
+        if auto is not None:  # classifier-free guidance towards the requested style
+            base = pred.logits_after(auto, token)
+            logits = base + STYLE_GUIDANCE * (logits - base)
+        if self._chooser is not None:  # library_player chooser="match": the music's descriptors choose
+            logits = self._chooser(self._hist, self._tempo.period)
+        return logits
+
     def _pairs(self, codes: list[int]) -> list[tuple[int, int]]:
         """(code, exemplar) of every exemplar of ``codes``."""
         return [(c, j) for c in codes for j in range(int(self._counts[c]))]
@@ -919,7 +931,8 @@ class DanceStream:
             own = [(c, j) for c, j in pairs if self._member_style[c, j] == tok]
             pairs = own or pairs
         if self._travels:  # near an edge: exemplars whose own travel heads inwards (stage.INWARDS)
-            keep = self._stage.inwards(np.array([self._travel[c, j, self.seg, :2] for c, j in pairs]))
+            keep = self._stage.inwards([(float(self._travel[c, j, self.seg, 0]), float(self._travel[c, j, self.seg, 1]))
+                                        for c, j in pairs])
             pairs = pairs if keep is None else [p for p, k in zip(pairs, keep) if k]
         tilt = self._member_tilt
         c, a = pairs[0] if pairs else (-1, 0)

@@ -342,18 +342,18 @@ class Stage:
         nz = min(max(1.0 - (self.z + hz) / mz, 0.0), 1.0) - min(max(1.0 - (hz - self.z) / mz, 0.0), 1.0)
         return None if nx == 0.0 and nz == 0.0 else (nx, nz)
 
-    def inwards(self, moves: np.ndarray) -> np.ndarray | None:
-        """Which candidate movements head inwards here: ``moves`` (n, 2) each one's own travel over a
-        movement (x, z m, in its own frame: ``member_travel[c, j, seg, :2]``) -> (n,) bool, True where
-        it (turned by the heading) moves no further towards a near edge; None where no edge is near,
-        :data:`INWARDS` is off, or none heads inwards (then any may play)."""
+    def inwards(self, moves) -> np.ndarray | None:
+        """Which candidate movements head inwards here: ``moves`` (n, 2; an array or (x, z) pairs) each
+        one's own travel over a movement (x, z m, in its own frame: ``member_travel[c, j, seg, :2]``) ->
+        (n,) bool, True where it (turned by the heading) moves no further towards a near edge; None where
+        no edge is near, :data:`INWARDS` is off, or none heads inwards (then any may play)."""
         n = self._near() if self.active and INWARDS and not self._homing else None
         if n is None:
             return None
         ch, sh = math.cos(self.heading), math.sin(self.heading)
-        wx, wz = moves[:, 0] * ch + moves[:, 1] * sh, -moves[:, 0] * sh + moves[:, 1] * ch
-        keep = wx * n[0] + wz * n[1] >= -1e-6  # along the edge counts (a micrometre of rounding)
-        return keep if keep.any() else None
+        keep = [(mx * ch + mz * sh) * n[0] + (-mx * sh + mz * ch) * n[1] >= -1e-6  # along the edge counts (a
+                for mx, mz in moves]  # micrometre of rounding); a few moves: Python floats, no NumPy call each
+        return np.array(keep) if any(keep) else None
 
     def _bound(self, wx: float, wz: float) -> tuple[float, float, float]:
         """(the step (wx, wz) with its part towards a near edge shrunk, the heading turn that
