@@ -8,7 +8,8 @@ tracker), the pose model's push (and, for a dance_vq model, the code step and it
 parts: the new row's pass, embedding, sampling, motion matching, the prefix pieces), the
 engine's block checks and the outputs' ``send``. Per-hop compute (the engine's own
 timer, as ``performer bench latency`` reports it) is also broken down by position in the
-8-frame code cycle. The timers wrap methods, so each call costs about 1 µs more than it
+8-frame code cycle, wall and the worker thread's CPU time, and the code step is timed in
+thread CPU time too. The timers wrap methods, so each call costs about 1 µs more than it
 would; the figures are for finding where the time goes, the budgets are checked by
 ``make bench``::
 
@@ -36,20 +37,20 @@ if str(REPO) not in sys.path:  # run as a script from anywhere
 import numpy as np  # noqa: E402
 
 
-def _timed(table: dict, label: str, fn):
+def _timed(table: dict, label: str, fn, clock=time.perf_counter):
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
-        t0 = time.perf_counter()
+        t0 = clock()
         try:
             return fn(*args, **kwargs)
         finally:
-            table[label].append(time.perf_counter() - t0)
+            table[label].append(clock() - t0)
     return wrapper
 
 
-def _wrap(table: dict, owner, name: str, label: str) -> None:
+def _wrap(table: dict, owner, name: str, label: str, clock=time.perf_counter) -> None:
     if hasattr(owner, name):
-        setattr(owner, name, _timed(table, label, getattr(owner, name)))
+        setattr(owner, name, _timed(table, label, getattr(owner, name), clock))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -99,7 +100,9 @@ def main(argv: list[str] | None = None) -> int:
         (steadiness.SteadinessTracker, "from_spectrum", "features: steadiness column"),
         (dance_stream.DanceStream, "_next_code", "dance_vq: code step"),
         (dance_stream.DanceStream, "_gate", "dance_vq: idle gate"),
-        (dance_numpy.NumpyPredictor, "embed", "dance_vq: code step: embedding"),
+        (dance_numpy.NumpyPredictor, "embed", "dance_vq: code step: embedding (whole: a stream's first)"),
+        (dance_numpy.NumpyPredictor, "embed_last", "dance_vq: code step: embedding (its newest frame)"),
+        (dance_stream.DanceStream, "_read_ahead", "dance_vq: the handover's rows read ahead (frame before)"),
         (dance_numpy.NumpyPredictor, "logits_after", "dance_vq: code step: new row + head"),
         (dance_vq.DanceVQ, "sample", "dance_vq: code step: sampling"),
         (dance_numpy.Prefix, "step", "dance_vq: prefix piece"),
@@ -111,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
         (WebSocketSink, "send", "outputs: WebSocket send"),
     ):
         _wrap(t, owner, name, label)
+    _wrap(t, dance_stream.DanceStream, "_next_code", "dance_vq: code step, thread CPU", time.thread_time)
     if hasattr(dance_stream, "match_exemplar"):  # (older trees: NumPy steps instead)
         dance_stream.match_exemplar = _timed(t, "dance_vq: code step: motion matching", dance_stream.match_exemplar)
     if args.guidance is not None:  # a script: the module's setting for this one run
@@ -142,12 +146,14 @@ def main(argv: list[str] | None = None) -> int:
     frames = int(args.seconds * 30)
     src = FileSource(audio, sr, name="audio", block_size=args.block)
     engine = Engine(src, pipe.extractor_factory, model, sinks,
-                    EngineConfig(threads=1, warmup_s=3.0, duration_s=args.seconds, stats_size=frames + 64))
+                    EngineConfig(threads=1, warmup_s=3.0, duration_s=args.seconds, stats_size=frames + 64,
+                                 runqueue_wait=True))  # the hop's worker CPU time too
     print(f"playing {args.seconds:.0f} s of {args.audio or 'the bundled clip'} in real time, style "
           f"{args.style or 'auto'}, STYLE_GUIDANCE {dance_stream.STYLE_GUIDANCE:g} ...", file=sys.stderr)
     engine.start()
     engine.wait()
     hop = np.asarray(engine.compute_ms.values(), float)
+    hop_cpu = np.asarray(engine.compute_cpu_ms.values(), float)
     engine.close()
     rx.close()
 
@@ -173,6 +179,10 @@ def main(argv: list[str] | None = None) -> int:
         for q, name in ((50, "p50"), (95, "p95"), (99, "p99")):
             print(f"| per-hop {name} ms | " + " | ".join(f"{np.percentile(hop[pos == k], q):.2f}" for k in range(8))
                   + " |")
+        if len(hop_cpu) == len(hop):  # the worker thread's CPU time of the hop (no wait for a CPU another process held)
+            for q, name in ((50, "p50"), (99, "p99")):
+                print(f"| per-hop CPU {name} ms | "
+                      + " | ".join(f"{np.percentile(hop_cpu[pos == k], q):.2f}" for k in range(8)) + " |")
     return 0
 
 

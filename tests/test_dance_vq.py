@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace as dataclasses_replace
 
 import numpy as np
@@ -531,6 +532,138 @@ def test_compiled_motion_matching_picks_and_bends_as_scipy_rotations_do():
             np.testing.assert_allclose(got, want, atol=2e-5)
             agree += 1
     assert agree > 150
+
+
+# The code step's kernels as they were before they made no array per bone and frame (their arithmetic,
+# the reference the allocation-free ones in models/networks/dance_jit.py must give bit for bit).
+def _qmul_arrays(a, b):  # pragma: no cover - compiled
+    ax, ay, az, aw = a[0], a[1], a[2], a[3]
+    bx, by, bz, bw = b[0], b[1], b[2], b[3]
+    return np.array([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz])
+
+
+def _qlog_arrays(q):  # pragma: no cover - compiled
+    x, y, z, w = q[0], q[1], q[2], q[3]
+    if w < 0:
+        x, y, z, w = -x, -y, -z, -w
+    s = math.sqrt(x * x + y * y + z * z)
+    k = 2.0 * math.atan2(s, w) / s if s > 1e-12 else 2.0
+    return np.array([k * x, k * y, k * z])
+
+
+def _qexp_arrays(r):  # pragma: no cover - compiled
+    a = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    k = math.sin(0.5 * a) / a if a > 1e-12 else 0.5
+    return np.array([k * r[0], k * r[1], k * r[2], math.cos(0.5 * a)])
+
+
+def _bend_arrays(w, out, cont, decay, vel_cap):  # pragma: no cover - compiled
+    """match_exemplar's per-bone bend of window ``w`` into ``out`` (its rows nd and on untouched)."""
+    nd = min(decay.shape[1], w.shape[0])
+    for c in range(3, w.shape[1], 4):
+        c0, c1 = cont[0, c:c + 4].astype(np.float64), cont[1, c:c + 4].astype(np.float64)
+        w0, w1 = w[0, c:c + 4].astype(np.float64), w[1, c:c + 4].astype(np.float64)
+        inv0 = np.array([-w0[0], -w0[1], -w0[2], w0[3]])
+        inv_c0 = np.array([-c0[0], -c0[1], -c0[2], c0[3]])
+        r0 = _qlog_arrays(_qmul_arrays(c0, inv0))
+        d1 = _qlog_arrays(_qmul_arrays(c1, inv_c0)) - _qlog_arrays(_qmul_arrays(w1, inv0))
+        norm = math.sqrt(d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2])
+        if norm > vel_cap:
+            d1 *= vel_cap / norm
+        for j in range(nd):
+            wj = w[j, c:c + 4].astype(np.float64)
+            q = _qmul_arrays(_qexp_arrays(decay[0, j] * r0 + decay[1, j] * d1), wj)
+            qn = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+            if q[0] * wj[0] + q[1] * wj[1] + q[2] * wj[2] + q[3] * wj[3] < 0:
+                qn = -qn
+            for k in range(4):
+                out[j, c + k] = q[k] / qn
+
+
+def _bone_rotations_arrays(window, f, parents, g):  # pragma: no cover - compiled
+    """joint_speed's bone rotations of frame ``f`` into ``g`` (J, 4), with an array per bone."""
+    q = np.zeros(4)
+    for j in range(g.shape[0]):
+        s = 0.0
+        for k in range(4):
+            q[k] = window[f, 3 + 4 * j + k]
+            s += q[k] * q[k]
+        s = math.sqrt(s) if s > 1e-18 else 1.0
+        for k in range(4):
+            q[k] /= s
+        p = parents[j]
+        g[j] = q.copy() if p < 0 else _qmul_arrays(g[p], q)
+
+
+def test_the_code_steps_kernels_give_their_array_arithmetic_bit_for_bit():
+    """match_exemplar's bend and joint_speed's bone rotations (bone_rotations) run on float64 scalars, no
+    array made per bone and frame (a quarter and a third of the time a call): the same values as the array code
+    they replaced (above), bit for bit, so no code step's movement moves (random windows, near and far
+    from the motion, capped and not; rotations through w = 0; a zero quaternion)."""
+    from numba import njit
+
+    import models.networks.dance_jit as dj
+    from models.networks.dance_stream import _unit, hermite_decay, sign_continuous
+    from models.rig.skeleton import POINT_PARENT_INDEX
+
+    for f in (_qmul_arrays, _qlog_arrays, _qexp_arrays):  # the reference kernels call each other by these names
+        globals()[f.__name__] = njit(getattr(f, "py_func", f))
+    bend, rotations = njit(_bend_arrays), njit(_bone_rotations_arrays)
+    rng = np.random.default_rng(3)
+    decay = hermite_decay(16)
+    for trial in range(300):
+        n, scale = int(rng.integers(1, 5)), float(rng.choice([0.01, 0.05, 0.5]))
+        cands = _unit(sign_continuous(np.cumsum(rng.normal(scale=scale, size=(n, 16, POSE_DIM)), 1).astype(np.float32)
+                                      + rng.normal(size=(n, 1, POSE_DIM)).astype(np.float32)))
+        cont = _unit(rng.normal(size=(2, POSE_DIM)).astype(np.float32))
+        cont[1] = cont[0] if trial % 7 == 0 else _unit(cont[0] + rng.normal(scale=scale, size=POSE_DIM).astype(np.float32))
+        cap = (0.4, 10.0, 0.01)[trial % 3]
+        i, got = dj.match_exemplar(cands, np.zeros((n, 8), np.float32), cont, decay, -1, 0.0, 8, cap, np.zeros(n))
+        w = cands[i].copy()
+        q = w[:, 3:].reshape(16, -1, 4)
+        q *= np.where((q[:1] * cont[0, 3:].reshape(-1, 4)).sum(-1, keepdims=True) < 0, -1.0, 1.0).astype(np.float32)
+        want = got.copy()
+        bend(w, want, cont, decay, cap)
+        dj._unit_rows(want)
+        np.testing.assert_array_equal(got[:, 3:], want[:, 3:])
+    parents = np.array(POINT_PARENT_INDEX, np.int64)
+    nb = (POSE_DIM - 3) // 4
+    for trial in range(200):
+        window = rng.normal(size=(16, POSE_DIM)).astype(np.float32)
+        window[3, 7:11] = 0.0 if trial % 5 == 0 else window[3, 7:11]
+        for f in (0, 3, 15):
+            got, want = np.zeros((nb, 4)), np.zeros((nb, 4))
+            dj.bone_rotations(window, f, parents, got)
+            rotations(window, f, parents, want)
+            assert got.tobytes() == want.tobytes()
+
+
+def test_a_token_embedded_a_frame_at_a_time_is_its_whole_embedding_bit_for_bit():
+    """The stream adds each coming token's frames to its audio MLP's first layer as they arrive
+    (NumpyPredictor.embed_frame on frames 1-7 of the cycle), so the code step adds the newest
+    frame only: the token is the whole embedding's, bit for bit (the sums in the same order), and
+    a stream that does it plays what one embedding each token at its code step plays."""
+    from models.networks.dance_numpy import NumpyPredictor
+
+    cfg = dataclasses_replace(TINY, seg=8)
+    torch.manual_seed(2)
+    pred = NumpyPredictor(DanceVQ(cfg).eval().predictor)
+    rng = np.random.default_rng(4)
+    for prev in (0, 5, cfg.codebook):
+        frames = (rng.normal(size=(cfg.seg, cfg.feature_dim)) * 3).astype(np.float32)
+        acc = pred.embed_start()
+        for r in range(cfg.seg - 1):
+            pred.embed_frame(acc, frames[r], r)
+        np.testing.assert_array_equal(pred.embed_last(acc, frames[-1], prev), pred.embed(frames.reshape(-1), prev))
+    m, x = tiny_model(), music(200, seed=3)
+    s = DanceStream(m, seed=1)
+    whole = DanceStream(m, seed=1)
+    whole._embed_rows = -1  # never summed ahead: every token embedded whole at its code step
+    for i in range(len(x)):  # one frame a push, as the engine pushes
+        np.testing.assert_array_equal(s.push(x[i:i + 1]), whole.push(x[i:i + 1]))
+        whole._embed_rows = -1
+    assert s.codes_drawn == whole.codes_drawn
 
 
 def test_inertialization_starts_on_the_motion_and_never_whips_a_bone():

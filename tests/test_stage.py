@@ -131,6 +131,92 @@ def test_stream_equals_the_whole_song_in_any_chunking_on_a_stage():
     assert np.abs(whole[:, [0, 2]]).max() > 0.1
 
 
+def test_a_handover_read_on_the_frame_before_is_what_it_reads_at_its_code_step(monkeypatch):
+    """On the frame before a code step the stream reads what the coming handover reads of the playing
+    movement (DanceStream._read_ahead: the rows before the new movement, their contacts and lifts,
+    the next two poses; Stage.read_ahead: the track's rows), so the code step only takes them: every
+    handover but the first does, and the poses are bit for bit those of a stream that reads them at
+    its code step (a turning walker on a 3x2 stage, facing free and the audience)."""
+    m = walking_model(speed=0.03, turn=0.03, sway=0.3)
+    x = music(400)
+    taken = {"stream": 0, "stage": 0}
+    ahead_for, handover = DanceStream._ahead_for, Stage.handover
+
+    def counted(self, reached, d):
+        got = ahead_for(self, reached, d)
+        taken["stream"] += got is not None
+        return got
+
+    def stage_counted(self, at, travel, first, lead=None):
+        taken["stage"] += self._ahead is not None and not first
+        return handover(self, at, travel, first, lead)
+
+    for facing in ("free", "audience"):
+        monkeypatch.setattr(DanceStream, "_ahead_for", counted)
+        monkeypatch.setattr(Stage, "handover", stage_counted)
+        taken.update(stream=0, stage=0)
+        s = DanceStream(m, seed=4, stage="3x2", facing=facing)
+        got = np.concatenate([s.push(x[i:i + 1]) for i in range(len(x))])
+        steps = len(s.codes_drawn)
+        assert taken["stream"] == 2 * (steps - 1) and taken["stage"] == steps - 1  # _ahead_for: twice a step
+        monkeypatch.setattr(DanceStream, "_read_ahead", lambda self: None)  # each handover reads its own rows
+        monkeypatch.setattr(Stage, "handover", handover)
+        own = DanceStream(m, seed=4, stage="3x2", facing=facing)
+        np.testing.assert_array_equal(got, np.concatenate([own.push(x[i:i + 1]) for i in range(len(x))]))
+        monkeypatch.undo()
+    assert np.abs(got[:, [0, 2]]).max() > 0.1
+
+
+def _handover_track_numpy(tr, s, seg, base, travel, carry, first, origin):
+    """Stage.handover's track arithmetic as it was in NumPy (the reference of its kernels)."""
+    c, sn = math.cos(base[2]), math.sin(base[2])
+    e = s + 2 * seg
+    if travel is None:
+        tr[s:e] = base
+    else:
+        tr[s:e, 0] = base[0] + c * travel[:, 0] + sn * travel[:, 1]
+        tr[s:e, 1] = base[1] - sn * travel[:, 0] + c * travel[:, 1]
+        tr[s:e, 2] = base[2] + travel[:, 2]
+    if not first:
+        prev = tr[s - 1]
+        dv = [base[i] - prev[i] - (tr[s + 1, i] - tr[s, i]) for i in range(3)]
+        tr[s:e] += carry * dv
+    tr[e:] = tr[e - 1]
+    if origin is not None:
+        p = origin
+        c, sn = math.cos(p[2]), math.sin(p[2])
+        dx, dz = tr[:, 0] - p[0], tr[:, 1] - p[1]
+        tr[:, 0], tr[:, 1] = c * dx - sn * dz, sn * dx + c * dz
+        tr[:, 2] -= p[2]
+
+
+def test_the_handovers_track_kernels_give_the_numpy_arithmetic_bit_for_bit():
+    """Stage.handover places the new movement's travel on the track and moves its origin in two
+    compiled calls (models/networks/dance_jit.py: place_travel, reorigin_track) instead of about 25
+    NumPy calls on a few rows: the same float64 values, bit for bit (random tracks, travels and
+    carries; in place and travelling; the first movement and the later ones)."""
+    from models.networks.dance_jit import place_travel, reorigin_track
+
+    rng = np.random.default_rng(7)
+    seg = 8
+    carry = Stage(seg, "3x2", "free")._carry
+    for trial in range(300):
+        tr = rng.normal(size=(4 * seg, 3)) * rng.choice([0.01, 1.0, 30.0])
+        s = int(rng.integers(seg, 2 * seg + 1))
+        base = tuple(float(v) for v in rng.normal(size=3) * 2)
+        travel = None if trial % 5 == 0 else np.cumsum(rng.normal(scale=0.02, size=(2 * seg, 3)), axis=0)
+        first = trial % 7 == 0
+        origin = None if first or trial % 3 == 0 else tuple(float(v) for v in rng.normal(size=3))
+        want = tr.copy()
+        _handover_track_numpy(want, s, seg, base, travel, carry, first, origin)
+        got = tr.copy()
+        place_travel(got, s, 2 * seg, *base, math.cos(base[2]), math.sin(base[2]),
+                     np.zeros((0, 3)) if travel is None else travel, carry, not first)
+        if origin is not None:
+            reorigin_track(got, *origin, math.cos(origin[2]), math.sin(origin[2]))
+        assert got.tobytes() == want.tobytes()
+
+
 def test_the_idle_stands_still_and_home_walks_back_to_the_centre():
     m = walking_model(speed=0.02, turn=0.0)
     s = DanceStream(m, seed=0, stage="6x5")

@@ -4,7 +4,8 @@ Four performers of the shipped default on their own spots of the 3x2 stage (as
 ``performer bench ensemble`` and ``performer run --performer`` place them; code steps
 staggered 0, 2, 4, 6; ``--stage 0``: all in place, the stage's part off), fed the bundled
 clip's features one frame at a time, unpaced, in one thread; the thread's CPU time of each
-frame's pushes (all lanes) is printed first. Each part is timed per call (``time.perf_counter_ns`` around the method: about
+frame's pushes (all lanes) is printed first, then each code step's thread CPU time and the
+pushes' by frame index mod 8 (with 4 lanes the code steps fall on the even ones). Each part is timed per call (``time.perf_counter_ns`` around the method: about
 0.3 µs added to each); printed: calls, median and p99 µs, and µs per frame summed over the
 four lanes (``--lanes``). Then ``Stage.step`` and ``Stage.handover`` alone on a synthetic
 track (no other work between calls: their cost with warm caches).
@@ -69,6 +70,17 @@ def main(argv: list[str] | None = None) -> int:
 
         setattr(owner, name, timed)
 
+    code_cpu: list[float] = []  # each code step's thread CPU time (µs), any lane
+    next_code = ds.DanceStream._next_code
+
+    def code_step(self):
+        c0 = time.thread_time_ns()
+        try:
+            return next_code(self)
+        finally:
+            code_cpu.append((time.thread_time_ns() - c0) / 1e3)
+
+    ds.DanceStream._next_code = code_step
     for owner, name in ((ds.DanceStream, "push"), (ds.DanceStream, "_next_code"), (ds.DanceStream, "_warped"),
                         (ds.DanceStream, "_contact_at"), (ds.DanceStream, "_play"), (stage.SpotStage, "step"),
                         (stage.Stage, "handover"), (stage.Stage, "inwards"), (feet.FeetLock, "step")):
@@ -89,6 +101,7 @@ def main(argv: list[str] | None = None) -> int:
         if lead is not None:
             m.push(lead)
     times.clear()
+    code_cpu.clear()
     lanes_cpu = np.zeros(len(feats))  # the thread's CPU time of each frame's pushes, all lanes (ms)
     for t in range(len(feats)):
         c0 = time.thread_time_ns()
@@ -98,6 +111,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"code: {tree}; {args.lanes} performers on their spots of the stage {args.stage}, {len(feats)} frames "
           f"each, unpaced; all lanes' pushes a frame, thread CPU ms: p50 {np.median(lanes_cpu):.3f}, "
           f"p99 {np.percentile(lanes_cpu, 99):.3f}")
+    print(f"the code step (any lane), thread CPU µs: p50 {np.median(code_cpu):.0f}, p99 {np.percentile(code_cpu, 99):.0f} "
+          f"({len(code_cpu)} steps)")
+    pos = np.arange(len(feats)) % 8  # lane k's code steps fall where pos == 8 - 8k/lanes (mod 8)
+    print("all lanes' pushes a frame by frame index mod 8, thread CPU ms p50: "
+          + " ".join(f"{np.median(lanes_cpu[pos == k]):.2f}" for k in range(8))
+          + "; p99: " + " ".join(f"{np.percentile(lanes_cpu[pos == k], 99):.2f}" for k in range(8)))
     print("| part | calls | p50 µs | p99 µs | µs a frame, all lanes |")
     print("|---|---:|---:|---:|---:|")
     for label, v in sorted(times.items(), key=lambda kv: -sum(kv[1])):

@@ -115,33 +115,30 @@ def _unit_rows(p):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _qmul(a, b):  # pragma: no cover - compiled
-    """Quaternion product a b, x y z w order (float64 (4,))."""
-    ax, ay, az, aw = a[0], a[1], a[2], a[3]
-    bx, by, bz, bw = b[0], b[1], b[2], b[3]
-    return np.array([aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw,
-                     aw * bw - ax * bx - ay * by - az * bz])
+def _qmul(ax, ay, az, aw, bx, by, bz, bw):  # pragma: no cover - compiled
+    """Quaternion product a b, x y z w order, of float64 components; a tuple (no array made)."""
+    return (aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz)
 
 
 @njit(cache=True, nogil=True)
-def _qlog(q):  # pragma: no cover - compiled
-    """Rotation vector (3,) (axis times angle, radians) of unit quaternion q (x y z w), the short way."""
-    x, y, z, w = q[0], q[1], q[2], q[3]
+def _qlog(x, y, z, w):  # pragma: no cover - compiled
+    """Rotation vector (axis times angle, radians; a tuple) of unit quaternion (x y z w), the short way."""
     if w < 0:
         x, y, z, w = -x, -y, -z, -w
     s = math.sqrt(x * x + y * y + z * z)
     k = 2.0 * math.atan2(s, w) / s if s > 1e-12 else 2.0
-    return np.array([k * x, k * y, k * z])
+    return k * x, k * y, k * z
 
 
 @njit(cache=True, nogil=True)
-def _qexp(r):  # pragma: no cover - compiled
-    """Unit quaternion (x y z w) of rotation vector r (3,), radians."""
-    a = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+def _qexp(rx, ry, rz):  # pragma: no cover - compiled
+    """Unit quaternion (x y z w; a tuple) of rotation vector (rx, ry, rz), radians."""
+    a = math.sqrt(rx * rx + ry * ry + rz * rz)
     k = math.sin(0.5 * a) / a if a > 1e-12 else 0.5
-    return np.array([k * r[0], k * r[1], k * r[2], math.cos(0.5 * a)])
+    return k * rx, k * ry, k * rz, math.cos(0.5 * a)
 
 
 @njit(cache=True, nogil=True)
@@ -200,26 +197,33 @@ def match_exemplar(cands, dips, cont, decay, beat_frame, beat_bonus, seg, vel_ca
         d1 = (cont[1, c] - cont[0, c]) - (w[1, c] - w[0, c])
         for j in range(nd):
             out[j, c] += decay[0, j] * d0 + decay[1, j] * d1
-    for c in range(3, p, 4):  # each bone
-        c0 = cont[0, c:c + 4].astype(np.float64)
-        c1 = cont[1, c:c + 4].astype(np.float64)
-        w0 = w[0, c:c + 4].astype(np.float64)
-        w1 = w[1, c:c + 4].astype(np.float64)
-        inv0 = np.array([-w0[0], -w0[1], -w0[2], w0[3]])
-        inv_c0 = np.array([-c0[0], -c0[1], -c0[2], c0[3]])
-        r0 = _qlog(_qmul(c0, inv0))
-        d1 = _qlog(_qmul(c1, inv_c0)) - _qlog(_qmul(w1, inv0))
-        norm = math.sqrt(d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2])
+    for c in range(3, p, 4):  # each bone, in float64 scalars (no array made per bone or frame)
+        c0x, c0y, c0z, c0w = np.float64(cont[0, c]), np.float64(cont[0, c + 1]), np.float64(cont[0, c + 2]), \
+            np.float64(cont[0, c + 3])
+        c1x, c1y, c1z, c1w = np.float64(cont[1, c]), np.float64(cont[1, c + 1]), np.float64(cont[1, c + 2]), \
+            np.float64(cont[1, c + 3])
+        w0x, w0y, w0z, w0w = np.float64(w[0, c]), np.float64(w[0, c + 1]), np.float64(w[0, c + 2]), \
+            np.float64(w[0, c + 3])
+        w1x, w1y, w1z, w1w = np.float64(w[1, c]), np.float64(w[1, c + 1]), np.float64(w[1, c + 2]), \
+            np.float64(w[1, c + 3])
+        r0x, r0y, r0z = _qlog(*_qmul(c0x, c0y, c0z, c0w, -w0x, -w0y, -w0z, w0w))
+        ax, ay, az = _qlog(*_qmul(c1x, c1y, c1z, c1w, -c0x, -c0y, -c0z, c0w))
+        bx, by, bz = _qlog(*_qmul(w1x, w1y, w1z, w1w, -w0x, -w0y, -w0z, w0w))
+        d1x, d1y, d1z = ax - bx, ay - by, az - bz
+        norm = math.sqrt(d1x * d1x + d1y * d1y + d1z * d1z)
         if norm > vel_cap:
-            d1 *= vel_cap / norm
+            cap = vel_cap / norm
+            d1x, d1y, d1z = d1x * cap, d1y * cap, d1z * cap
         for j in range(nd):
-            wj = w[j, c:c + 4].astype(np.float64)
-            q = _qmul(_qexp(decay[0, j] * r0 + decay[1, j] * d1), wj)
-            qn = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-            if q[0] * wj[0] + q[1] * wj[1] + q[2] * wj[2] + q[3] * wj[3] < 0:  # keep the exemplar's signs
+            e0, e1 = np.float64(decay[0, j]), np.float64(decay[1, j])
+            wx, wy, wz, ww = np.float64(w[j, c]), np.float64(w[j, c + 1]), np.float64(w[j, c + 2]), \
+                np.float64(w[j, c + 3])
+            ex, ey, ez, ew = _qexp(e0 * r0x + e1 * d1x, e0 * r0y + e1 * d1y, e0 * r0z + e1 * d1z)
+            qx, qy, qz, qw = _qmul(ex, ey, ez, ew, wx, wy, wz, ww)
+            qn = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
+            if qx * wx + qy * wy + qz * wz + qw * ww < 0:  # keep the exemplar's signs
                 qn = -qn
-            for k in range(4):
-                out[j, c + k] = q[k] / qn
+            out[j, c], out[j, c + 1], out[j, c + 2], out[j, c + 3] = qx / qn, qy / qn, qz / qn, qw / qn
     _unit_rows(out)
     return best, out
 
@@ -228,7 +232,32 @@ def match_exemplar(cands, dips, cont, decay, beat_frame, beat_bonus, seg, vel_ca
 def embed_token(audio_row, w_a1, b_a1, w_a2, b_a2, code_row):  # pragma: no cover - compiled
     """A token's input (d,): the audio MLP (GELU) of its standardised frames ``audio_row``
     (seg * D,) plus ``code_row`` (d,), the previous code's embedding."""
-    u = _vec_mat(audio_row, w_a1, b_a1)
+    return _embed_out(_vec_mat(audio_row, w_a1, b_a1), w_a2, b_a2, code_row)
+
+
+@njit(cache=True, nogil=True)
+def add_rows(acc, x, w, lo):  # pragma: no cover - compiled
+    """In place: ``acc`` (k,) += ``x`` (n,) @ ``w[lo:lo + n]`` (k,), row by row in order: with ``acc``
+    started at the bias, ``_vec_mat``'s sums for rows ``lo..lo + n - 1`` of its input, so a token's
+    first layer can be summed a frame at a time, bit for bit the same (:func:`embed_finish`)."""
+    for i in range(x.shape[0]):
+        xi = x[i]
+        for j in range(w.shape[1]):
+            acc[j] += xi * w[lo + i, j]
+
+
+@njit(cache=True, nogil=True)
+def embed_finish(acc, last, lo, w_a1, w_a2, b_a2, code_row):  # pragma: no cover - compiled
+    """:func:`embed_token` of a token whose first layer ``acc`` (hidden,) holds its bias plus every
+    input but the ``last`` ones (:func:`add_rows`), those starting at input ``lo``: the same values.
+    ``acc`` is used up (written in place)."""
+    add_rows(acc, last, w_a1, lo)
+    return _embed_out(acc, w_a2, b_a2, code_row)
+
+
+@njit(cache=True, nogil=True)
+def _embed_out(u, w_a2, b_a2, code_row):  # pragma: no cover - compiled
+    """The audio MLP's GELU (in place on its first layer ``u``) and second layer, plus ``code_row``."""
     for i in range(u.shape[0]):
         u[i] = np.float32(0.5 * u[i] * (1.0 + math.erf(u[i] * _SQRT_HALF)))
     out = _vec_mat(u, w_a2, b_a2)
@@ -484,6 +513,24 @@ def warp_pose(played, x):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def bone_rotations(window, f, parents, g):  # pragma: no cover - compiled
+    """Each bone's world rotation in frame ``f`` of poses ``window`` (F, P) float32 into ``g`` (J, 4)
+    float64: its quaternion renormalised, composed with its parent's (``parents``: bones first, each
+    after its parent, -1 the root). On float64 scalars, no array made per bone (joint_speed's FK)."""
+    for j in range(g.shape[0]):
+        c = 3 + 4 * j
+        qx, qy, qz, qw = np.float64(window[f, c]), np.float64(window[f, c + 1]), np.float64(window[f, c + 2]), \
+            np.float64(window[f, c + 3])
+        s = qx * qx + qy * qy + qz * qz + qw * qw
+        s = math.sqrt(s) if s > 1e-18 else 1.0
+        qx, qy, qz, qw = qx / s, qy / s, qz / s, qw / s
+        p = parents[j]
+        if p >= 0:
+            qx, qy, qz, qw = _qmul(g[p, 0], g[p, 1], g[p, 2], g[p, 3], qx, qy, qz, qw)
+        g[j, 0], g[j, 1], g[j, 2], g[j, 3] = qx, qy, qz, qw
+
+
+@njit(cache=True, nogil=True)
 def joint_speed(window, n, parents, offsets):  # pragma: no cover - compiled
     """Mean joint speed (m a frame) of the first ``n`` frames of pose ``window`` (F, P) float32
     by forward kinematics: ``parents`` (J + E,) int64 each point's parent (bones first, -1 the
@@ -495,18 +542,8 @@ def joint_speed(window, n, parents, offsets):  # pragma: no cover - compiled
     nb = (window.shape[1] - 3) // 4
     pos = np.zeros((n, npt, 3))
     g = np.zeros((nb, 4))
-    q = np.zeros(4)
     for f in range(n):
-        for j in range(nb):
-            s = 0.0
-            for k in range(4):
-                q[k] = window[f, 3 + 4 * j + k]
-                s += q[k] * q[k]
-            s = math.sqrt(s) if s > 1e-18 else 1.0
-            for k in range(4):
-                q[k] /= s
-            p = parents[j]
-            g[j] = q.copy() if p < 0 else _qmul(g[p], q)
+        bone_rotations(window, f, parents, g)
         for i in range(npt):
             p = parents[i]
             if p < 0:
@@ -530,3 +567,43 @@ def joint_speed(window, n, parents, offsets):  # pragma: no cover - compiled
                 e += c * c
             total += math.sqrt(e)
     return total / (n * npt)
+
+
+# -- the stage's track at a handover (models/networks/stage.py, Stage.handover) --------------------
+
+
+@njit(cache=True, nogil=True)
+def place_travel(tr, s, rows, base0, base1, base2, c, sn, travel, carry, carried):  # pragma: no cover - compiled
+    """The stage track ``tr`` (R, 3) float64 from row ``s``: ``rows`` rows of the new movement's
+    ``travel`` (rows, 3; none: its rows all ``base``) turned by the base heading (``c``, ``sn`` its
+    cosine and sine) and carried on from ``base``; with ``carried``, the last movement's velocity
+    where they meet blended in (``carry`` (rows, 3)); the rows after repeat the last. Stage.handover's
+    NumPy arithmetic, element by element in float64 (the same values, bit for bit)."""
+    e = s + rows
+    for f in range(rows):
+        if travel.shape[0]:
+            tr[s + f, 0] = base0 + c * travel[f, 0] + sn * travel[f, 1]
+            tr[s + f, 1] = base1 - sn * travel[f, 0] + c * travel[f, 1]
+            tr[s + f, 2] = base2 + travel[f, 2]
+        else:
+            tr[s + f, 0], tr[s + f, 1], tr[s + f, 2] = base0, base1, base2
+    if carried:
+        d0 = base0 - tr[s - 1, 0] - (tr[s + 1, 0] - tr[s, 0])
+        d1 = base1 - tr[s - 1, 1] - (tr[s + 1, 1] - tr[s, 1])
+        d2 = base2 - tr[s - 1, 2] - (tr[s + 1, 2] - tr[s, 2])
+        for f in range(rows):
+            tr[s + f, 0] += carry[f, 0] * d0
+            tr[s + f, 1] += carry[f, 1] * d1
+            tr[s + f, 2] += carry[f, 2] * d2
+    for r in range(e, tr.shape[0]):
+        tr[r, 0], tr[r, 1], tr[r, 2] = tr[e - 1, 0], tr[e - 1, 1], tr[e - 1, 2]
+
+
+@njit(cache=True, nogil=True)
+def reorigin_track(tr, p0, p1, p2, c, sn):  # pragma: no cover - compiled
+    """The track ``tr`` (R, 3) float64 in place with (``p0``, ``p1``) its origin and ``p2`` its zero
+    heading (``c``, ``sn`` that heading's cosine and sine): Stage.handover's NumPy arithmetic, bit for bit."""
+    for r in range(tr.shape[0]):
+        dx, dz = tr[r, 0] - p0, tr[r, 1] - p1
+        tr[r, 0], tr[r, 1] = c * dx - sn * dz, sn * dx + c * dz
+        tr[r, 2] -= p2

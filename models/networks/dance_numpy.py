@@ -44,7 +44,7 @@ from collections.abc import Iterator
 import numpy as np
 from scipy.special import erf
 
-from models.networks.dance_jit import embed_token, gelu_bias, head, layer_norm_rows, row_layer
+from models.networks.dance_jit import add_rows, embed_finish, embed_token, gelu_bias, head, layer_norm_rows, row_layer
 
 _SQRT_HALF = np.float32(np.sqrt(0.5))
 _BLAS = None  # threadpoolctl's controller of the BLAS libraries, made on first use (about 2 ms)
@@ -271,6 +271,20 @@ class NumpyPredictor:
         """One token's input (d,): audio MLP of its standardised frames (seg * D,) + the previous code's embedding."""
         a = np.ascontiguousarray(audio_row, np.float32)
         return embed_token(a, self.w_a1, self.b_a1, self.w_a2, self.b_a2, self.code[prev])  # one compiled call
+
+    def embed_start(self) -> np.ndarray:
+        """A token's first layer before any of its frames (its bias, a copy): :meth:`embed_frame` adds
+        its frames one by one as they arrive, :meth:`embed_last` the newest and finishes the token."""
+        return self.b_a1.copy()
+
+    def embed_frame(self, acc: np.ndarray, frame: np.ndarray, r: int) -> None:
+        """Add the token's standardised frame ``r`` (D,) to its first layer ``acc``, in place (frames in order)."""
+        add_rows(acc, frame, self.w_a1, r * len(frame))
+
+    def embed_last(self, acc: np.ndarray, frame: np.ndarray, prev: int) -> np.ndarray:
+        """:meth:`embed` of the token whose first ``seg - 1`` frames ``acc`` holds (:meth:`embed_frame`)
+        and whose last is ``frame`` (D,): the same values, bit for bit; ``acc`` is used up."""
+        return embed_finish(acc, frame, len(self.w_a1) - len(frame), self.w_a1, self.w_a2, self.b_a2, self.code[prev])
 
     def logits(self, tokens: np.ndarray, style: int) -> np.ndarray:
         """Logits (K,) of the next code: ``tokens`` (n, d) from :meth:`embed`, n <= window_codes."""

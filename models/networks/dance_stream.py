@@ -601,6 +601,9 @@ class DanceStream:
         self.frame = 0
         self.nonfinite_frames = 0
         self._hist = np.zeros((self.seg, self._fd), np.float32)
+        # the coming token's audio MLP first layer, summed a frame at a time (its bias + _embed_rows frames)
+        self._embed_acc = self._predictor.embed_start()
+        self._embed_rows = 0
         self._tokens: deque[np.ndarray] = deque(maxlen=c.window_codes)  # embedded (audio + previous code)
         self._prefix: Prefix | None = None  # the next code step's window but its last token, computed ahead
         self._prefix_auto: Prefix | None = None  # the same with the "auto" style, while a style is guided
@@ -630,6 +633,7 @@ class DanceStream:
         self._played_contact = np.zeros((4 * self.seg, 3), np.float32)  # each foot's contact and the lift, as _played
         self._handover.reset()
         self._at = float(self.seg)  # where in _played the last frame was read
+        self._rows_ahead: tuple | None = None  # what the next handover reads of the playing movement (_read_ahead)
         if self._feet is not None:
             self._feet.reset()
         self._feet_used = False  # the feet part has stepped since the reset (FEET_IN_PLACE)
@@ -793,33 +797,36 @@ class DanceStream:
     def _next_code(self) -> None:
         m, pred = self.model, self._predictor
         guided = bool(self._pstyle) and STYLE_GUIDANCE != 1.0
-        with single_thread_blas():
+        if self._embed_rows == self.seg - 1:  # its first seg - 1 frames were added as they came
+            token = pred.embed_last(self._embed_acc, self._hist[-1], self._last)
+        else:  # the stream's first token
             token = pred.embed(self._hist.reshape(-1), self._last)
-            prefix = self._prefix
-            if prefix is None or prefix.style != self._pstyle:  # the first step, or the style changed since
-                prefix = Prefix(pred, list(self._tokens), self._pstyle)
-            logits = pred.logits_after(prefix, token)
-            if guided:  # classifier-free guidance towards the requested style
-                auto = self._prefix_auto if self._prefix_auto is not None else Prefix(pred, list(self._tokens), 0)
-                base = pred.logits_after(auto, token)
-                logits = base + STYLE_GUIDANCE * (logits - base)
-            if self._chooser is not None:  # library_player chooser="match": the music's descriptors choose
-                logits = self._chooser(self._hist, self._tempo.period)
-            if self.style and STYLE_PRIOR != 0.0:  # codes the requested style's dancers use
-                logits = logits + STYLE_PRIOR * self._style_prior[:, self.style]
-            bias = self._energy_bias  # read once: the control thread may swap it
-            if bias is not None:  # livelier or calmer codes (set_energy)
-                logits = logits + bias
-            tilt = self._tempo_tilt()
-            if tilt != 0.0:  # livelier codes at a faster tempo, calmer at a slower one (TEMPO_ENERGY)
-                logits = logits + np.float32(tilt) * self._tempo_z
-            if REPEAT_PENALTY > 0.0 and len(self.codes_drawn) >= REPEAT_FREE:
-                logits = self._repeat_penalty(logits)
-            self._tokens.append(token)
-            # the next step's window but its newest token is known now: its layers run on the frames between
-            nxt = list(self._tokens)[-(pred.window - 1):]
-            self._prefix = Prefix(pred, nxt, self._pstyle)
-            self._prefix_auto = Prefix(pred, nxt, 0) if guided else None
+        self._embed_rows = 0
+        prefix = self._prefix
+        if prefix is None or prefix.style != self._pstyle:  # the first step, or the style changed since
+            prefix = Prefix(pred, list(self._tokens), self._pstyle)
+        auto = (self._prefix_auto if self._prefix_auto is not None else Prefix(pred, list(self._tokens), 0)) \
+            if guided else None
+        if prefix.done and (auto is None or auto.done) and self._chooser is None:  # the new rows: compiled, no BLAS
+            logits = self._logits(token, prefix, auto)
+        else:  # a window's pieces not computed ahead, or a library's chooser: BLAS products
+            with single_thread_blas():
+                logits = self._logits(token, prefix, auto)
+        if self.style and STYLE_PRIOR != 0.0:  # codes the requested style's dancers use
+            logits = logits + STYLE_PRIOR * self._style_prior[:, self.style]
+        bias = self._energy_bias  # read once: the control thread may swap it
+        if bias is not None:  # livelier or calmer codes (set_energy)
+            logits = logits + bias
+        tilt = self._tempo_tilt()
+        if tilt != 0.0:  # livelier codes at a faster tempo, calmer at a slower one (TEMPO_ENERGY)
+            logits = logits + np.float32(tilt) * self._tempo_z
+        if REPEAT_PENALTY > 0.0 and len(self.codes_drawn) >= REPEAT_FREE:
+            logits = self._repeat_penalty(logits)
+        self._tokens.append(token)
+        # the next step's window but its newest token is known now: its layers run on the frames between
+        nxt = list(self._tokens)[-(pred.window - 1):]
+        self._prefix = Prefix(pred, nxt, self._pstyle)
+        self._prefix_auto = Prefix(pred, nxt, 0) if guided else None
         draws = [m.sample(logits, self.rng) for _ in range(self._draws)]
         if int(self._counts[draws[0]]) == 0:  # no exemplars (members = 0): the decoder writes the movement
             self._codes.append(draws[0])  # the decoder reads the new code
@@ -828,7 +835,8 @@ class DanceStream:
             window = np.concatenate([segment, np.repeat(segment[-1:], self.seg, axis=0)])
             shift = self._handover.base + self._advance(self.seg) - self.seg  # the rows the last movement moved on
             self._stage.handover(shift, None, not self.codes_drawn)  # in place
-            self._play(window, 1.0, shift=shift)  # no continuation to play into: its own pace (no contacts known)
+            ahead = self._ahead_for(shift + self.seg, 0)
+            self._play(window, 1.0, shift=shift, ahead=ahead)  # no continuation to play into: its own pace, no contacts
             self._handover.handed(self.seg, shift + self.seg)
             self.playing_member = None
             self._own_speed = 0.0
@@ -861,7 +869,9 @@ class DanceStream:
             beat = self._next_beat(self._rate_for(*c0, asked), d)
             frame, clarity = beat if beat is not None else (-1, 0.0)
             at = reached + d  # where the playing movement hands over
-            cont = np.stack([warp_pose(self._played, at), warp_pose(self._played, at + 1.0)])
+            ahead = self._ahead_for(reached, d)
+            cont = ahead[4] if ahead is not None else np.stack([warp_pose(self._played, at),
+                                                                warp_pose(self._played, at + 1.0)])
             for k, use in enumerate(tries):
                 if k:
                     pairs, cands, dips, z = self._candidates(self._pairs(use) if use else self._nearest(cont[0]))
@@ -877,11 +887,23 @@ class DanceStream:
         self._stage.handover(reached - self.seg, self._travel[pairs[i]], not self.codes_drawn, self.seg + d)
         self.playing_member = pairs[i]
         self._play(best, rate, self._bone_limit(best, max(rate, self._rate)), self._contacts[pairs[i]],
-                   reached - self.seg, d)
+                   reached - self.seg, d, self._ahead_for(reached, d))
         self._handover.handed(self.seg + d, reached + d)
         self._own_speed = float(self._member_speed[pairs[i]])
         self._commit(pairs[i][0])
         self._has_cont = True
+
+    def _logits(self, token: np.ndarray, prefix: Prefix, auto: Prefix | None) -> np.ndarray:
+        """The predictor's logits (K,) of the window ``prefix`` + ``token``, guided away from ``auto``'s
+        (the same window in "auto": classifier-free guidance; None: unguided), or a library's chooser's."""
+        pred = self._predictor
+        logits = pred.logits_after(prefix, token)
+        if auto is not None:  # classifier-free guidance towards the requested style
+            base = pred.logits_after(auto, token)
+            logits = base + STYLE_GUIDANCE * (logits - base)
+        if self._chooser is not None:  # library_player chooser="match": the music's descriptors choose
+            logits = self._chooser(self._hist, self._tempo.period)
+        return logits
 
     def _pairs(self, codes: list[int]) -> list[tuple[int, int]]:
         """(code, exemplar) of every exemplar of ``codes``."""
@@ -909,7 +931,8 @@ class DanceStream:
             own = [(c, j) for c, j in pairs if self._member_style[c, j] == tok]
             pairs = own or pairs
         if self._travels:  # near an edge: exemplars whose own travel heads inwards (stage.INWARDS)
-            keep = self._stage.inwards(np.array([self._travel[c, j, self.seg, :2] for c, j in pairs]))
+            keep = self._stage.inwards([(float(self._travel[c, j, self.seg, 0]), float(self._travel[c, j, self.seg, 1]))
+                                        for c, j in pairs])
             pairs = pairs if keep is None else [p for p, k in zip(pairs, keep) if k]
         tilt = self._member_tilt
         c, a = pairs[0] if pairs else (-1, 0)
@@ -998,17 +1021,22 @@ class DanceStream:
         return max(1.0, self._bone_cap / peak) if peak > 0.0 else np.inf
 
     def _play(self, window: np.ndarray, rate: float, limit: float = np.inf, contact: np.ndarray | None = None,
-              shift: float = 0.0, d: int = 0) -> None:
+              shift: float = 0.0, d: int = 0, ahead: tuple | None = None) -> None:
         """Start playing ``window`` (2 seg, P), the next movement and its continuation, at ``rate``
         (and the rate it takes over from the current movement) at most ``limit``: the ``seg + d``
         rows before it are those the current movement would have played next from row ``seg +
         shift`` (``d``: the rows its exemplar plays on to its own frame seg, handover.py).
         ``contact`` (2 seg, 3): its exemplar's foot contacts and lift
-        (:func:`models.networks.feet.member_contacts`; None: none known)."""
+        (:func:`models.networks.feet.member_contacts`; None: none known). ``ahead``: those rows,
+        contacts and lifts as :meth:`_read_ahead` read them on the frame before (None: read them now)."""
         n, e = self.seg + d, self.seg + d + len(window)  # the window's rows: n .. e
         if not self.codes_drawn:  # before the first movement there is only its first pose
             self._played[:n] = window[0]
             self._played_contact[:n] = contact[0] if contact is not None else 0.0
+        elif ahead is not None:  # read on the frame before (_read_ahead): the same rows
+            self._played[:n] = ahead[2]
+            self._played_contact[:n] = ahead[3]
+            lift = ahead[5]
         else:
             self._played[:n] = [warp_pose(self._played, shift + i) for i in range(n)]
             lift = (self._contact_at(shift + n)[2], self._contact_at(shift + n + 1)[2])
@@ -1027,6 +1055,30 @@ class DanceStream:
         """Exemplar frames the current movement has played by its frame ``j``: the rate moves
         linearly from ``_rate_from`` (frame 0) towards ``_rate`` (frame seg)."""
         return j * self._rate_from + (self._rate - self._rate_from) * j * (j - 1) / (2 * self.seg)
+
+    def _read_ahead(self) -> None:
+        """On the frame before a code step (after its own read): what the coming handover reads of
+        the playing movement, which no frame changes until then: the ``seg`` rows before the new
+        movement (from row ``reached - seg``: ``_play``'s), their contacts and the two lifts after
+        them, the motion's next two poses at ``reached`` (the matching's), and the stage's rows
+        (:meth:`Stage.read_ahead`). The code step then only takes them (:meth:`_ahead_for`); the
+        values are those it would read itself. Only for a handover at once (``d`` = 0)."""
+        reached = self._handover.base + self._advance(self.seg)
+        shift, n = reached - self.seg, self.seg
+        rows = np.array([warp_pose(self._played, shift + i) for i in range(n)])
+        contact = [self._contact_at(shift + i) for i in range(n)]
+        lift = (self._contact_at(shift + n)[2], self._contact_at(shift + n + 1)[2])
+        cont = np.stack([warp_pose(self._played, reached), warp_pose(self._played, reached + 1.0)])
+        self._stage.read_ahead(shift, n)
+        self._rows_ahead = (self.frame + 1, reached, rows, contact, cont, lift)
+
+    def _ahead_for(self, reached: float, d: int) -> tuple | None:
+        """:meth:`_read_ahead`'s reading (frame, reached, rows, contacts, next poses, lifts) when it
+        is this code step's, read at ``reached``, for a handover at once (``d`` 0); else None."""
+        ahead = self._rows_ahead
+        if ahead is None or d != 0 or ahead[0] != self.frame or ahead[1] != reached:
+            return None
+        return ahead
 
     def _commit(self, code: int) -> None:
         """Record ``code`` as played (``self._play`` has started its movement)."""
@@ -1148,6 +1200,13 @@ class DanceStream:
                 self._forecast.push(float(x[i, self._onset_col]))
             row = self._ahead(x[i]) if self._lead and self._beat_cols is not None else x[i]
             push_history(self._hist, row, self._feat_mean, self._feat_std)  # its first _fd columns, standardised
+            j = t % self.seg
+            if j:  # the coming token's first layer, a frame at a time (NumpyPredictor.embed_frame)
+                if j == 1:
+                    self._embed_acc, self._embed_rows = self._predictor.embed_start(), 0
+                if self._embed_rows == j - 1:
+                    self._predictor.embed_frame(self._embed_acc, self._hist[-1], j - 1)
+                    self._embed_rows = j
             self._raw = row
             if self._beat_cols is not None:  # the tempo (the period is the same ahead or not)
                 if self._onset_col is not None:
@@ -1185,6 +1244,8 @@ class DanceStream:
                     pose = self._feet.step(pose, 0.0, 0.0, 0.0)
                     self._feet_used = True
             out[i] = pose
+            if (t + 1) % self.seg == 0 and self.codes_drawn:  # the next frame is a code step
+                self._read_ahead()
             self.frame += 1
         if k == 0:
             return out

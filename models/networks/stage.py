@@ -38,6 +38,7 @@ import math
 import numpy as np
 
 from models.errors import ConfigError, short_repr
+from models.networks.dance_jit import place_travel, reorigin_track
 from models.timebase import FPS
 
 #: The stage a screen or a small stage suits (width x depth, metres), which ``performer
@@ -92,6 +93,8 @@ FACING_CONE: float = math.radians(35.0)
 HOME_SPEED: float = 0.6
 HOME_RAMP: float = 0.5
 HOME_DONE: float = 0.02
+#: :func:`~models.networks.dance_jit.place_travel`'s "no travel" (a movement in place).
+_NO_TRAVEL = np.zeros((0, 3))
 
 
 def parse_stage(value) -> tuple[float, float]:
@@ -204,6 +207,7 @@ class Stage:
         self._track[:] = 0.0
         self._prev: tuple[float, float, float] | None = None  # the track's value read last frame
         self._read = 0.0  # where it was read
+        self._ahead: tuple | None = None  # (at, rows, base) of the next handover, read ahead (read_ahead)
         self._homing = False
         self._home_w = 0.0
         # counts for measuring (benchmarks/studies/stage_travel.py): frames near an edge and those
@@ -226,34 +230,36 @@ class Stage:
                 ch, sh = math.cos(self.heading), math.sin(self.heading)
                 mx, mz = float(travel[self.seg, 0]), float(travel[self.seg, 1])
                 self.counts["inward_choices"] += (mx * ch + mz * sh) * near[0] + (-mx * sh + mz * ch) * near[1] >= -1e-6
+        ahead, self._ahead = self._ahead, None
         if first:
             tr[:s] = 0.0
             base = (0.0, 0.0, 0.0)
         else:
-            for i in range(s):
-                tr[i] = self._at(at + i)
-            base = self._at(at + s)
+            if ahead is not None and ahead[0] == at and len(ahead[1]) == s:  # read the frame before: the same rows
+                tr[:s] = ahead[1]
+                base = ahead[2]
+            else:
+                for i in range(s):
+                    tr[i] = self._at(at + i)
+                base = self._at(at + s)
             self._read -= at  # the last read, in the new rows
         c, sn = math.cos(base[2]), math.sin(base[2])
-        e = s + 2 * self.seg  # the new movement's rows end; the rows after repeat its last
-        if travel is None:
-            tr[s:e] = base
-        else:  # Ry(base heading) applied to the exemplar's own-frame displacement
-            tr[s:e, 0] = base[0] + c * travel[:, 0] + sn * travel[:, 1]
-            tr[s:e, 1] = base[1] - sn * travel[:, 0] + c * travel[:, 1]
-            tr[s:e, 2] = base[2] + travel[:, 2]
-        if not first:  # the last movement's velocity where they meet, blended into the new one's
-            prev = tr[s - 1]  # the last movement's row at at + lead - 1
-            dv = [base[i] - prev[i] - (tr[s + 1, i] - tr[s, i]) for i in range(3)]
-            tr[s:e] += self._carry * dv
-        tr[e:] = tr[e - 1]
+        # rows s .. s + 2 seg: Ry(base heading) applied to the exemplar's own-frame displacement (or base
+        # in place), then, but for the first, the last movement's velocity where they meet blended into
+        # the new one's (from the last movement's row at at + lead - 1); the rows after repeat the last
+        place_travel(tr, s, 2 * self.seg, *base, c, sn,
+                     _NO_TRAVEL if travel is None else np.ascontiguousarray(travel, np.float64), self._carry, not first)
         if self._prev is not None and not first:  # keep the numbers small: the last read is the new origin
             p = self._at(self._read)
-            c, sn = math.cos(p[2]), math.sin(p[2])
-            dx, dz = tr[:, 0] - p[0], tr[:, 1] - p[1]
-            tr[:, 0], tr[:, 1] = c * dx - sn * dz, sn * dx + c * dz
-            tr[:, 2] -= p[2]
+            reorigin_track(tr, *p, math.cos(p[2]), math.sin(p[2]))
             self._prev = (0.0, 0.0, 0.0)
+
+    def read_ahead(self, at: float, lead: int) -> None:
+        """On the frame before a code step: the track's rows :meth:`handover` (``at``, ``lead``) will
+        read, read now (no frame writes the track before it), so the code step only copies them.
+        A handover at another row or lead reads its own."""
+        rows = [self._at(at + i) for i in range(lead)] if at >= 0.0 else []  # at >= 0: no row read is one written
+        self._ahead = (at, rows, self._at(at + lead)) if rows else None
 
     def _at(self, x: float) -> tuple[float, float, float]:
         """The track at fractional row ``x`` (linear between rows, as warp_pose reads the root)."""
@@ -336,18 +342,18 @@ class Stage:
         nz = min(max(1.0 - (self.z + hz) / mz, 0.0), 1.0) - min(max(1.0 - (hz - self.z) / mz, 0.0), 1.0)
         return None if nx == 0.0 and nz == 0.0 else (nx, nz)
 
-    def inwards(self, moves: np.ndarray) -> np.ndarray | None:
-        """Which candidate movements head inwards here: ``moves`` (n, 2) each one's own travel over a
-        movement (x, z m, in its own frame: ``member_travel[c, j, seg, :2]``) -> (n,) bool, True where
-        it (turned by the heading) moves no further towards a near edge; None where no edge is near,
-        :data:`INWARDS` is off, or none heads inwards (then any may play)."""
+    def inwards(self, moves) -> np.ndarray | None:
+        """Which candidate movements head inwards here: ``moves`` (n, 2; an array or (x, z) pairs) each
+        one's own travel over a movement (x, z m, in its own frame: ``member_travel[c, j, seg, :2]``) ->
+        (n,) bool, True where it (turned by the heading) moves no further towards a near edge; None where
+        no edge is near, :data:`INWARDS` is off, or none heads inwards (then any may play)."""
         n = self._near() if self.active and INWARDS and not self._homing else None
         if n is None:
             return None
         ch, sh = math.cos(self.heading), math.sin(self.heading)
-        wx, wz = moves[:, 0] * ch + moves[:, 1] * sh, -moves[:, 0] * sh + moves[:, 1] * ch
-        keep = wx * n[0] + wz * n[1] >= -1e-6  # along the edge counts (a micrometre of rounding)
-        return keep if keep.any() else None
+        keep = [(mx * ch + mz * sh) * n[0] + (-mx * sh + mz * ch) * n[1] >= -1e-6  # along the edge counts (a
+                for mx, mz in moves]  # micrometre of rounding); a few moves: Python floats, no NumPy call each
+        return np.array(keep) if any(keep) else None
 
     def _bound(self, wx: float, wz: float) -> tuple[float, float, float]:
         """(the step (wx, wz) with its part towards a near edge shrunk, the heading turn that
