@@ -99,12 +99,13 @@ demo: setup
 
 # Two passes (docs/testing.md): every test not marked `serial` on both cores (pytest-xdist, one
 # worker per core, a test file per worker at a time), then the `serial` ones alone, which time
-# themselves against the wall clock or pin CPUs. The exit status fails if either pass fails.
+# themselves against the wall clock or pin CPUs. The exit status fails if either pass fails
+# (nothing is printed after the serial pass's summary line unless one did).
 TEST_PARALLEL := -n 2 --dist loadfile
 test: setup browser-deps
 	@$(BIN)/python -m pytest -q $(TEST_PARALLEL) -m "not serial" --durations=25; p=$$?; \
 	$(BIN)/python -m pytest -q -m serial --durations=25; s=$$?; \
-	echo "make test: parallel pass exit $$p, serial pass exit $$s"; [ $$p = 0 ] && [ $$s = 0 ]
+	[ $$p = 0 ] && [ $$s = 0 ] || { echo "make test: parallel pass exit $$p, serial pass exit $$s" >&2; exit 1; }
 
 test-fast: setup browser-deps
 	@$(BIN)/python -m pytest -q $(TEST_PARALLEL) -m "not slow and not serial"; p=$$?; \
