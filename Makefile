@@ -97,11 +97,19 @@ DEMO_SECONDS ?= 120
 demo: setup
 	$(BIN)/performer run --audio models/assets/clip.ogg --loop --duration $(DEMO_SECONDS)
 
+# Two passes (docs/testing.md): every test not marked `serial` on both cores (pytest-xdist, one
+# worker per core, a test file per worker at a time), then the `serial` ones alone, which time
+# themselves against the wall clock or pin CPUs. The exit status fails if either pass fails
+# (nothing is printed after the serial pass's summary line unless one did).
+TEST_PARALLEL := -n 2 --dist loadfile
 test: setup browser-deps
-	$(BIN)/python -m pytest -q --durations=25
+	@$(BIN)/python -m pytest -q $(TEST_PARALLEL) -m "not serial" --durations=25; p=$$?; \
+	$(BIN)/python -m pytest -q -m serial --durations=25; s=$$?; \
+	[ $$p = 0 ] && [ $$s = 0 ] || { echo "make test: parallel pass exit $$p, serial pass exit $$s" >&2; exit 1; }
 
 test-fast: setup browser-deps
-	$(BIN)/python -m pytest -q -m "not slow"
+	@$(BIN)/python -m pytest -q $(TEST_PARALLEL) -m "not slow and not serial"; p=$$?; \
+	$(BIN)/python -m pytest -q -m "serial and not slow"; s=$$?; [ $$p = 0 ] && [ $$s = 0 ]
 
 # make bench: the latency suite (docs/latency.md) on the bundled clip and BENCH_SONGS from
 # DATA, the concurrency sweep, the ensemble (1, 2, 4, 8 performers in one process against

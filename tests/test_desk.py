@@ -23,6 +23,8 @@ from test_web_client import chromium_context
 from _proc import default_sigint
 from _ws_reader import JsonReader
 
+pytestmark = pytest.mark.serial  # the desk's responses timed against 1-2 s bounds: the serial pass of make test
+
 REPO = Path(__file__).resolve().parents[1]
 TOKEN = "desk-test-token"
 CLIP_BPM = 120.0  # models/assets/clip.json

@@ -145,6 +145,7 @@ def timed_run(seconds: float, realtime: bool, block: int) -> tuple[Engine, ListS
     return eng, sink, time.monotonic() - t0 - eng.warmup_seconds
 
 
+@pytest.mark.serial  # wall-clock bounds
 @pytest.mark.slow
 def test_paced_replay_keeps_real_time():
     eng, sink, elapsed = timed_run(2.0, realtime=True, block=512)
@@ -156,6 +157,7 @@ def test_paced_replay_keeps_real_time():
     assert eng.stats()["latency_ms_p50"] < 250
 
 
+@pytest.mark.serial  # wall-clock bounds
 def test_fast_replay_is_faster_than_real_time():
     _, _, elapsed = timed_run(8.0, realtime=False, block=2048)
     assert elapsed < 8.0
@@ -285,6 +287,7 @@ def test_failing_source_is_reported_holds_last_pose_and_resumes():
     assert [f.index for f in sink.frames] == list(range(60))  # resumed, same stream
 
 
+@pytest.mark.serial  # wall-clock bounds
 def test_silent_source_is_reported_as_stalled_then_resumes():
     src = FlakySource(noise(1.0), quiet_at=15 * HOP, quiet_s=0.6)
     sink = ListSink()

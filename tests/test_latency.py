@@ -37,6 +37,8 @@ from realtime.engine import Engine, EngineConfig, rest_pose
 from realtime.vmc import VmcEncoder
 from realtime.wire import encode_frame
 
+pytestmark = pytest.mark.serial  # wall-clock latency runs against budgets, CPU pinning: the serial pass of make test
+
 REPO = Path(__file__).resolve().parents[1]
 
 #: 5x the targets of benchmarks/budgets.toml's [latency] table (lost frames: 2 for 0).

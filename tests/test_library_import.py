@@ -19,6 +19,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from _bvh_exporters import CONVENTIONS, mixamo, write_convention
+from _cli import run_cli
 from models.data.bvh_import import name_words
 from models.data.library import load_library
 from models.rig.humanoid import BONE_INDEX, NUM_BONES
@@ -195,20 +196,20 @@ def test_bad_file_is_one_line_exit_2_nothing_written(tmp_path, case):
         assert "LeftUpperLeg" in run.stderr and "--map" in run.stderr
 
 
-def test_command_line_errors(tmp_path):
-    assert performer("library", "build", tmp_path / "none.bvh", "--out", tmp_path / "x.npz").returncode == 2
+def test_command_line_errors(tmp_path, capsys):
+    assert run_cli(capsys, "library", "build", tmp_path / "none.bvh", "--out", tmp_path / "x.npz")[0] == 2
     (tmp_path / "empty").mkdir()
-    run = performer("library", "build", tmp_path / "empty", "--out", tmp_path / "x.npz")
-    assert run.returncode == 2 and "no .bvh files" in run.stderr
+    code, _, err = run_cli(capsys, "library", "build", tmp_path / "empty", "--out", tmp_path / "x.npz")
+    assert code == 2 and "no .bvh files" in err
     good = write_convention(tmp_path / "g.bvh", synthetic_dance(1.0), load_default_skeleton(), mixamo())
-    run = performer("library", "build", good, "--out", tmp_path / "x.pt")
-    assert run.returncode == 2 and ".npz" in run.stderr
+    code, _, err = run_cli(capsys, "library", "build", good, "--out", tmp_path / "x.pt")
+    assert code == 2 and ".npz" in err
     bad_map = tmp_path / "m.map"
     bad_map.write_text("LeftElbow = x\n")
-    run = performer("library", "build", good, "--out", tmp_path / "x.npz", "--map", bad_map)
-    assert run.returncode == 2 and "line 1" in run.stderr and "LeftElbow" in run.stderr
-    help_text = performer("library", "build", "--help").stdout
-    assert "--map" in help_text and "Mixamo" in help_text and "retarget error" in help_text
+    code, _, err = run_cli(capsys, "library", "build", good, "--out", tmp_path / "x.npz", "--map", bad_map)
+    assert code == 2 and "line 1" in err and "LeftElbow" in err
+    code, help_text, _ = run_cli(capsys, "library", "build", "--help")
+    assert code == 0 and "--map" in help_text and "Mixamo" in help_text and "retarget error" in help_text
 
 
 @pytest.mark.parametrize("name, expected", [

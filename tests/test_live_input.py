@@ -19,6 +19,8 @@ from _ws_reader import JsonReader
 
 from models.errors import AudioError
 
+pytestmark = pytest.mark.serial  # a real-time PulseAudio input, read in real time: the serial pass of make test
+
 SONG, SONG_BPM = "DANCE_C_2", 129.0  # a validation cha-cha (librosa: 129 bpm, docs/listening.md)
 START_S, SECONDS = 30.0, 16.0  # the stretch of it played
 

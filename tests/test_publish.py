@@ -196,6 +196,7 @@ class SlowBroker:
         self.released.set()
 
 
+@pytest.mark.serial  # send() times and a 2-s reconnect, wall clock
 def test_a_blocked_broker_connection_never_blocks_send_and_no_frame_is_lost_uncounted():
     """The broker stops reading: nats-py's socket and its buffer fill; send() must still return
     at once (the engine's worker calls it), and every frame must be either published or counted
@@ -230,6 +231,7 @@ def test_a_blocked_broker_connection_never_blocks_send_and_no_frame_is_lost_unco
         route.close()
 
 
+@pytest.mark.serial  # send() times and a 2-s reconnect, wall clock
 def test_broker_killed_and_restarted_mid_show(broker):
     """A real engine streams through the publisher; the broker is killed for 1.5 s and comes back on
     the same ports: the engine never falls behind its input, the frames missed are counted, and

@@ -15,7 +15,8 @@ from realtime.frame import PoseFrame
 from realtime.nats_server import free_port
 from realtime.publish_process import BrokerProcess
 
-pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="needs Linux (/proc, sched_setaffinity)")
+pytestmark = [pytest.mark.skipif(not sys.platform.startswith("linux"), reason="needs Linux (/proc, sched_setaffinity)"),
+              pytest.mark.serial]  # which CPU a thread runs on, timed: the serial pass of make test
 
 
 def _preemptions() -> int:

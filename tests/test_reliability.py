@@ -33,6 +33,8 @@ from realtime.engine import Engine, EngineConfig
 
 from script_loader import load_script
 
+pytestmark = pytest.mark.serial  # stall and fallback timers of 0.1-1 s, 200 live connections: the serial pass of make test
+
 soak = load_script("benchmarks/soak.py")
 
 MAX_STEP_DEG = 60.0  # largest rotation change per frame (any bone) accepted across a fault

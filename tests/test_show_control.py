@@ -34,6 +34,8 @@ from realtime.osc_control import MAX_BUNDLE_DEPTH, OscControl, parse_packet
 from realtime.receiver import OscReceiver, ReceivedFrame
 from realtime.vmc import osc_message
 
+pytestmark = pytest.mark.serial  # controls timed against 0.3-1 s settle bounds: the serial pass of make test
+
 needs_oscsend = pytest.mark.skipif(
     shutil.which("oscsend") is None,
     reason="oscsend not installed (Debian package liblo-tools; `make setup` installs it when run as root)",

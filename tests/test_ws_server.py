@@ -148,6 +148,7 @@ def _stalled_client(port: int) -> socket.socket:
     return raw
 
 
+@pytest.mark.serial  # send() times, wall clock
 def test_stalled_client_slows_neither_send_nor_other_clients(sink_factory):
     sink = sink_factory(queue_frames=16)
     stalled = _stalled_client(sink.port)

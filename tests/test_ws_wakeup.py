@@ -17,7 +17,8 @@ from models.rig.motion import POSE_DIM
 from realtime.frame import PoseFrame
 from realtime.ws_server import WebSocketSink
 
-pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="needs Linux (/proc, sched_setaffinity)")
+pytestmark = [pytest.mark.skipif(not sys.platform.startswith("linux"), reason="needs Linux (/proc, sched_setaffinity)"),
+              pytest.mark.serial]  # which CPU a thread runs on, timed: the serial pass of make test
 
 
 def _spin(seconds: float) -> None:

@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
+import tempfile
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -307,9 +309,13 @@ def style_classifier(train: RealSet, epochs: int, seed: int, cache_dir: str | Pa
         model.trained_on = {"dances": [c.name for c in train.clips], "epochs": epochs, "seed": seed, "key": key}
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_suffix(".tmp")
-            save_classifier(model, tmp, model.trained_on)
-            tmp.replace(path)
+            fd, tmp = tempfile.mkstemp(prefix=path.name, suffix=".tmp", dir=path.parent)  # one per writer:
+            os.close(fd)  # two processes training the same classifier at once each replace whole files
+            try:
+                save_classifier(model, tmp, model.trained_on)
+                os.replace(tmp, path)
+            finally:
+                Path(tmp).unlink(missing_ok=True)
     model.cache_key = key
     return model
 

@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
@@ -199,9 +200,11 @@ def flags(r: dict) -> str:
     return " ".join(out)
 
 
-def print_report(rep: dict, file=sys.stdout) -> None:
+def print_report(rep: dict, file: TextIO | None = None) -> None:
+    """The report as a table on ``file`` (None: the current ``sys.stdout``, looked up at the call)."""
     from models.data.dwm import STYLES
 
+    file = sys.stdout if file is None else file
     p = lambda *a: print(*a, file=file)  # noqa: E731
     t = rep["total"]
     p(f"DWM dataset at {rep['root']}: {t['dances']} dances, {t['minutes']:.1f} min of motion, "
