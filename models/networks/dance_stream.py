@@ -835,8 +835,8 @@ class DanceStream:
             window = np.concatenate([segment, np.repeat(segment[-1:], self.seg, axis=0)])
             shift = self._handover.base + self._advance(self.seg) - self.seg  # the rows the last movement moved on
             self._stage.handover(shift, None, not self.codes_drawn)  # in place
-            ahead = self._ahead_for(shift + self.seg, 0)
-            self._play(window, 1.0, shift=shift, ahead=ahead)  # no continuation to play into: its own pace, no contacts
+            ahead = self._ahead_for(shift + self.seg, 0)  # no continuation to play into: its own pace, no contacts
+            self._play(window, 1.0, shift=shift, ahead=ahead[0] if ahead is not None else None)
             self._handover.handed(self.seg, shift + self.seg)
             self.playing_member = None
             self._own_speed = 0.0
@@ -861,6 +861,7 @@ class DanceStream:
         tries = [codes[:n] for n in range(1, len(codes) + 1)] + [None] if self._guard > 0.0 else [codes]
         pairs, cands, dips, z = self._candidates(self._pairs(tries[0]))
         asked = self._asked_rate()  # the rate the followed tempo asks now, before each exemplar's speed cap
+        ahead = self._ahead_for(reached, d)  # what _read_ahead read on the frame before, if it is this step's
         if not self._has_cont:  # the first movement starts from its own pose
             i = 0
             best = _unit(cands[0].copy())
@@ -869,9 +870,7 @@ class DanceStream:
             beat = self._next_beat(self._rate_for(*c0, asked), d)
             frame, clarity = beat if beat is not None else (-1, 0.0)
             at = reached + d  # where the playing movement hands over
-            ahead = self._ahead_for(reached, d)
-            cont = ahead[4] if ahead is not None else np.stack([warp_pose(self._played, at),
-                                                                warp_pose(self._played, at + 1.0)])
+            cont = ahead[1] if ahead is not None else self._next_two(at)
             for k, use in enumerate(tries):
                 if k:
                     pairs, cands, dips, z = self._candidates(self._pairs(use) if use else self._nearest(cont[0]))
@@ -887,7 +886,7 @@ class DanceStream:
         self._stage.handover(reached - self.seg, self._travel[pairs[i]], not self.codes_drawn, self.seg + d)
         self.playing_member = pairs[i]
         self._play(best, rate, self._bone_limit(best, max(rate, self._rate)), self._contacts[pairs[i]],
-                   reached - self.seg, d, self._ahead_for(reached, d))
+                   reached - self.seg, d, ahead[0] if ahead is not None else None)
         self._handover.handed(self.seg + d, reached + d)
         self._own_speed = float(self._member_speed[pairs[i]])
         self._commit(pairs[i][0])
@@ -1028,19 +1027,14 @@ class DanceStream:
         shift`` (``d``: the rows its exemplar plays on to its own frame seg, handover.py).
         ``contact`` (2 seg, 3): its exemplar's foot contacts and lift
         (:func:`models.networks.feet.member_contacts`; None: none known). ``ahead``: those rows,
-        contacts and lifts as :meth:`_read_ahead` read them on the frame before (None: read them now)."""
+        contacts and lifts (:meth:`_rows_from`) as :meth:`_read_ahead` read them on the frame before
+        (None: read them now)."""
         n, e = self.seg + d, self.seg + d + len(window)  # the window's rows: n .. e
         if not self.codes_drawn:  # before the first movement there is only its first pose
             self._played[:n] = window[0]
             self._played_contact[:n] = contact[0] if contact is not None else 0.0
-        elif ahead is not None:  # read on the frame before (_read_ahead): the same rows
-            self._played[:n] = ahead[2]
-            self._played_contact[:n] = ahead[3]
-            lift = ahead[5]
         else:
-            self._played[:n] = [warp_pose(self._played, shift + i) for i in range(n)]
-            lift = (self._contact_at(shift + n)[2], self._contact_at(shift + n + 1)[2])
-            self._played_contact[:n] = [self._contact_at(shift + i) for i in range(n)]
+            self._played[:n], self._played_contact[:n], lift = ahead if ahead is not None else self._rows_from(shift, n)
         self._played[n:e] = window
         self._played[e:] = window[-1]
         self._played_contact[n:e] = contact if contact is not None else 0.0
@@ -1064,21 +1058,28 @@ class DanceStream:
         (:meth:`Stage.read_ahead`). The code step then only takes them (:meth:`_ahead_for`); the
         values are those it would read itself. Only for a handover at once (``d`` = 0)."""
         reached = self._handover.base + self._advance(self.seg)
-        shift, n = reached - self.seg, self.seg
-        rows = np.array([warp_pose(self._played, shift + i) for i in range(n)])
-        contact = [self._contact_at(shift + i) for i in range(n)]
-        lift = (self._contact_at(shift + n)[2], self._contact_at(shift + n + 1)[2])
-        cont = np.stack([warp_pose(self._played, reached), warp_pose(self._played, reached + 1.0)])
-        self._stage.read_ahead(shift, n)
-        self._rows_ahead = (self.frame + 1, reached, rows, contact, cont, lift)
+        self._stage.read_ahead(reached - self.seg, self.seg)
+        self._rows_ahead = (self.frame + 1, reached, self._rows_from(reached - self.seg, self.seg), self._next_two(reached))
 
     def _ahead_for(self, reached: float, d: int) -> tuple | None:
-        """:meth:`_read_ahead`'s reading (frame, reached, rows, contacts, next poses, lifts) when it
-        is this code step's, read at ``reached``, for a handover at once (``d`` 0); else None."""
+        """((rows, contacts, lifts) of :meth:`_rows_from`, the next two poses) as :meth:`_read_ahead`
+        read them, when that reading is this code step's, at ``reached``, for a handover at once (``d``
+        0); else None."""
         ahead = self._rows_ahead
         if ahead is None or d != 0 or ahead[0] != self.frame or ahead[1] != reached:
             return None
-        return ahead
+        return ahead[2:]
+
+    def _rows_from(self, shift: float, n: int) -> tuple[list, list, tuple[float, float]]:
+        """The playing movement's ``n`` rows from row ``shift`` (poses, as warp_pose reads them), their
+        contacts and the lifts of the two rows after them: what a handover keeps before the new movement."""
+        rows = [warp_pose(self._played, shift + i) for i in range(n)]
+        contact = [self._contact_at(shift + i) for i in range(n)]
+        return rows, contact, (self._contact_at(shift + n)[2], self._contact_at(shift + n + 1)[2])
+
+    def _next_two(self, at: float) -> np.ndarray:
+        """The playing motion's poses (2, P) at rows ``at`` and ``at + 1``: the motion matching's continuation."""
+        return np.stack([warp_pose(self._played, at), warp_pose(self._played, at + 1.0)])
 
     def _commit(self, code: int) -> None:
         """Record ``code`` as played (``self._play`` has started its movement)."""
