@@ -598,9 +598,10 @@ def _bone_rotations_arrays(window, f, parents, g):  # pragma: no cover - compile
 
 def test_the_code_steps_kernels_give_their_array_arithmetic_bit_for_bit():
     """match_exemplar's bend and joint_speed's bone rotations (bone_rotations) run on float64 scalars, no
-    array made per bone and frame (a quarter and a third of the time a call): the same values as the array code
-    they replaced (above), bit for bit, so no code step's movement moves (random windows, near and far
-    from the motion, capped and not; rotations through w = 0; a zero quaternion)."""
+    array made per bone and frame (the motion matching 0.108 -> 0.042 ms a code step, docs/latency.md's "Where a
+    hop goes"): the same values as the array code they replaced (above), bit for bit, so no code step's
+    movement moves (random windows, near and far from the motion, capped and not; rotations through w = 0;
+    a zero quaternion)."""
     from numba import njit
 
     import models.networks.dance_jit as dj

@@ -19,9 +19,11 @@ feature config and the tempo, so a second training run starts in seconds.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -140,6 +142,40 @@ def _load(path: Path, name: str) -> Clip | None:
         return None
 
 
+@contextlib.contextmanager
+def _build_lock(path: Path) -> Iterator[None]:
+    """Hold an exclusive lock on ``path``'s sibling ``.lock`` file while one process builds it.
+
+    Several processes (pytest-xdist workers, two training runs) may ask for the same clip on a
+    fresh cache; the first builds it, the others wait and then load it instead of building it
+    again. Where ``fcntl`` is missing (Windows) nobody waits: writes still replace whole files."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - POSIX here
+        yield
+        return
+    with open(path.with_name(path.name + ".lock"), "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def _cached_or_built(path: Path | None, dance: Dance, cfg: FeatureConfig, tempo: float,
+                     audio: list[np.ndarray]) -> Clip:
+    """The clip from the cache at ``path``, else built (and saved there); ``audio`` holds the
+    song once loaded, shared between the tempo factors of one dance."""
+    clip = _load(path, dance.name) if path and path.exists() else None
+    if clip is None:
+        if not audio:
+            audio.append(load_audio(dance.audio_path, SAMPLE_RATE)[0])
+        clip = make_clip(dance, cfg, tempo, audio[0])
+        if path:
+            _save(path, clip)
+    return clip
+
+
 def build_corpus(
     data_root: str | Path,
     names: list[str],
@@ -158,18 +194,15 @@ def build_corpus(
     bar = tqdm(total=len(names) * len(tempos), desc="corpus", unit="clip", disable=not progress)
     for name in names:
         dance = load_dance(Path(data_root) / name)
-        audio = None
+        audio: list[np.ndarray] = []
         for tempo in tempos:
             path = cache / _key(dance, cfg, tempo) if cache else None
             clip = _load(path, name) if path and path.exists() else None
-            if clip is not None and clip.first_frame < 0:  # older cache entry
+            if clip is None:  # another process may be building it: wait for it, then load
+                with _build_lock(path) if path else contextlib.nullcontext():
+                    clip = _cached_or_built(path, dance, cfg, tempo, audio)
+            if clip.first_frame < 0:  # older cache entry
                 clip.first_frame = first_frame(dance, tempo)
-            if clip is None:
-                if audio is None:
-                    audio = load_audio(dance.audio_path, SAMPLE_RATE)[0]
-                clip = make_clip(dance, cfg, tempo, audio)
-                if path:
-                    _save(path, clip)
             clips.append(clip)
             bar.update(1)
     bar.close()
