@@ -31,6 +31,8 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
+import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -291,13 +293,29 @@ class AudioCache:
         self.root.mkdir(parents=True, exist_ok=True)
         return self.root / name
 
+    @staticmethod
+    def _write(f: Path, data: np.ndarray | str) -> None:
+        """Write ``f`` whole or not at all (a temporary file renamed over it), so a run beside
+        another one sharing the cache never reads half a file."""
+        fd, tmp = tempfile.mkstemp(prefix=f.name, suffix=".tmp", dir=f.parent)
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                if isinstance(data, str):
+                    fh.write(data.encode())
+                else:
+                    np.save(fh, data)
+            os.replace(tmp, f)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+
     def tempo(self, path: Path) -> float:
         f = self._file(_key(Path(path), "tempo") + ".json")
         if f is not None and f.is_file():
             return float(json.loads(f.read_text())["bpm"])
         bpm = recording_tempo(self.audio(path))
         if f is not None:
-            f.write_text(json.dumps({"file": str(path), "bpm": bpm}))
+            self._write(f, json.dumps({"file": str(path), "bpm": bpm}))
         return bpm
 
     def beats(self, path: Path) -> np.ndarray:
@@ -309,7 +327,7 @@ class AudioCache:
             return np.asarray(json.loads(f.read_text())["beats"], np.float64)
         _, t = librosa.beat.beat_track(y=self.audio(path), sr=SAMPLE_RATE, hop_length=HOP, units="time")
         if f is not None:
-            f.write_text(json.dumps({"file": str(path), "beats": [float(x) for x in t]}))
+            self._write(f, json.dumps({"file": str(path), "beats": [float(x) for x in t]}))
         return np.asarray(t, np.float64)
 
     def excerpt(self, path: Path, start_s: float, seconds: float, rate: float) -> np.ndarray:
@@ -325,7 +343,7 @@ class AudioCache:
             return np.load(f)
         y = librosa.effects.time_stretch(x, rate=rate).astype(np.float32)
         if f is not None:
-            np.save(f, y)
+            self._write(f, y)
         return y
 
     def ramp(self, path: Path, start_s: float, seconds: float) -> np.ndarray:
@@ -338,7 +356,7 @@ class AudioCache:
             return np.load(f)
         y = vary_rate(x, ramp_rate)
         if f is not None:
-            np.save(f, y)
+            self._write(f, y)
         return y
 
 
