@@ -999,8 +999,9 @@ class DanceStream:
         return logits if out is None else out
 
     def _tempo_tilt(self) -> float:
-        """:data:`TEMPO_ENERGY` (:data:`TEMPO_ENERGY_HEARD` for a predictor that hears the tempo) times ln(T / T_ref), blended to 0 as the pulse fades and as the
-        energy control goes from 1 to 0 or to 2 (0 without a tempo)."""
+        """:data:`TEMPO_ENERGY` (:data:`TEMPO_ENERGY_HEARD` for a predictor that hears the tempo) times
+        ln(T / T_ref), blended to 0 as the pulse fades and as the energy control goes from 1 to 0 or
+        to 2 (0 without a tempo)."""
         period = self._tempo.period
         gain = TEMPO_ENERGY if self._predictor.tempo is None else TEMPO_ENERGY_HEARD
         if not FOLLOW_TEMPO or gain == 0.0 or self._ref_period <= 0.0 or period <= 0.0:
