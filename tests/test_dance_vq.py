@@ -133,10 +133,12 @@ def test_non_finite_features_are_counted_and_poses_stay_valid():
 
 
 @pytest.mark.parametrize("cfg", [TINY, DanceVQConfig(feature_dim=12, codebook=40, code_dim=8, enc_width=16,
-                                                     dec_width=16, d_model=32, layers=3, heads=4, window_codes=6)])
+                                                     dec_width=16, d_model=32, layers=3, heads=4, window_codes=6),
+                                 dataclasses_replace(TINY, tempo_input=True)])
 def test_numpy_predictor_gives_the_torch_predictors_logits(cfg):
     """The live path's NumPy predictor (models/networks/dance_numpy.py) against the torch module it copies:
-    the whole window at once, and the newest row after the others were computed ahead (Prefix)."""
+    the whole window at once, and the newest row after the others were computed ahead (Prefix); with the
+    tempo input (``tempo_input``), each token's own ln(T / T_ref)."""
     from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 
     torch.manual_seed(1)
@@ -146,10 +148,11 @@ def test_numpy_predictor_gives_the_torch_predictors_logits(cfg):
     for n in range(1, cfg.window_codes + 1):
         audio = rng.normal(size=(n, cfg.seg * cfg.feature_dim)).astype(np.float32)
         prev = rng.integers(0, cfg.codebook + 1, n)  # codebook = "no code yet"
+        tempo = rng.normal(size=n) * 0.3 if cfg.tempo_input else np.zeros(n)
         for style in range(cfg.num_styles + 1):
-            ref = m.next_logits(audio, prev, style)
+            ref = m.next_logits(audio, prev, style, tempo if cfg.tempo_input else None)
             with single_thread_blas():
-                tokens = [fast.embed(a, int(p)) for a, p in zip(audio, prev)]
+                tokens = [fast.with_tempo(fast.embed(a, int(p)), t) for a, p, t in zip(audio, prev, tempo)]
                 whole = fast.logits(np.stack(tokens), style)
                 ahead = Prefix(fast, tokens[:-1], style)
                 if n > 1:
@@ -723,6 +726,31 @@ def turning_exemplars(m: DanceVQ, deg_per_frame: float = 3.0) -> None:
             pose[:, 3:] = np.tile(q, (1, (c.pose_dim - 3) // 4))
             m.member_poses[:, j] = torch.from_numpy(pose)
         m.member_count[:] = c.members
+
+
+def test_a_predictor_that_hears_the_tempo_is_given_it_and_chooses_by_it():
+    """``tempo_input``: every token gets the followed tempo's ln(T / T_ref) (``DanceStream.tempo_input``);
+    the same music draws other codes than with the input's weight zeroed (the tempo at T_ref), and the
+    stream's offline twin (``tempo_inputs``) reads what the stream gave."""
+    import models.networks.dance_stream as ds
+
+    torch.manual_seed(3)
+    m = DanceVQ(dataclasses_replace(BEAT, tempo_input=True)).eval()
+    turning_exemplars(m)
+    with torch.no_grad():
+        m.member_period[:] = 20.0  # the memory's tempo 90 bpm; the music's 120 (a beat every 15 frames)
+        m.predictor.tempo.weight.mul_(20.0)
+    x = beat_music(600)
+    s = DanceStream(m, seed=1)
+    s.push(x)
+    assert s.tempo_input == pytest.approx(math.log(20.0 / 15.0), abs=0.02)
+    np.testing.assert_allclose(ds.tempo_inputs(m, x)[-1], s.tempo_input, atol=1e-6)
+    heard = list(s.codes_drawn)
+    with torch.no_grad():
+        m.predictor.tempo.weight.zero_()
+    s0 = DanceStream(m, seed=1)
+    s0.push(x)
+    assert sum(a != b for a, b in zip(s0.codes_drawn, heard)) > len(heard) // 4
 
 
 def test_beat_warp_slows_the_motion_into_every_beat_and_streams_like_the_whole_song(monkeypatch):

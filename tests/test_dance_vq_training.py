@@ -126,3 +126,36 @@ def test_train_dance_vq_writes_a_playable_checkpoint_with_exemplars(tmp_path):
     assert -1e8 < float(m.gate[0]) < energy.min()
     poses = DanceStream(m.eval(), seed=0).push(np.concatenate([c.features for c in clips])[:200])
     assert poses.shape == (200, POSE_DIM) and np.isfinite(poses).all()
+
+
+def test_a_predictor_that_hears_the_tempo_is_trained_on_what_the_stream_gives_it(clip_features):
+    """models/training/tempo_predictor.py: the codebook and every buffer kept, a fresh predictor with the
+    tempo input; each training token's tempo is the stream's own (``tempo_inputs`` at the token's last
+    frame, clip and phase in encode_clips' order), and training moves the tempo input's weights."""
+    from types import SimpleNamespace
+
+    from models.networks.dance_stream import tempo_inputs
+    from models.training.dance_vq import DanceVQTrainOptions
+    from models.training.tempo_predictor import tempo_codes, train_tempo_predictor, with_tempo_input
+
+    m = gate_model(clip_features)
+    with torch.no_grad():
+        m.member_count[:] = 1
+        m.member_period[:] = 20.0  # the memory's tempo 90 bpm
+    n = len(clip_features)
+    poses = np.random.default_rng(0).normal(size=(n, POSE_DIM)).astype(np.float32)
+    clip = SimpleNamespace(name="clip", style="W", tempo=1.0, features=clip_features, poses=poses,
+                           valid=np.ones(n, bool), num_frames=n)
+    new = with_tempo_input(m, seed=0)
+    assert new.config.tempo_input and new.predictor.tempo is not None and not m.config.tempo_input
+    assert torch.equal(new.member_period, m.member_period) and torch.equal(new.quantizer.embed, m.quantizer.embed)
+    data, tempo = tempo_codes(new, [clip], range(2))
+    x = tempo_inputs(new, clip_features)
+    assert np.abs(x[-100:]).min() > 0.05  # the clip's pulse, away from 90 bpm
+    for p, (codes, t) in enumerate(zip(data.codes, tempo)):
+        np.testing.assert_array_equal(t, x[p + 8 * np.arange(len(codes))])
+    before = new.predictor.tempo.weight.detach().clone()
+    rows = train_tempo_predictor(new, [clip], [clip], DanceVQTrainOptions(pred_batch=8), steps=20, seed=0,
+                                 eval_every=10, progress=False)
+    assert [r["step"] for r in rows] == [10, 20] and all(np.isfinite(r["val_ce"]) for r in rows)
+    assert not torch.equal(new.predictor.tempo.weight, before)

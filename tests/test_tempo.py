@@ -265,6 +265,23 @@ def test_the_stream_follower_is_the_offline_arithmetic():
     np.testing.assert_allclose(live, offline, rtol=1e-9)
 
 
+def test_the_tempo_a_predictor_is_trained_on_is_the_one_the_stream_gives_it():
+    """What models.training.tempo_predictor trains a tempo-hearing predictor on (``tempo_inputs``, offline)
+    is what the live stream gives it at every frame (``DanceStream.tempo_input``): ln(T / T_ref) of the
+    same follower, within the rate range, faded with the pulse."""
+    lm = load_model(None)
+    y = load_audio("models/assets/clip.ogg")[0][: 12 * 22050]
+    feats = extract_features(y, lm.features)
+    s = ds.DanceStream(lm.model, seed=0)
+    live = []
+    for t in range(len(feats)):
+        s.push(feats[t: t + 1])
+        live.append(s.tempo_input)
+    offline = ds.tempo_inputs(lm.model, feats)
+    np.testing.assert_allclose(offline, live, atol=1e-6)
+    assert np.abs(offline[-60:]).min() > 0.05  # a pulse, away from the memory's tempo: not all zeros
+
+
 @pytest.fixture(scope="module")
 def clip_stretched():
     lm = load_model(None)

@@ -257,6 +257,8 @@ class NumpyPredictor:
         self.w_a2, self.b_a2 = _np(lin2.weight).T.copy(), _np(lin2.bias)
         self.code = _np(predictor.code.weight)
         self.style = _np(predictor.style.weight)
+        # the tempo input's direction (d,) (DanceVQConfig.tempo_input; None: the predictor does not hear it)
+        self.tempo = _np(predictor.tempo.weight)[:, 0].copy() if getattr(predictor, "tempo", None) is not None else None
         self.pos = _np(predictor.pos)
         d = self.pos.shape[1]
         self.layers = [_Layer(layer, d) for layer in predictor.blocks.layers]
@@ -285,6 +287,13 @@ class NumpyPredictor:
         """:meth:`embed` of the token whose first ``seg - 1`` frames ``acc`` holds (:meth:`embed_frame`)
         and whose last is ``frame`` (D,): the same values, bit for bit; ``acc`` is used up."""
         return embed_finish(acc, frame, len(self.w_a1) - len(frame), self.w_a1, self.w_a2, self.b_a2, self.code[prev])
+
+    def with_tempo(self, token: np.ndarray, tempo: float) -> np.ndarray:
+        """``token`` (d,) from :meth:`embed` / :meth:`embed_last` with its ln(T / T_ref) ``tempo`` added, in
+        place (a predictor that hears the tempo; else ``token`` as it is)."""
+        if self.tempo is not None and tempo != 0.0:
+            token += np.float32(tempo) * self.tempo
+        return token
 
     def logits(self, tokens: np.ndarray, style: int) -> np.ndarray:
         """Logits (K,) of the next code: ``tokens`` (n, d) from :meth:`embed`, n <= window_codes."""

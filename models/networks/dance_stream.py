@@ -178,6 +178,9 @@ ENERGY_GAIN: float = 3.0
 #: strength energy 0 moved as much as energy 1 on DANCE_R_5, and energy 2 less than 1 on
 #: DANCE_C_2). 0: the choice ignores the tempo.
 TEMPO_ENERGY: float = 4.0
+#: The same tilt for a predictor that hears the tempo itself (``DanceVQConfig.tempo_input``,
+#: models/training/tempo_predictor.py), which chooses by the tempo as the dancers did at it.
+TEMPO_ENERGY_HEARD: float = 0.0
 #: Tempo and frequency: the tempo's logit tilt (:data:`TEMPO_ENERGY`) reads each code's liveliness
 #: plus this times its movements' frequency (:func:`code_frequency`'s z-score: mean joint
 #: acceleration over mean joint speed, the root's travel taken out). At a faster tempo the
@@ -466,6 +469,39 @@ def _cached_bone_cap(model: DanceVQ, members: np.ndarray, counts: np.ndarray) ->
     return cached[1]
 
 
+def reference_period(model: DanceVQ) -> float:
+    """The memory's mean tempo T_ref as a beat period (frames at 30 fps): the geometric mean of its
+    exemplars' songs' periods (``DanceVQ.member_period``; 0 where none is known)."""
+    period = model.member_period.numpy().astype(np.float64)  # (K, M) each exemplar's song; 0 unknown
+    real = np.arange(period.shape[1])[None, :] < model.member_count.numpy()[:, None]
+    known = period[real & (period > 0)]
+    return float(np.exp(np.log(known).mean())) if len(known) else 0.0
+
+
+def tempo_inputs(model: DanceVQ, features: np.ndarray) -> np.ndarray:
+    """(T,) float32: what :attr:`DanceStream.tempo_input` reads after each frame of a fresh stream fed
+    ``features`` (T, D) under auto, ln(T / T_ref) within ln :data:`RATE_RANGE` faded with the pulse, from the
+    same tempo follower: the tempo a predictor that hears it is trained on (models/training/tempo_predictor.py)."""
+    c = model.config
+    cc, oc = c.clarity_col, c.onset_col
+    out = np.zeros(len(features), np.float32)
+    ref = reference_period(model)
+    if not (FOLLOW_TEMPO and 0 <= cc and cc + 1 < c.feature_dim) or ref <= 0.0:
+        return out
+    follower = TempoFollower(tempo_mod.FOLD_HOLD)
+    x = np.asarray(features, np.float64)
+    dens = 0.0
+    lo, hi = RATE_RANGE
+    for t in range(len(x)):
+        if 0 <= oc < c.feature_dim and t % c.seg == 0:  # the stream's onset density, taken at its code steps
+            dens = onset_density(x[max(0, t + 1 - DENSITY_WINDOW): t + 1, oc])
+        follower.update(float(x[t, cc + 1]), float(x[t, cc]), dens)
+        if follower.period > 0.0:
+            w = min(1.0, follower.confidence / RATE_CONFIDENCE)
+            out[t] = w * math.log(min(max(ref / follower.period, lo), hi))
+    return out
+
+
 def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton products a b of quaternion rows (..., 4), (x, y, z, w) order (SciPy's). All of a
     pose's bones in one NumPy expression for :meth:`DanceStream._fade`, which runs on the audio
@@ -559,9 +595,7 @@ class DanceStream:
         self._fk_offsets = load_default_skeleton().point_offsets().astype(np.float64)
         # how much a repeat of each code is penalised (REPEAT_PENALTY): calm codes repeat freely
         self._repeat_weight = np.clip(self._code_energy + REPEAT_CALM, 0.0, 1.0).astype(np.float32)
-        period = model.member_period.numpy().astype(np.float64)  # (K, M) each exemplar's song; 0 unknown
-        known = period[real & (period > 0)]
-        self._ref_period = float(np.exp(np.log(known).mean())) if len(known) else 0.0
+        self._ref_period = reference_period(model)
         self.energy = 1.0
         self._energy_bias: np.ndarray | None = None  # ENERGY_GAIN * (energy - 1) * z; None at 1
         self.set_energy(energy)
@@ -773,6 +807,13 @@ class DanceStream:
         return 60.0 * FPS / period if period > 0.0 else 0.0
 
     @property
+    def tempo_input(self) -> float:
+        """What a predictor that hears the tempo (``DanceVQConfig.tempo_input``) is given: ln(T / T_ref),
+        T the followed tempo, T_ref the memory's, within ln :data:`RATE_RANGE` and faded to 0 as the
+        pulse fades, as the playback rate is (:meth:`_asked_rate`); 0 without a tempo."""
+        return math.log(self._asked_rate())
+
+    @property
     def playback_rate(self) -> float:
         """Exemplar frames a frame the current movement ends at (1: its own pace; tempo following)."""
         return self._rate
@@ -802,6 +843,8 @@ class DanceStream:
         else:  # the stream's first token
             token = pred.embed(self._hist.reshape(-1), self._last)
         self._embed_rows = 0
+        if pred.tempo is not None:  # a predictor that hears the tempo (DanceVQConfig.tempo_input)
+            token = pred.with_tempo(token, self.tempo_input)
         prefix = self._prefix
         if prefix is None or prefix.style != self._pstyle:  # the first step, or the style changed since
             prefix = Prefix(pred, list(self._tokens), self._pstyle)
@@ -956,13 +999,15 @@ class DanceStream:
         return logits if out is None else out
 
     def _tempo_tilt(self) -> float:
-        """:data:`TEMPO_ENERGY` times ln(T / T_ref), blended to 0 as the pulse fades and as the
-        energy control goes from 1 to 0 or to 2 (0 without a tempo)."""
+        """:data:`TEMPO_ENERGY` (:data:`TEMPO_ENERGY_HEARD` for a predictor that hears the tempo) times
+        ln(T / T_ref), blended to 0 as the pulse fades and as the energy control goes from 1 to 0 or
+        to 2 (0 without a tempo)."""
         period = self._tempo.period
-        if not FOLLOW_TEMPO or TEMPO_ENERGY == 0.0 or self._ref_period <= 0.0 or period <= 0.0:
+        gain = TEMPO_ENERGY if self._predictor.tempo is None else TEMPO_ENERGY_HEARD
+        if not FOLLOW_TEMPO or gain == 0.0 or self._ref_period <= 0.0 or period <= 0.0:
             return 0.0
         w = min(1.0, self._tempo.confidence / RATE_CONFIDENCE) * max(0.0, 1.0 - abs(self.energy - 1.0))  # the energy control set away from 1 takes over
-        return TEMPO_ENERGY * w * math.log(self._ref_period / period)
+        return gain * w * math.log(self._ref_period / period)
 
     def _asked_rate(self) -> float:
         """The playback rate the followed tempo asks for now, within :data:`RATE_RANGE`, before the

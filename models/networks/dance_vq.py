@@ -98,6 +98,10 @@ class DanceVQConfig:
     gate_tau: time constant (frames) of the presence detector's statistics while the performer
     dances, the one its detector was fitted at (models/networks/music_gate.py; 15 before the
     steadiness column, 10 with it).
+    tempo_input: the predictor hears the followed tempo, ``ln(T / T_ref)`` (T the tempo the
+    performer follows at the token's last frame, T_ref the memory's mean tempo, faded to 0 as
+    the pulse fades: :meth:`~models.networks.dance_stream.DanceStream.tempo_input`), as one more
+    input of each token (a learned direction, no bias: 0 at T_ref). False: it does not.
     """
 
     feature_dim: int = 62
@@ -121,6 +125,7 @@ class DanceVQConfig:
     onset_col: int = -1
     gate_col: int = -1
     gate_tau: float = 15.0
+    tempo_input: bool = False
 
     def __post_init__(self) -> None:
         ints = ("feature_dim", "seg", "codebook", "code_dim", "enc_width", "dec_width", "d_model", "layers", "heads",
@@ -260,7 +265,8 @@ class CodePredictor(nn.Module):
     """Causal Transformer: audio chunks (B, N, seg * D), previous codes (B, N), style (B,) -> logits (B, N, K).
 
     ``prev[:, j]`` is the code of the step before token j (``codebook`` = none yet, the
-    stream's start). N <= window_codes; token j attends to tokens <= j.
+    stream's start). N <= window_codes; token j attends to tokens <= j. With
+    ``tempo_input``, ``tempo`` (B, N): each token's ln(T / T_ref) (None: 0, the memory's tempo).
     """
 
     def __init__(self, c: DanceVQConfig) -> None:
@@ -268,6 +274,7 @@ class CodePredictor(nn.Module):
         self.audio = nn.Sequential(nn.Linear(c.seg * c.feature_dim, c.d_model), nn.GELU(), nn.Linear(c.d_model, c.d_model))
         self.code = nn.Embedding(c.codebook + 1, c.d_model)
         self.style = nn.Embedding(c.num_styles + 1, c.d_model)
+        self.tempo = nn.Linear(1, c.d_model, bias=False) if c.tempo_input else None
         self.pos = nn.Parameter(torch.zeros(c.window_codes, c.d_model))
         nn.init.normal_(self.pos, std=0.02)
         layer = nn.TransformerEncoderLayer(c.d_model, c.heads, 4 * c.d_model, c.dropout, activation="gelu",
@@ -278,9 +285,12 @@ class CodePredictor(nn.Module):
         n = c.window_codes
         self.register_buffer("mask", torch.triu(torch.full((n, n), float("-inf")), diagonal=1), persistent=False)
 
-    def forward(self, audio: torch.Tensor, prev: torch.Tensor, style: torch.Tensor) -> torch.Tensor:
+    def forward(self, audio: torch.Tensor, prev: torch.Tensor, style: torch.Tensor,
+                tempo: torch.Tensor | None = None) -> torch.Tensor:
         n = audio.shape[1]
         h = self.audio(audio) + self.code(prev) + self.style(style)[:, None] + self.pos[:n]
+        if self.tempo is not None and tempo is not None:
+            h = h + self.tempo(tempo[..., None].to(h.dtype))
         h = self.blocks(h, mask=self.mask[:n, :n], is_causal=True)
         return self.head(self.norm(h))
 
@@ -397,11 +407,13 @@ class DanceVQ(nn.Module):
         return padded[: n * s].reshape(n, s * d)
 
     @torch.no_grad()
-    def next_logits(self, audio: np.ndarray, prev: np.ndarray, style: int) -> np.ndarray:
-        """Logits (K,) of the next code from the window's tokens: audio (n, seg * D), prev codes (n,)."""
+    def next_logits(self, audio: np.ndarray, prev: np.ndarray, style: int, tempo: np.ndarray | None = None) -> np.ndarray:
+        """Logits (K,) of the next code from the window's tokens: audio (n, seg * D), prev codes (n,),
+        each token's ln(T / T_ref) (n,) where the predictor hears the tempo (None: 0)."""
         a = torch.from_numpy(np.ascontiguousarray(audio, np.float32))[None]
         p = torch.as_tensor(prev, dtype=torch.long)[None]
-        return self.predictor(a, p, torch.tensor([style]))[0, -1].numpy()
+        t = None if tempo is None else torch.as_tensor(np.asarray(tempo, np.float32))[None]
+        return self.predictor(a, p, torch.tensor([style]), t)[0, -1].numpy()
 
     def sample(self, logits: np.ndarray, rng: np.random.Generator) -> int:
         """One code drawn from ``softmax(logits / temperature)`` over the top_k codes."""

@@ -372,12 +372,15 @@ def fit_style_prior(model: DanceVQ, clips: list) -> np.ndarray:
 
 @dataclass
 class CodeSet:
-    """Per (clip, phase): audio tokens (N, seg * D), codes (N,), code validity (N,), style token."""
+    """Per (clip, phase): audio tokens (N, seg * D), codes (N,), code validity (N,), style token, and
+    for a predictor that hears the tempo each token's ln(T / T_ref) (N,) (models.training.tempo_predictor;
+    None: not heard)."""
 
     tokens: list[np.ndarray]
     codes: list[np.ndarray]
     valid: list[np.ndarray]
     style: list[int]
+    tempo: list[np.ndarray] | None = None
 
 
 @torch.no_grad()
@@ -405,10 +408,11 @@ def encode_clips(model: DanceVQ, clips: list, phases: range) -> CodeSet:
 
 def predictor_batch(data: CodeSet, n: int, batch: int, k: int, opts: DanceVQTrainOptions | None,
                     rng: np.random.Generator) -> tuple[torch.Tensor, ...]:
-    """A batch of ``n``-step windows: (audio, prev codes, style, target codes, mask). ``opts`` None: no noise, auto style."""
+    """A batch of ``n``-step windows: (audio, prev codes, style, target codes, mask), and where ``data``
+    has tempo inputs their windows (B, n) last. ``opts`` None: no noise, auto style."""
     long = [i for i in range(len(data.codes)) if len(data.codes[i]) >= n]
     pick = rng.choice(long, batch)
-    a, prev, tgt, mask, sty = [], [], [], [], []
+    a, prev, tgt, mask, sty, tempo = [], [], [], [], [], []
     for i in pick:
         k0 = int(rng.integers(0, len(data.codes[i]) - n + 1))
         codes = data.codes[i]
@@ -420,20 +424,46 @@ def predictor_batch(data: CodeSet, n: int, batch: int, k: int, opts: DanceVQTrai
         prev.append(p)
         tgt.append(codes[k0: k0 + n])
         mask.append(data.valid[i][k0: k0 + n])
+        if data.tempo is not None:
+            tempo.append(data.tempo[i][k0: k0 + n])
         auto = opts is None or rng.random() < opts.auto_prob
         sty.append(0 if auto else data.style[i])
-    return (torch.from_numpy(np.stack(a)), torch.from_numpy(np.stack(prev)).long(), torch.tensor(sty),
-            torch.from_numpy(np.stack(tgt)).long(), torch.from_numpy(np.stack(mask)))
+    out = (torch.from_numpy(np.stack(a)), torch.from_numpy(np.stack(prev)).long(), torch.tensor(sty),
+           torch.from_numpy(np.stack(tgt)).long(), torch.from_numpy(np.stack(mask)))
+    return (*out, torch.from_numpy(np.stack(tempo))) if tempo else out
 
 
 def predictor_loss(model: DanceVQ, batch: tuple[torch.Tensor, ...]) -> tuple[torch.Tensor, float]:
-    """Masked cross-entropy of the next code, and the accuracy."""
-    audio, prev, style, tgt, mask = batch
-    logits = model.predictor(audio, prev, style)
+    """Masked cross-entropy of the next code, and the accuracy (``batch``: :func:`predictor_batch`'s)."""
+    audio, prev, style, tgt, mask = batch[:5]
+    logits = model.predictor(audio, prev, style, batch[5] if len(batch) > 5 else None)
     ce = F.cross_entropy(logits.reshape(-1, logits.shape[-1]), tgt.reshape(-1), reduction="none")
     m = mask.reshape(-1).float()
     acc = ((logits.argmax(-1).reshape(-1) == tgt.reshape(-1)).float() * m).sum() / m.sum().clamp_min(1)
     return (ce * m).sum() / m.sum().clamp_min(1), float(acc)
+
+
+def predictor_step(model: DanceVQ, codes: CodeSet, opts: DanceVQTrainOptions, opt: torch.optim.Optimizer,
+                   rng: np.random.Generator) -> dict[str, float]:
+    """One stage-2 step of the predictor on a :func:`predictor_batch` of ``codes``; returns its loss and accuracy."""
+    model.encoder.eval()
+    loss, acc = predictor_loss(model, predictor_batch(codes, model.config.window_codes, opts.pred_batch,
+                                                      model.config.codebook, opts, rng))
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    torch.nn.utils.clip_grad_norm_(model.predictor.parameters(), opts.grad_clip)
+    opt.step()
+    return {"loss_ce": loss.item(), "acc": acc}
+
+
+@torch.no_grad()
+def validate_predictor(model: DanceVQ, val_codes: CodeSet) -> dict[str, float]:
+    """Cross-entropy and accuracy of the next code on 256 fixed windows of ``val_codes`` (auto style, no noise)."""
+    model.eval()
+    ce, acc = predictor_loss(model, predictor_batch(val_codes, model.config.window_codes, 256,
+                                                    model.config.codebook, None, np.random.default_rng(0)))
+    model.train()
+    return {"val_ce": ce.item(), "val_acc": acc}
 
 
 def training_dances(cfg, data_root: str | Path) -> tuple[list[str], list[str], list[str]]:
@@ -537,14 +567,7 @@ def train_dance_vq(cfg, data_root: str | Path, out_dir: str | Path, cache_dir: s
                     fit_style_prior(model, motion_clips)
                 codes = encode_clips(model, train_clips, range(model.config.seg))
                 val_codes = encode_clips(model, val_clips, range(1))
-            model.encoder.eval()
-            loss, acc = predictor_loss(model, predictor_batch(codes, model.config.window_codes, opts.pred_batch,
-                                                              model.config.codebook, opts, rng))
-            opt_pred.zero_grad(set_to_none=True)
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(model.predictor.parameters(), opts.grad_clip)
-            opt_pred.step()
-            row = {"loss_ce": loss.item(), "acc": acc}
+            row = predictor_step(model, codes, opts, opt_pred, rng)
             frames += opts.pred_batch * model.config.window_codes * model.config.seg
         step += 1
         row.update(step=step, stage=stage)
@@ -555,13 +578,7 @@ def train_dance_vq(cfg, data_root: str | Path, out_dir: str | Path, cache_dir: s
             if stage == 1:
                 row.update(validate_codebook(model, val_clips, offsets))
             else:
-                model.eval()
-                with torch.no_grad():
-                    vrng = np.random.default_rng(0)
-                    ce, acc = predictor_loss(model, predictor_batch(val_codes, model.config.window_codes, 256,
-                                                                    model.config.codebook, None, vrng))
-                model.train()
-                row.update(val_ce=ce.item(), val_acc=acc)
+                row.update(validate_predictor(model, val_codes))
             extra = {k: row[k] for k in ("val_pose_l1", "val_fk_m", "val_ce", "val_acc") if k in row}
             save(out / "last.pt", extra)
             if step == cfg.total_steps:
