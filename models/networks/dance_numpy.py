@@ -211,6 +211,11 @@ class Prefix:
         """Pieces not computed yet."""
         return len(self._todo) - self._next
 
+    @property
+    def pieces(self) -> int:
+        """All its pieces, computed or not."""
+        return len(self._todo)
+
     def step(self) -> None:
         """The next piece (see the class docstring)."""
         kind, i = self._todo[self._next]

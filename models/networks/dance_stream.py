@@ -261,6 +261,18 @@ SWAY: tuple[tuple[str, int, float, float, float], ...] = (
 #: days holds at most 2.4 MB of history (one trim moves 0.5 MB in memory, every 4.5 minutes).
 CODES_KEPT: int = 65536
 CODES_TRIM: int = 1024
+#: The next code step's pieces ahead (:class:`~models.networks.dance_numpy.Prefix`: 7 for the
+#: 3-layer predictor, in order the attention block of layer 0, its feed-forward's two halves, the
+#: same for layer 1, layer 2's keys and values) done by the end of frame j of an 8-frame cycle,
+#: in sevenths of them (rounded up; a prefix of other length takes the same shares): one on
+#: frames 1, 2, 5, 6 and 7, two on 3, none on the code step and on frame 4 (the code step of a
+#: performer staggered by half a cycle). 4 staggered performers (phases 0, 2, 4, 6) put every
+#: code step on an even hop and every lane at an odd position on the odd hops, which also carry
+#: the handover's reads (frame 7): so the costliest piece, layer 0's first feed-forward half, goes
+#: on frame 2 and the even hop (a code step, frames 2 and 6) costs about what the odd one does
+#: (before: two pieces on frame 1, the odd hop 0.1-0.25 ms above the even one;
+#: benchmarks/studies/lane_parts.py, docs/latency.md). Which frame computes a piece changes no value.
+PIECES_BY_8: tuple[int, ...] = (0, 1, 2, 4, 4, 5, 6, 7)
 #: Steps of the tempo's speed-cap table (:data:`SPEED_CAP_TEMPO`).
 _CAP_STEPS = 64
 
@@ -506,7 +518,7 @@ class DanceStream:
     movement played from audio frame t (shown at t + L) is so decided with audio up to L
     frames before it is seen, and its speed dips aim at the beats expected at t + L.
     The code steps stay on frames ``t % seg == 0`` whatever the lead, so an ensemble's
-    stagger and the prefix schedule (``_free``) are those of lead 0.
+    stagger and the prefix schedule (``_pieces_by``) are those of lead 0.
     """
 
     def __init__(self, model: DanceVQ, seed: int = 0, style: str | None = None, energy: float = 1.0,
@@ -579,13 +591,18 @@ class DanceStream:
         self._forecast = PhaseForecast()  # the lead's beat forecast (models/networks/lead.py), fed the onsets
         self._decay = hermite_decay(DECAY_FRAMES * self.seg // 8)  # (2, D): match_exemplar's
         self._handover = Handover(self.seg)  # when the playing exemplar hands over (models/networks/handover.py)
-        # Frames of the cycle the next code step's prefix is computed on: all but the code step
-        # and the frame half a cycle from it, where the code step of a performer staggered by half
-        # a cycle falls (an ensemble of 2 or 4: realtime.engine's stagger). _free[j]: how many
-        # such frames are left from frame j on (0: none on j itself).
+        # Frames of the cycle the next code step's prefix (its pieces ahead) is computed on: all but
+        # the code step and the frame half a cycle from it, where the code step of a performer
+        # staggered by half a cycle falls (an ensemble of 2 or 4: realtime.engine's stagger).
+        # _pieces_by[j] / _pieces_den: the share of a prefix's pieces done by the end of frame j.
+        # seg 8 (PIECES_BY_8): levelled for 4 staggered performers, whose code steps all fall on
+        # even hops; else spread evenly over those frames.
         skip = {0, self.seg // 2} if self.seg > 2 else {0}
-        self._free = [0 if j in skip else sum(1 for i in range(j, self.seg) if i not in skip)
-                      for j in range(self.seg)]
+        if self.seg == 8:
+            self._pieces_by, self._pieces_den = PIECES_BY_8, PIECES_BY_8[-1]
+        else:
+            self._pieces_by = tuple(sum(1 for i in range(1, j + 1) if i not in skip) for j in range(self.seg))
+            self._pieces_den = max(self._pieces_by[-1], 1)
         base = getattr(model, "idle_base", None)  # a library's own mean pose (library_player), else the dancers'
         base = model.destandardize_poses(model.pose_mean * 0) if base is None else base  # unit quaternions
         self._idle_base = base.numpy().astype(np.float32)
@@ -1219,12 +1236,14 @@ class DanceStream:
                 self._tempo.update(float(x[i, self._beat_cols[3]]), float(x[i, self._beat_cols[2]]), self._density)
             if t % self.seg == 0:
                 self._next_code()
-            elif self._free[t % self.seg]:
+            elif self._pieces_by[j] > self._pieces_by[j - 1]:  # this frame's share of the pieces ahead
                 for pre in (self._prefix, self._prefix_auto):
                     if pre is not None and not pre.done:
-                        with single_thread_blas():  # its pieces over this frame and the free ones after it
-                            for _ in range(-(-pre.left // self._free[t % self.seg])):
-                                pre.step()  # (models/networks/dance_numpy.py)
+                        keep = pre.pieces - -(-pre.pieces * self._pieces_by[j] // self._pieces_den)  # left after it
+                        if pre.left > keep:
+                            with single_thread_blas():  # (models/networks/dance_numpy.py)
+                                while pre.left > keep:
+                                    pre.step()
             pose = self._warped(t % self.seg)
             w = self._idle.step(x[i])
             e = 0.0
