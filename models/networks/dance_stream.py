@@ -265,14 +265,16 @@ CODES_TRIM: int = 1024
 #: 3-layer predictor, in order the attention block of layer 0, its feed-forward's two halves, the
 #: same for layer 1, layer 2's keys and values) done by the end of frame j of an 8-frame cycle,
 #: in sevenths of them (rounded up; a prefix of other length takes the same shares): one on
-#: frames 1, 2, 5, 6 and 7, two on 3, none on the code step and on frame 4 (the code step of a
-#: performer staggered by half a cycle). 4 staggered performers (phases 0, 2, 4, 6) put every
-#: code step on an even hop and every lane at an odd position on the odd hops, which also carry
-#: the handover's reads (frame 7): so the costliest piece, layer 0's first feed-forward half, goes
-#: on frame 2 and the even hop (a code step, frames 2 and 6) costs about what the odd one does
-#: (before: two pieces on frame 1, the odd hop 0.1-0.25 ms above the even one;
-#: benchmarks/studies/lane_parts.py, docs/latency.md). Which frame computes a piece changes no value.
-PIECES_BY_8: tuple[int, ...] = (0, 1, 2, 4, 4, 5, 6, 7)
+#: frames 1, 2 and 7, two on 3 and 5, none on the code step, on frame 4 (the code step of a
+#: performer staggered by half a cycle) and on 6. 4 staggered performers (phases 0, 2, 4, 6) put
+#: every code step on an even hop and every lane at an odd position on the odd hops, which also
+#: carry the handover's reads (frame 7): layer 0's first feed-forward half (the costliest piece
+#: but one) on frame 2 and nothing on 6 make an even hop (a code step, frame 2) cost what an odd
+#: one does, within 0.03 ms of CPU (p50; two pieces on frame 1, one on 2 and 6: 0.04 the other
+#: way; layer 1's second half on 6 too: 0.12; benchmarks/studies/lane_parts.py, docs/latency.md),
+#: and one performer's or two's costliest frame but the code step is lighter than with two pieces
+#: on frame 1. Which frame computes a piece changes no value.
+PIECES_BY_8: tuple[int, ...] = (0, 1, 2, 4, 4, 6, 6, 7)
 #: Steps of the tempo's speed-cap table (:data:`SPEED_CAP_TEMPO`).
 _CAP_STEPS = 64
 
@@ -596,7 +598,7 @@ class DanceStream:
         # staggered by half a cycle falls (an ensemble of 2 or 4: realtime.engine's stagger).
         # _pieces_by[j] / _pieces_den: the share of a prefix's pieces done by the end of frame j.
         # seg 8 (PIECES_BY_8): levelled for 4 staggered performers, whose code steps all fall on
-        # even hops; else spread evenly over those frames.
+        # even hops (frame 6 left free too); else spread evenly over those frames.
         skip = {0, self.seg // 2} if self.seg > 2 else {0}
         if self.seg == 8:
             self._pieces_by, self._pieces_den = PIECES_BY_8, PIECES_BY_8[-1]
