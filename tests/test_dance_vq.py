@@ -189,6 +189,24 @@ def test_the_pieces_ahead_level_the_even_and_odd_hops_of_four_staggered_performe
                            5: [("ff1", 1), ("ff2", 1)], 7: [("attn", 2)]}
 
 
+def test_the_fades_row_norms_and_products_are_numpys_bit_for_bit():
+    """DanceStream._fade's row norms and quaternion products without NumPy's Python wrappers
+    (models/networks/dance_stream.py, _row_norms, _qmul) give np.linalg.norm's and moveaxis's bytes."""
+    from models.networks.dance_stream import _qmul, _row_norms
+
+    rng = np.random.default_rng(7)
+    for n, k in ((21, 3), (21, 4), (1, 3), (55, 4)):
+        x = rng.normal(size=(n, 4))[:, :k] * 10.0 ** rng.uniform(-8, 3, (n, 1))  # a strided view, as rel[:, :3]
+        assert _row_norms(x).tobytes() == np.linalg.norm(x, axis=1).tobytes()
+        assert _row_norms(x, True).tobytes() == np.linalg.norm(x, axis=1, keepdims=True).tobytes()
+    a, b = rng.normal(size=(21, 4)), rng.normal(size=(21, 4))
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    ref = np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                    aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+    assert _qmul(a, b).tobytes() == ref.tobytes()
+
+
 def test_compiled_frame_kernels_give_the_numpy_arithmetic_bit_for_bit():
     """The kernels of a performer's ordinary frame (models/networks/dance_jit.py) against the NumPy
     code they replaced: the same float32 values, not merely close ones, so codes and poses do not

@@ -485,10 +485,17 @@ def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     pose's bones in one NumPy expression for :meth:`DanceStream._fade`, which runs on the audio
     path while fading: SciPy's ``Rotation`` took 0.2-0.5 ms a frame there (see :class:`IdleSway`),
     and :func:`models.networks.dance_jit._qmul` is the same product for one quaternion, compiled."""
-    ax, ay, az, aw = np.moveaxis(a, -1, 0)
-    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]  # np.moveaxis's views, without its wrapper
+    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
     return np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
                      aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+
+
+def _row_norms(x: np.ndarray, keepdims: bool = False) -> np.ndarray:
+    """``np.linalg.norm(x, axis=1, keepdims=keepdims)`` of float64 rows (n, k), the same arithmetic
+    (the square root of ``add.reduce`` of the squares) without its Python wrapper: for
+    :meth:`DanceStream._fade`, which runs on the audio path while fading (7 of them a frame)."""
+    return np.sqrt(np.add.reduce(x * x, axis=1, keepdims=keepdims))
 
 
 def _nlerp(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
@@ -1178,23 +1185,23 @@ class DanceStream:
             self._fade_prev = None
             return _nlerp(pose, idle, e)
         qa, qb = pose[3:].reshape(-1, 4).astype(np.float64), idle[3:].reshape(-1, 4).astype(np.float64)
-        qa = qa / np.maximum(np.linalg.norm(qa, axis=1, keepdims=True), 1e-12)
-        qb = qb / np.maximum(np.linalg.norm(qb, axis=1, keepdims=True), 1e-12)
+        qa = qa / np.maximum(_row_norms(qa, True), 1e-12)
+        qb = qb / np.maximum(_row_norms(qb, True), 1e-12)
         rel = _qmul(qa * [-1.0, -1.0, -1.0, 1.0], qb)  # qa^-1 qb
         rel = rel * np.where(rel[:, 3:] < 0, -1.0, 1.0)  # the shorter way: angle <= pi
-        vn = np.linalg.norm(rel[:, :3], axis=1)
+        vn = _row_norms(rel[:, :3])
         angle = 2.0 * np.arctan2(vn, rel[:, 3])
         axis = rel[:, :3] / np.maximum(vn, 1e-12)[:, None]
         w = angle[:, None] * axis
         if self._fade_prev is not None:  # the same rotation the long way round, where that is nearer the last
             other = w - (2.0 * np.pi) * axis
-            far = np.linalg.norm(other - self._fade_prev, axis=1) < np.linalg.norm(w - self._fade_prev, axis=1)
+            far = _row_norms(other - self._fade_prev) < _row_norms(w - self._fade_prev)
             w[far] = other[far]
             if min(e, 1.0 - e) * 2.0 * np.pi <= FADE_SWITCH:  # near either end the shorter way costs a small step
-                long = np.linalg.norm(w, axis=1) > np.pi
+                long = _row_norms(w) > np.pi
                 w[long] = (angle[:, None] * axis)[long]
         self._fade_prev = w
-        wn = np.linalg.norm(w, axis=1)
+        wn = _row_norms(w)
         h = 0.5 * e * wn
         turn = np.concatenate([np.sin(h)[:, None] * (w / np.maximum(wn, 1e-12)[:, None]), np.cos(h)[:, None]], axis=1)
         q = _qmul(qa, turn)
