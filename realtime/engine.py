@@ -1030,6 +1030,9 @@ class Engine:
             with hold:
                 try:
                     self._warm_up()
+                except BaseException as exc:  # noqa: BLE001 - for start(), before it reads it (re-raised below)
+                    self.error = exc
+                    raise
                 finally:
                     warmed.set()
                 go.wait()
