@@ -30,6 +30,7 @@ bounded buffers for p50/p99.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
@@ -42,6 +43,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from models.errors import ConfigError, short_repr
+from models.networks.dance_numpy import hold_single_thread_blas
 from models.rig.humanoid import NUM_BONES
 from models.rig.motion import POSE_DIM
 from models.timebase import FPS, HOP, SAMPLE_RATE
@@ -1020,14 +1022,22 @@ class Engine:
         return max(int(self.config.ring_seconds * source.sample_rate), 4 * self.config.max_read)
 
     def _worker(self, warmed: threading.Event, go: threading.Event) -> None:
+        # With one torch thread (config.threads, the default) BLAS is held to one thread too for the
+        # worker's life: its products are small, and a dance_vq performer then skips its per-frame
+        # limit (models/networks/dance_numpy.py, single_thread_blas: up to 50 µs a frame each)
+        hold = hold_single_thread_blas() if self.config.threads == 1 else contextlib.nullcontext()
         try:
-            try:
-                self._warm_up()
-            finally:
-                warmed.set()
-            go.wait()
-            if not self._stop.is_set():
-                self._loop()
+            with hold:
+                try:
+                    self._warm_up()
+                except BaseException as exc:  # noqa: BLE001 - for start(), before it reads it (re-raised below)
+                    self.error = exc
+                    raise
+                finally:
+                    warmed.set()
+                go.wait()
+                if not self._stop.is_set():
+                    self._loop()
         except BaseException as exc:  # noqa: BLE001 - kept and re-raised by start() / wait()
             self.error = exc
             self.state = "failed"

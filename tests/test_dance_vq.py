@@ -163,6 +163,53 @@ def test_numpy_predictor_gives_the_torch_predictors_logits(cfg):
                 np.testing.assert_allclose(got, ref, atol=1e-5 * max(1.0, float(np.abs(ref).max())), rtol=0)
 
 
+def test_the_pieces_ahead_level_the_even_and_odd_hops_of_four_staggered_performers(monkeypatch):
+    """A 3-layer predictor's 7 pieces ahead (models/networks/dance_numpy.py, Prefix) fall on the frames
+    of the 8-frame cycle that PIECES_BY_8 gives: layer 0's first feed-forward half on frame 2, the only
+    piece on an even frame, so that with 4 performers staggered by 2 frames (every code step on an even
+    hop) the even hops (a code step and it) cost what the odd ones do (the other pieces and the
+    handover's reads); none on the code step nor on frame 4 (the code step of a performer staggered
+    by half a cycle)."""
+    import models.networks.dance_numpy as dance_numpy
+
+    torch.manual_seed(0)
+    m = DanceVQ(dataclasses_replace(TINY, layers=3, window_codes=6)).eval()
+    assert m.config.seg == 8
+    s = DanceStream(m, seed=0)
+    seen: dict[int, list[tuple[str, int]]] = {}
+    step = dance_numpy.Prefix.step
+
+    def counted(pre):
+        if s.frame >= 8 * 8:  # a full window: every piece there
+            seen.setdefault(s.frame, []).append(pre._todo[pre._next])
+        step(pre)
+
+    monkeypatch.setattr(dance_numpy.Prefix, "step", counted)
+    s.push(music(8 * 12))
+    by_position = {f % 8: kinds for f, kinds in seen.items()}
+    assert all(seen[f] == by_position[f % 8] for f in seen)  # the same every cycle
+    assert by_position == {1: [("attn", 0)], 2: [("ff1", 0)], 3: [("ff2", 0), ("attn", 1)],
+                           5: [("ff1", 1), ("ff2", 1)], 7: [("attn", 2)]}
+
+
+def test_the_fades_row_norms_and_products_are_numpys_bit_for_bit():
+    """DanceStream._fade's row norms and quaternion products without NumPy's Python wrappers
+    (models/networks/dance_stream.py, _row_norms, _qmul) give np.linalg.norm's and moveaxis's bytes."""
+    from models.networks.dance_stream import _qmul, _row_norms
+
+    rng = np.random.default_rng(7)
+    for n, k in ((21, 3), (21, 4), (1, 3), (55, 4)):
+        x = rng.normal(size=(n, 4))[:, :k] * 10.0 ** rng.uniform(-8, 3, (n, 1))  # a strided view, as rel[:, :3]
+        assert _row_norms(x).tobytes() == np.linalg.norm(x, axis=1).tobytes()
+        assert _row_norms(x, True).tobytes() == np.linalg.norm(x, axis=1, keepdims=True).tobytes()
+    a, b = rng.normal(size=(21, 4)), rng.normal(size=(21, 4))
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    ref = np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                    aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+    assert _qmul(a, b).tobytes() == ref.tobytes()
+
+
 def test_compiled_frame_kernels_give_the_numpy_arithmetic_bit_for_bit():
     """The kernels of a performer's ordinary frame (models/networks/dance_jit.py) against the NumPy
     code they replaced: the same float32 values, not merely close ones, so codes and poses do not

@@ -122,6 +122,32 @@ def test_fast_replay_matches_offline_pipeline_and_stamps():
     assert st["state"] == "finished" and sink.closed
 
 
+def test_with_one_torch_thread_the_worker_holds_blas_to_one_thread_and_gives_the_count_back():
+    """The worker (threads=1, the default) runs BLAS on one thread all its life, so a dance_vq performer's
+    per-frame limit (models/networks/dance_numpy.py, single_thread_blas) has nothing to do; after the
+    run the process's count is what it was. threads=None leaves BLAS alone."""
+    from threadpoolctl import threadpool_info
+
+    import models.networks.dance_numpy as dance_numpy
+
+    def blas_threads() -> list[int]:
+        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+    seen: list[tuple[int, list[int]]] = []
+
+    class Probe(ListSink):
+        def send(self, frame: PoseFrame) -> None:
+            if not self.frames:
+                seen.append((dance_numpy._held, blas_threads()))
+            super().send(frame)
+
+    before = blas_threads()  # more than one on a machine of several cores, unless OMP_NUM_THREADS says one
+    for threads, held, inside in ((1, 1, [1] * len(before)), (None, 0, before)):
+        run_engine(FileSource(noise(1.0), SAMPLE_RATE, realtime=False), sinks=[Probe()], threads=threads)
+        assert seen[-1] == (held, inside)
+        assert blas_threads() == before and dance_numpy._held == 0
+
+
 def test_44k_stereo_input_stamps_in_input_samples():
     sr = 44100
     audio = noise(1.0, sr, channels=2)

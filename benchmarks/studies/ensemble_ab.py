@@ -6,10 +6,11 @@ process, code steps staggered) alternately on REF (checked out in a temporary gi
 run with this interpreter and PYTHONPATH pointing at it) and on the working tree, PAIRS
 times, and prints for each run and each count the whole hop per frame, ms: wall p50, own
 (wall less the run-queue wait) p50 / p99 / p99.9, the worker thread's CPU time p50 / p99 /
-p99.9, the input stage (features) p50, the share of the CPUs other processes held; then the
-median of each side's runs. On a shared machine only the interleaved pairs compare:
+p99.9, the same CPU time's p50 / p99 on the even and on the odd frame indices apart (4
+staggered performers: the code steps on the even ones), the input stage (features) p50, the
+share of the CPUs other processes held; then the median of each side's runs. On a shared machine only the interleaved pairs compare:
 docs/latency.md. A REF older than the p50 / p99.9 fields of the ensemble rows
-(``realtime/bench/suite.py`` ``_hop_tails``) prints – for them::
+(``realtime/bench/suite.py`` ``_hop_tails``, ``_hop_parity``) prints – for them::
 
     .venv/bin/python benchmarks/studies/ensemble_ab.py --ref HEAD~3 --pairs 3 --out out/ensemble_ab
 """
@@ -29,7 +30,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 COLS = (("per_hop_ms_p50_wall", "wall p50"), ("per_hop_ms_p50_own", "own p50"), ("per_hop_ms_p99_own", "own p99"),
         ("per_hop_ms_p999_own", "own p99.9"), ("per_hop_ms_p50_cpu", "CPU p50"), ("per_hop_ms_p99_cpu", "CPU p99"),
-        ("per_hop_ms_p999_cpu", "CPU p99.9"), ("features_ms_p50", "features p50"),
+        ("per_hop_ms_p999_cpu", "CPU p99.9"), ("per_hop_ms_p50_cpu_even", "CPU p50 even"),
+        ("per_hop_ms_p99_cpu_even", "CPU p99 even"), ("per_hop_ms_p50_cpu_odd", "CPU p50 odd"),
+        ("per_hop_ms_p99_cpu_odd", "CPU p99 odd"), ("features_ms_p50", "features p50"),
         ("others_busy_percent", "others busy %"))
 
 

@@ -7,8 +7,10 @@ clip's features one frame at a time, unpaced, in one thread; the thread's CPU ti
 frame's pushes (all lanes) is printed first, then each code step's thread CPU time and the
 pushes' by frame index mod 8 (with 4 lanes the code steps fall on the even ones). Each part is timed per call (``time.perf_counter_ns`` around the method: about
 0.3 µs added to each); printed: calls, median and p99 µs, and µs per frame summed over the
-four lanes (``--lanes``). Then ``Stage.step`` and ``Stage.handover`` alone on a synthetic
-track (no other work between calls: their cost with warm caches).
+four lanes (``--lanes``). The pushes run with BLAS held to one thread as the engine's
+worker holds it (``dance_numpy.hold_single_thread_blas``; a tree without it: none, as its
+engine). Then ``Stage.step`` and ``Stage.handover`` alone on a synthetic track (no other work
+between calls: their cost with warm caches).
 
 A comparison of two checkouts runs this script once per checkout, alternately, each
 importing its own code (``--tree``; same load, interleaved)::
@@ -24,6 +26,7 @@ Medians only mean something interleaved: the machine's load moves them by 2x bet
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
 from collections import defaultdict
@@ -47,6 +50,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import numpy as np
 
+    import models.networks.dance_numpy as dance_numpy
     import models.networks.dance_stream as ds
     import models.networks.feet as feet
     import models.networks.stage as stage
@@ -103,11 +107,13 @@ def main(argv: list[str] | None = None) -> int:
     times.clear()
     code_cpu.clear()
     lanes_cpu = np.zeros(len(feats))  # the thread's CPU time of each frame's pushes, all lanes (ms)
-    for t in range(len(feats)):
-        c0 = time.thread_time_ns()
-        for m in models:
-            m.push(feats[t:t + 1])
-        lanes_cpu[t] = (time.thread_time_ns() - c0) / 1e6
+    hold = getattr(dance_numpy, "hold_single_thread_blas", contextlib.nullcontext)  # older trees: none
+    with hold():  # BLAS as the engine's worker holds it
+        for t in range(len(feats)):
+            c0 = time.thread_time_ns()
+            for m in models:
+                m.push(feats[t:t + 1])
+            lanes_cpu[t] = (time.thread_time_ns() - c0) / 1e6
     print(f"code: {tree}; {args.lanes} performers on their spots of the stage {args.stage}, {len(feats)} frames "
           f"each, unpaced; all lanes' pushes a frame, thread CPU ms: p50 {np.median(lanes_cpu):.3f}, "
           f"p99 {np.percentile(lanes_cpu, 99):.3f}")

@@ -124,6 +124,17 @@ def _qmul(ax, ay, az, aw, bx, by, bz, bw):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def qmul_rows(a, b):  # pragma: no cover - compiled
+    """Quaternion products a b of rows (n, 4) float64, x y z w order: dance_stream's ``_qmul`` (the
+    idle fade's), each component's sum in the same order as its NumPy expression, bit for bit."""
+    out = np.empty((a.shape[0], 4))
+    for i in range(a.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = _qmul(a[i, 0], a[i, 1], a[i, 2], a[i, 3],
+                                                           b[i, 0], b[i, 1], b[i, 2], b[i, 3])
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _qlog(x, y, z, w):  # pragma: no cover - compiled
     """Rotation vector (axis times angle, radians; a tuple) of unit quaternion (x y z w), the short way."""
     if w < 0:

@@ -39,6 +39,7 @@ one (a new ``DanceStream``).
 from __future__ import annotations
 
 import contextlib
+import threading
 from collections.abc import Iterator
 
 import numpy as np
@@ -48,6 +49,22 @@ from models.networks.dance_jit import add_rows, embed_finish, embed_token, gelu_
 
 _SQRT_HALF = np.float32(np.sqrt(0.5))
 _BLAS = None  # threadpoolctl's controller of the BLAS libraries, made on first use (about 2 ms)
+_HOLD_LOCK = threading.Lock()
+_held = 0  # blocks inside hold_single_thread_blas now (any thread); while > 0 BLAS runs one thread
+_hold_limit = None  # the threadpoolctl limit the first of them entered (None: none was needed)
+
+
+def _blas():
+    """threadpoolctl's controller of the BLAS libraries (False without threadpoolctl)."""
+    global _BLAS
+    if _BLAS is None:
+        try:
+            from threadpoolctl import ThreadpoolController
+
+            _BLAS = ThreadpoolController().select(user_api="blas")
+        except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn (librosa)
+            _BLAS = False
+    return _BLAS
 
 
 @contextlib.contextmanager
@@ -57,24 +74,47 @@ def single_thread_blas() -> Iterator[None]:
     The predictor's matrix products (15 rows, up to 512 columns; even its one-row products
     are above OpenBLAS's threshold for matrix-vector threading) are split over every core
     by default, and split they cost several times more: on the 2-core bench machine with
-    another job running, a 5.5-minute stream took 36 s instead of 7 s. Where BLAS already
-    runs one thread (the bench's performers: OMP_NUM_THREADS=1) this costs two library
-    calls; else a threadpoolctl limit (about 20 µs). Without threadpoolctl the block runs
-    as it is.
+    another job running, a 5.5-minute stream took 36 s instead of 7 s. Inside
+    :func:`hold_single_thread_blas` (a live engine's worker) this costs nothing; where BLAS
+    already runs one thread (OMP_NUM_THREADS=1) two library calls (about 9 µs); else a
+    threadpoolctl limit (about 50 µs on the 2-core machine). Without threadpoolctl the block
+    runs as it is.
     """
-    global _BLAS
-    if _BLAS is None:
-        try:
-            from threadpoolctl import ThreadpoolController
-
-            _BLAS = ThreadpoolController().select(user_api="blas")
-        except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn (librosa)
-            _BLAS = False
-    if not _BLAS or all(lib.get_num_threads() == 1 for lib in _BLAS.lib_controllers):
+    if _held:
         yield
         return
-    with _BLAS.limit(limits=1):
+    blas = _blas()
+    if not blas or all(lib.get_num_threads() == 1 for lib in blas.lib_controllers):
         yield
+        return
+    with blas.limit(limits=1):
+        yield
+
+
+@contextlib.contextmanager
+def hold_single_thread_blas() -> Iterator[None]:
+    """One BLAS thread for the whole block, so that :func:`single_thread_blas` inside it costs
+    nothing: for a thread that runs the live path all its life (``realtime.engine``'s worker, whose
+    performers' products are all small). BLAS's thread count is the process's: the first block
+    entered sets it to 1, the last one left restores it (nested or on several threads: a count).
+    Only the time changes: the bundled clip's features and a performer's poses on them were the
+    same bytes held or not (2 BLAS threads otherwise, the 2-core machine).
+    """
+    global _held, _hold_limit
+    with _HOLD_LOCK:
+        if _held == 0:
+            blas = _blas()
+            if blas and not all(lib.get_num_threads() == 1 for lib in blas.lib_controllers):
+                _hold_limit = blas.limit(limits=1)
+        _held += 1
+    try:
+        yield
+    finally:
+        with _HOLD_LOCK:
+            _held -= 1
+            if _held == 0 and _hold_limit is not None:
+                _hold_limit.restore_original_limits()
+                _hold_limit = None
 
 
 def _np(t) -> np.ndarray:
@@ -210,6 +250,11 @@ class Prefix:
     def left(self) -> int:
         """Pieces not computed yet."""
         return len(self._todo) - self._next
+
+    @property
+    def pieces(self) -> int:
+        """All its pieces, computed or not."""
+        return len(self._todo)
 
     def step(self) -> None:
         """The next piece (see the class docstring)."""

@@ -42,8 +42,8 @@ import numpy as np
 
 from models.errors import ConfigError
 from models.networks.blend import blend_track
-from models.networks.dance_jit import (joint_speed, match_exemplar, push_history, renorm_pose, sanitize_rows,
-                                       warp_pose)
+from models.networks.dance_jit import (joint_speed, match_exemplar, push_history, qmul_rows, renorm_pose,
+                                       sanitize_rows, warp_pose)
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 from models.networks.dance_vq import DanceVQ
 from models.networks import feet as feet_part
@@ -264,6 +264,20 @@ SWAY: tuple[tuple[str, int, float, float, float], ...] = (
 #: days holds at most 2.4 MB of history (one trim moves 0.5 MB in memory, every 4.5 minutes).
 CODES_KEPT: int = 65536
 CODES_TRIM: int = 1024
+#: The next code step's pieces ahead (:class:`~models.networks.dance_numpy.Prefix`: 7 for the
+#: 3-layer predictor, in order the attention block of layer 0, its feed-forward's two halves, the
+#: same for layer 1, layer 2's keys and values) done by the end of frame j of an 8-frame cycle,
+#: in sevenths of them (rounded up; a prefix of other length takes the same shares): one on
+#: frames 1, 2 and 7, two on 3 and 5, none on the code step, on frame 4 (the code step of a
+#: performer staggered by half a cycle) and on 6. 4 staggered performers (phases 0, 2, 4, 6) put
+#: every code step on an even hop and every lane at an odd position on the odd hops, which also
+#: carry the handover's reads (frame 7): layer 0's first feed-forward half (the costliest piece
+#: but one) on frame 2 and nothing on 6 make an even hop (a code step, frame 2) cost what an odd
+#: one does, within 0.03 ms of CPU (p50; two pieces on frame 1, one on 2 and 6: 0.04 the other
+#: way; layer 1's second half on 6 too: 0.12; benchmarks/studies/lane_parts.py, docs/latency.md),
+#: and one performer's or two's costliest frame but the code step is lighter than with two pieces
+#: on frame 1. Which frame computes a piece changes no value.
+PIECES_BY_8: tuple[int, ...] = (0, 1, 2, 4, 4, 6, 6, 7)
 #: Steps of the tempo's speed-cap table (:data:`SPEED_CAP_TEMPO`).
 _CAP_STEPS = 64
 
@@ -503,14 +517,18 @@ def tempo_inputs(model: DanceVQ, features: np.ndarray) -> np.ndarray:
 
 
 def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton products a b of quaternion rows (..., 4), (x, y, z, w) order (SciPy's). All of a
-    pose's bones in one NumPy expression for :meth:`DanceStream._fade`, which runs on the audio
-    path while fading: SciPy's ``Rotation`` took 0.2-0.5 ms a frame there (see :class:`IdleSway`),
-    and :func:`models.networks.dance_jit._qmul` is the same product for one quaternion, compiled."""
-    ax, ay, az, aw = np.moveaxis(a, -1, 0)
-    bx, by, bz, bw = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+    """Hamilton products a b of quaternion rows (n, 4) float64, (x, y, z, w) order (SciPy's), for
+    :meth:`DanceStream._fade`, which runs on the audio path while fading: SciPy's ``Rotation`` took
+    0.2-0.5 ms a frame there (see :class:`IdleSway`), NumPy's expression of all rows at once 35 µs,
+    one compiled call (:func:`models.networks.dance_jit.qmul_rows`, NumPy's sums bit for bit) 2 µs."""
+    return qmul_rows(np.ascontiguousarray(a, np.float64), np.ascontiguousarray(b, np.float64))
+
+
+def _row_norms(x: np.ndarray, keepdims: bool = False) -> np.ndarray:
+    """``np.linalg.norm(x, axis=1, keepdims=keepdims)`` of float64 rows (n, k), the same arithmetic
+    (the square root of ``add.reduce`` of the squares) without its Python wrapper: for
+    :meth:`DanceStream._fade`, which runs on the audio path while fading (7 of them a frame)."""
+    return np.sqrt(np.add.reduce(x * x, axis=1, keepdims=keepdims))
 
 
 def _nlerp(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
@@ -542,7 +560,7 @@ class DanceStream:
     movement played from audio frame t (shown at t + L) is so decided with audio up to L
     frames before it is seen, and its speed dips aim at the beats expected at t + L.
     The code steps stay on frames ``t % seg == 0`` whatever the lead, so an ensemble's
-    stagger and the prefix schedule (``_free``) are those of lead 0.
+    stagger and the prefix schedule (``_pieces_by``) are those of lead 0.
     """
 
     def __init__(self, model: DanceVQ, seed: int = 0, style: str | None = None, energy: float = 1.0,
@@ -613,13 +631,18 @@ class DanceStream:
         self._forecast = PhaseForecast()  # the lead's beat forecast (models/networks/lead.py), fed the onsets
         self._decay = hermite_decay(DECAY_FRAMES * self.seg // 8)  # (2, D): match_exemplar's
         self._handover = Handover(self.seg)  # when the playing exemplar hands over (models/networks/handover.py)
-        # Frames of the cycle the next code step's prefix is computed on: all but the code step
-        # and the frame half a cycle from it, where the code step of a performer staggered by half
-        # a cycle falls (an ensemble of 2 or 4: realtime.engine's stagger). _free[j]: how many
-        # such frames are left from frame j on (0: none on j itself).
+        # Frames of the cycle the next code step's prefix (its pieces ahead) is computed on: all but
+        # the code step and the frame half a cycle from it, where the code step of a performer
+        # staggered by half a cycle falls (an ensemble of 2 or 4: realtime.engine's stagger).
+        # _pieces_by[j] / _pieces_den: the share of a prefix's pieces done by the end of frame j.
+        # seg 8 (PIECES_BY_8): levelled for 4 staggered performers, whose code steps all fall on
+        # even hops (frame 6 left free too); else spread evenly over those frames.
         skip = {0, self.seg // 2} if self.seg > 2 else {0}
-        self._free = [0 if j in skip else sum(1 for i in range(j, self.seg) if i not in skip)
-                      for j in range(self.seg)]
+        if self.seg == 8:
+            self._pieces_by, self._pieces_den = PIECES_BY_8, PIECES_BY_8[-1]
+        else:
+            self._pieces_by = tuple(sum(1 for i in range(1, j + 1) if i not in skip) for j in range(self.seg))
+            self._pieces_den = max(self._pieces_by[-1], 1)
         base = getattr(model, "idle_base", None)  # a library's own mean pose (library_player), else the dancers'
         base = model.destandardize_poses(model.pose_mean * 0) if base is None else base  # unit quaternions
         self._idle_base = base.numpy().astype(np.float32)
@@ -1204,23 +1227,23 @@ class DanceStream:
             self._fade_prev = None
             return _nlerp(pose, idle, e)
         qa, qb = pose[3:].reshape(-1, 4).astype(np.float64), idle[3:].reshape(-1, 4).astype(np.float64)
-        qa = qa / np.maximum(np.linalg.norm(qa, axis=1, keepdims=True), 1e-12)
-        qb = qb / np.maximum(np.linalg.norm(qb, axis=1, keepdims=True), 1e-12)
+        qa = qa / np.maximum(_row_norms(qa, True), 1e-12)
+        qb = qb / np.maximum(_row_norms(qb, True), 1e-12)
         rel = _qmul(qa * [-1.0, -1.0, -1.0, 1.0], qb)  # qa^-1 qb
         rel = rel * np.where(rel[:, 3:] < 0, -1.0, 1.0)  # the shorter way: angle <= pi
-        vn = np.linalg.norm(rel[:, :3], axis=1)
+        vn = _row_norms(rel[:, :3])
         angle = 2.0 * np.arctan2(vn, rel[:, 3])
         axis = rel[:, :3] / np.maximum(vn, 1e-12)[:, None]
         w = angle[:, None] * axis
         if self._fade_prev is not None:  # the same rotation the long way round, where that is nearer the last
             other = w - (2.0 * np.pi) * axis
-            far = np.linalg.norm(other - self._fade_prev, axis=1) < np.linalg.norm(w - self._fade_prev, axis=1)
+            far = _row_norms(other - self._fade_prev) < _row_norms(w - self._fade_prev)
             w[far] = other[far]
             if min(e, 1.0 - e) * 2.0 * np.pi <= FADE_SWITCH:  # near either end the shorter way costs a small step
-                long = np.linalg.norm(w, axis=1) > np.pi
+                long = _row_norms(w) > np.pi
                 w[long] = (angle[:, None] * axis)[long]
         self._fade_prev = w
-        wn = np.linalg.norm(w, axis=1)
+        wn = _row_norms(w)
         h = 0.5 * e * wn
         turn = np.concatenate([np.sin(h)[:, None] * (w / np.maximum(wn, 1e-12)[:, None]), np.cos(h)[:, None]], axis=1)
         q = _qmul(qa, turn)
@@ -1264,12 +1287,14 @@ class DanceStream:
                 self._tempo.update(float(x[i, self._beat_cols[3]]), float(x[i, self._beat_cols[2]]), self._density)
             if t % self.seg == 0:
                 self._next_code()
-            elif self._free[t % self.seg]:
+            elif self._pieces_by[j] > self._pieces_by[j - 1]:  # this frame's share of the pieces ahead
                 for pre in (self._prefix, self._prefix_auto):
                     if pre is not None and not pre.done:
-                        with single_thread_blas():  # its pieces over this frame and the free ones after it
-                            for _ in range(-(-pre.left // self._free[t % self.seg])):
-                                pre.step()  # (models/networks/dance_numpy.py)
+                        keep = pre.pieces - -(-pre.pieces * self._pieces_by[j] // self._pieces_den)  # left after it
+                        if pre.left > keep:
+                            with single_thread_blas():  # (models/networks/dance_numpy.py)
+                                while pre.left > keep:
+                                    pre.step()
             pose = self._warped(t % self.seg)
             w = self._idle.step(x[i])
             e = 0.0

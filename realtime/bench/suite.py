@@ -205,6 +205,23 @@ def _hop_tails(wall_ms: np.ndarray, own_ms: np.ndarray, cpu_ms: np.ndarray) -> d
     return out
 
 
+def _hop_parity(index, cpu_ms: np.ndarray) -> dict[str, float | None]:
+    """The whole hop's worker CPU time per frame (ms), p50 and p99, on the even and on the odd
+    frame indices apart: with 4 staggered dance_vq performers (phases 0, 2, 4, 6) every code
+    step falls on an even hop and every lane is at an odd position of its cycle on the odd ones
+    (for A/B tables, benchmarks/studies/ensemble_ab.py)."""
+    idx = np.asarray(index, dtype=np.int64)
+    cpu = np.asarray(cpu_ms, dtype=np.float64)[: len(idx)]
+    odd = idx[: len(cpu)] % 2 == 1
+    out: dict[str, float | None] = {}
+    for name, sel in (("even", ~odd), ("odd", odd)):
+        v = cpu[sel]
+        v = v[np.isfinite(v)]
+        for q, key in ((50, "p50"), (99, "p99")):
+            out[f"per_hop_ms_{key}_cpu_{name}"] = float(np.percentile(v, q)) if len(v) else None
+    return out
+
+
 def _cpu_ms(rec: dict, n: int) -> np.ndarray:
     """The worker thread's CPU time of each of ``n`` hops, ms (NaN where not recorded)."""
     cpu = np.asarray(rec.get("compute_cpu_ms", []), dtype=np.float64)[:n]
@@ -844,6 +861,7 @@ def _ensemble_row(n: int, mode: str, run: dict, cycle: int = 1) -> dict:
         own_p99, cpu_p99, own_p95, cpu_p95 = own["p99"], cpu["p99"], own["p95"], cpu["p95"]
         tails = _hop_tails(proc["compute_ms"], own_hop_ms(proc["compute_ms"], proc.get("compute_wait_ms")),
                            _cpu_ms(proc, len(proc["compute_ms"])))
+        tails.update(_hop_parity(run["streams"][0]["index"], _cpu_ms(proc, len(proc["compute_ms"]))))
         features_p50 = summarize(np.asarray(proc["features_ms"]))["p50"]
         cpu_s, rss = proc["cpu_s"], proc["peak_rss_mb"]
         extractors = proc["extractors"]
@@ -876,7 +894,7 @@ def _ensemble_row(n: int, mode: str, run: dict, cycle: int = 1) -> dict:
         "per_hop_ms_p95_own": own_p95,
         "per_hop_ms_p95_cpu": cpu_p95,
         "features_ms_p50": features_p50,
-        **tails,  # one process: wall, own and CPU p50 / p99.9 of the whole hop
+        **tails,  # one process: wall, own and CPU p50 / p99.9 of the whole hop, CPU p50 / p99 on even and odd hops
         "performer_part_ms_p50": [m["per_hop_ms"]["p50"] for m in per] if "process" in run else None,
         "phases": [r.get("phase", 0) for r in run["streams"]],
         "cpu_ms_per_frame": 1000.0 * cpu_s / max(frames, 1),
