@@ -193,9 +193,9 @@ def test_the_pieces_ahead_level_the_even_and_odd_hops_of_four_staggered_performe
 
 
 def test_the_fades_row_norms_and_products_are_numpys_bit_for_bit():
-    """DanceStream._fade's row norms and quaternion products without NumPy's Python wrappers
+    """IdleFade's row norms and quaternion products without NumPy's Python wrappers
     (models/networks/dance_stream.py, _row_norms, _qmul) give np.linalg.norm's and moveaxis's bytes."""
-    from models.networks.dance_stream import _qmul, _row_norms
+    from models.networks.idle_fade import _qmul, _row_norms
 
     rng = np.random.default_rng(7)
     for n, k in ((21, 3), (21, 4), (1, 3), (55, 4)):
@@ -271,7 +271,7 @@ def test_sampling_draws_what_rng_choice_draws():
 def test_idle_pose_is_the_scipy_composition_it_replaced():
     from scipy.spatial.transform import Rotation
 
-    from models.networks.dance_stream import SWAY, IdleSway
+    from models.networks.idle_fade import SWAY, IdleSway
     from models.rig.humanoid import BONE_INDEX
     from models.timebase import FPS
 
@@ -831,7 +831,7 @@ def test_beat_warp_slows_the_motion_into_every_beat_and_streams_like_the_whole_s
 
 def test_warp_pose_reads_between_frames_as_nlerp_does():
     from models.networks.dance_jit import warp_pose
-    from models.networks.dance_stream import _nlerp
+    from models.networks.idle_fade import _nlerp
 
     rng = np.random.default_rng(0)
     played = rng.normal(size=(16, POSE_DIM)).astype(np.float32)
@@ -998,7 +998,7 @@ def test_the_idle_fade_keeps_each_bone_on_one_arc():
     follows the rotation it started on continuously."""
     from scipy.spatial.transform import Rotation
 
-    from models.networks.dance_stream import _nlerp
+    from models.networks.idle_fade import _nlerp
 
     s = DanceStream(tiny_model())
     n = 31
@@ -1013,7 +1013,7 @@ def test_the_idle_fade_keeps_each_bone_on_one_arc():
         return float(quat_angles_deg(poses[1:], poses[:-1]).max())
 
     fresh = np.stack([_nlerp(d, idle, w) for d, w in zip(dance, weights)])
-    faded = np.stack([s._fade(d, idle, w) for d, w in zip(dance, weights)])
+    faded = np.stack([s._idle_fade(d, idle, w) for d, w in zip(dance, weights)])
     assert largest_step(fresh) > 90.0  # the flip
     assert largest_step(faded) < 5.0
     # the first frame: on the shorter arc (150 degrees apart), 0.6 of the way from the dance to the idle
@@ -1036,7 +1036,7 @@ def test_a_bone_turning_back_to_the_idle_mid_fade_blends_the_short_way():
     dance = np.repeat(idle[None], n, 0)
     dance[:, 3:7] = Rotation.from_euler("y", angles[:, None], degrees=True).as_quat()
     weights = np.linspace(0.95, 0.05, n)  # fading in
-    faded = np.stack([s._fade(d, idle, w) for d, w in zip(dance, weights)])
+    faded = np.stack([s._idle_fade(d, idle, w) for d, w in zip(dance, weights)])
     dance_step = float(np.diff(angles).__abs__().max())  # 8.45 degrees a frame
     # the rotation to the idle, followed past 180 degrees, is at most a full turn: 0.045 of it a frame
     assert float(quat_angles_deg(faded[1:], faded[:-1]).max()) < dance_step + 360.0 * 0.045 + 1.0

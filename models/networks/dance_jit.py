@@ -125,7 +125,7 @@ def _qmul(ax, ay, az, aw, bx, by, bz, bw):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def qmul_rows(a, b):  # pragma: no cover - compiled
-    """Quaternion products a b of rows (n, 4) float64, x y z w order: dance_stream's ``_qmul`` (the
+    """Quaternion products a b of rows (n, 4) float64, x y z w order: idle_fade's ``_qmul`` (the
     idle fade's), each component's sum in the same order as its NumPy expression, bit for bit."""
     out = np.empty((a.shape[0], 4))
     for i in range(a.shape[0]):

@@ -29,7 +29,7 @@ between frames about :data:`WARP_LAG` frames late, so its speed dips land on the
 whether music is playing (its presence detector, :mod:`models.networks.music_gate`, or an older
 checkpoint's logistic one) and holds through a song's breaks of up to 2 s; without music the
 performer fades into a calm idle (the dancers' mean pose with a slow sway of hips, spine and
-head, :func:`idle_pose`) and back into the dance, which has kept running underneath, so nothing
+head, :mod:`models.networks.idle_fade`) and back into the dance, which has kept running underneath, so nothing
 jumps. ``set_idle(True)`` holds the idle whatever the music (the show control's ``/performer/idle``).
 """
 
@@ -42,7 +42,7 @@ import numpy as np
 
 from models.errors import ConfigError
 from models.networks.blend import blend_track
-from models.networks.dance_jit import (joint_speed, match_exemplar, push_history, qmul_rows, renorm_pose,
+from models.networks.dance_jit import (joint_speed, match_exemplar, push_history, renorm_pose,
                                        sanitize_rows, warp_pose)
 from models.networks.dance_numpy import NumpyPredictor, Prefix, single_thread_blas
 from models.networks.dance_vq import DanceVQ
@@ -50,6 +50,7 @@ from models.networks import feet as feet_part
 from models.networks.feet import FeetLock
 from models.networks.handover import Handover
 from models.networks.stage import SpotStage, Stage, cached_travel
+from models.networks.idle_fade import IdleFade, IdleSway, idle_pose  # noqa: F401 - idle_pose: this module's idle, public here too
 from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate
 from models.networks import lead as lead_part
 from models.networks.lead import PhaseForecast
@@ -60,15 +61,10 @@ from models.networks.member_tables import (CHUNK_FRAMES, MemberTables, code_ener
 from models.networks.streaming import FEATURE_LIMIT
 from models.networks import tempo as tempo_mod
 from models.networks.tempo import DENSITY_WINDOW, TEMPO_RANGE, TempoFollower, danced_beat, onset_density
-from models.rig.humanoid import BONE_INDEX
 from models.rig.kinematics import rotation_jumps_deg
 from models.rig.skeleton import POINT_PARENT_INDEX, load_default_skeleton
 from models.timebase import FPS
 
-#: A fade that follows a bone's rotation to the idle the long way round (past 180 degrees,
-#: :meth:`DanceStream._fade`) goes back to the shorter way when that moves the bone by at most
-#: this much (radians: 10 degrees), near the fade's start or end.
-FADE_SWITCH: float = math.radians(10.0)
 #: Frames over which a new movement's difference from the last one decays (inertialization), at 8 frames a code.
 DECAY_FRAMES: int = 16
 #: Largest angular-velocity mismatch (per bone, radians per frame: 23 degrees) that the
@@ -250,14 +246,6 @@ ENERGY_RANGE: tuple[float, float] = (0.0, 2.0)
 #: The lead control's range, ms (:meth:`DanceStream.set_lead`): a display chain's delay
 #: (renderer, projector, LED wall, encoder) that the motion is sent ahead of.
 LEAD_RANGE_MS: tuple[float, float] = (0.0, 200.0)
-#: Idle sway: (bone, axis, amplitude in degrees, period in s, phase in rad).
-SWAY: tuple[tuple[str, int, float, float, float], ...] = (
-    ("Hips", 1, 4.0, 6.0, 0.0),  # a slow turn about the vertical
-    ("Spine", 2, 2.5, 4.0, 0.0),  # side to side
-    ("Chest", 0, 1.5, 4.0, 1.0),  # breathing-like forward lean
-    ("Head", 2, 2.0, 5.0, 2.0),
-)
-
 
 #: Codes :attr:`DanceStream.codes_drawn` keeps, the newest (65,536: 4.9 hours at 8 frames a
 #: code); past that it drops the oldest :data:`CODES_TRIM` at once, so a stream that runs for
@@ -280,47 +268,6 @@ CODES_TRIM: int = 1024
 PIECES_BY_8: tuple[int, ...] = (0, 1, 2, 4, 4, 6, 6, 7)
 #: Steps of the tempo's speed-cap table (:data:`SPEED_CAP_TEMPO`).
 _CAP_STEPS = 64
-
-
-class IdleSway:
-    """:func:`idle_pose` for one ``base`` pose (P,), with everything that does not depend on time computed once.
-
-    Each swaying bone's rotation is its base rotation composed with a rotation of the
-    sway's angle ``a`` about one local axis ``e``: the Hamilton product
-    ``q_base * (sin(a/2) e, cos(a/2))``, written out in NumPy for all bones at once
-    (float64, the same arithmetic as SciPy's ``Rotation`` composition, which this
-    replaces: that took 0.2-0.5 ms a frame while idle).
-    """
-
-    def __init__(self, base: np.ndarray) -> None:
-        self.base = np.asarray(base, np.float64)
-        self.cols = np.array([3 + 4 * BONE_INDEX[b] for b, *_ in SWAY])[:, None] + np.arange(4)  # (B, 4)
-        q = self.base[self.cols]
-        self.q = q / np.linalg.norm(q, axis=1, keepdims=True)  # (B, 4) unit, as Rotation.from_quat
-        self.axis = np.array([a for _, a, *_ in SWAY])
-        self.amp = np.deg2rad(np.array([d for _, _, d, _, _ in SWAY]))
-        self.period = np.array([p for *_, p, _ in SWAY], np.float64)
-        self.phase = np.array([ph for *_, ph in SWAY], np.float64)
-        self.onehot = np.eye(3)[self.axis]  # (B, 3)
-
-    def __call__(self, t: np.ndarray) -> np.ndarray:
-        """Idle poses (len(t), P) float32 at frame times ``t`` (frames)."""
-        sec = np.asarray(t, np.float64)[:, None] / FPS
-        half = 0.5 * (self.amp * np.sin(2 * np.pi * sec / self.period + self.phase))  # (T, B)
-        s, c = np.sin(half), np.cos(half)
-        v = s[..., None] * self.onehot  # (T, B, 3): the sway rotation's vector part
-        p, pw = self.q[:, :3], self.q[:, 3]
-        cross = np.stack([p[:, 1] * v[..., 2] - p[:, 2] * v[..., 1], p[:, 2] * v[..., 0] - p[:, 0] * v[..., 2],
-                          p[:, 0] * v[..., 1] - p[:, 1] * v[..., 0]], axis=-1)
-        out = np.repeat(self.base[None], len(sec), axis=0)
-        out[:, self.cols[:, :3]] = pw[:, None] * v + c[..., None] * p + cross
-        out[:, self.cols[:, 3]] = pw * c - p[np.arange(len(p)), self.axis] * s
-        return out.astype(np.float32)
-
-
-def idle_pose(base: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Idle poses (len(t), P): ``base`` (P,) with the :data:`SWAY` rotations at frame times ``t`` (frames)."""
-    return IdleSway(base)(t)
 
 
 def hermite_decay(frames: int) -> np.ndarray:
@@ -516,31 +463,6 @@ def tempo_inputs(model: DanceVQ, features: np.ndarray) -> np.ndarray:
     return out
 
 
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton products a b of quaternion rows (n, 4) float64, (x, y, z, w) order (SciPy's), for
-    :meth:`DanceStream._fade`, which runs on the audio path while fading: SciPy's ``Rotation`` took
-    0.2-0.5 ms a frame there (see :class:`IdleSway`), NumPy's expression of all rows at once 35 µs,
-    one compiled call (:func:`models.networks.dance_jit.qmul_rows`, NumPy's sums bit for bit) 2 µs."""
-    return qmul_rows(np.ascontiguousarray(a, np.float64), np.ascontiguousarray(b, np.float64))
-
-
-def _row_norms(x: np.ndarray, keepdims: bool = False) -> np.ndarray:
-    """``np.linalg.norm(x, axis=1, keepdims=keepdims)`` of float64 rows (n, k), the same arithmetic
-    (the square root of ``add.reduce`` of the squares) without its Python wrapper: for
-    :meth:`DanceStream._fade`, which runs on the audio path while fading (7 of them a frame)."""
-    return np.sqrt(np.add.reduce(x * x, axis=1, keepdims=keepdims))
-
-
-def _nlerp(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
-    """Pose a -> b by weight w in [0, 1]: root lerped, every quaternion nlerped on b's hemisphere of a."""
-    out = (1 - w) * a + w * b
-    qa, qb = a[3:].reshape(-1, 4), b[3:].reshape(-1, 4)
-    qb = qb * np.where((qa * qb).sum(1, keepdims=True) < 0, -1.0, 1.0)
-    q = (1 - w) * qa + w * qb
-    out[3:] = (q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-9)).reshape(-1)
-    return out
-
-
 class DanceStream:
     """Frame-by-frame generation with a :class:`DanceVQ` (see the module docstring).
 
@@ -694,7 +616,7 @@ class DanceStream:
         if self._feet is not None:
             self._feet.reset()
         self._feet_used = False  # the feet part has stepped since the reset (FEET_IN_PLACE)
-        self._fade_prev: np.ndarray | None = None  # the fade's last rotation vectors, dance -> idle (J, 3)
+        self._idle_fade = IdleFade()  # dance -> idle, following each bone's rotation (models/networks/idle_fade.py)
         self._prev_quat: np.ndarray | None = None
         self.codes_drawn: list[int] = []
         self._lead = self._lead_next  # the lead in frames now (taken up at code steps)
@@ -1210,47 +1132,6 @@ class DanceStream:
         a, b = c[i], c[i + 1]
         return (float(a[0] + f * (b[0] - a[0])), float(a[1] + f * (b[1] - a[1])), float(a[2] + f * (b[2] - a[2])))
 
-    def _fade(self, pose: np.ndarray, idle: np.ndarray, e: float) -> np.ndarray:
-        """The dance ``pose`` (P,) -> the ``idle`` pose by weight ``e`` in (0, 1]: the root lerped,
-        each bone turned from its dance rotation towards the idle's by ``e`` of the rotation
-        between them, ``qa exp(e w)``, where ``w`` (a rotation vector) is that rotation taken
-        the shorter way when the fade starts and then followed continuously, however far round
-        it goes. Choosing the shorter way anew each frame flips it where the two pass 180
-        degrees apart (the head, 99 degrees in a frame, early in a validation dance); blending
-        the two quaternions (nlerp) with their signs fixed at the start whips a bone that turns
-        back towards the idle (91 degrees, a fade-in of DANCE_W_22), and with their signs put on
-        the last output's hemisphere one that passes 90 degrees from it (107 degrees, the soak).
-        Followed continuously, a bone turns no faster than the dance plus the fade's own step
-        (at most 1.5 / FADE_FRAMES of the rotation between them a frame, a full turn at most);
-        near the fade's ends it goes back to the shorter way (:data:`FADE_SWITCH`)."""
-        if e >= 1.0:  # fully idle: no fade to follow
-            self._fade_prev = None
-            return _nlerp(pose, idle, e)
-        qa, qb = pose[3:].reshape(-1, 4).astype(np.float64), idle[3:].reshape(-1, 4).astype(np.float64)
-        qa = qa / np.maximum(_row_norms(qa, True), 1e-12)
-        qb = qb / np.maximum(_row_norms(qb, True), 1e-12)
-        rel = _qmul(qa * [-1.0, -1.0, -1.0, 1.0], qb)  # qa^-1 qb
-        rel = rel * np.where(rel[:, 3:] < 0, -1.0, 1.0)  # the shorter way: angle <= pi
-        vn = _row_norms(rel[:, :3])
-        angle = 2.0 * np.arctan2(vn, rel[:, 3])
-        axis = rel[:, :3] / np.maximum(vn, 1e-12)[:, None]
-        w = angle[:, None] * axis
-        if self._fade_prev is not None:  # the same rotation the long way round, where that is nearer the last
-            other = w - (2.0 * np.pi) * axis
-            far = _row_norms(other - self._fade_prev) < _row_norms(w - self._fade_prev)
-            w[far] = other[far]
-            if min(e, 1.0 - e) * 2.0 * np.pi <= FADE_SWITCH:  # near either end the shorter way costs a small step
-                long = _row_norms(w) > np.pi
-                w[long] = (angle[:, None] * axis)[long]
-        self._fade_prev = w
-        wn = _row_norms(w)
-        h = 0.5 * e * wn
-        turn = np.concatenate([np.sin(h)[:, None] * (w / np.maximum(wn, 1e-12)[:, None]), np.cos(h)[:, None]], axis=1)
-        q = _qmul(qa, turn)
-        out = (1 - e) * pose + e * idle
-        out[3:] = q.reshape(-1).astype(np.float32)
-        return out
-
     def push(self, features: np.ndarray) -> np.ndarray:
         """Consume k >= 0 feature frames (k, D); return their k poses (k, POSE_DIM) float32."""
         x = np.asarray(features, np.float32)
@@ -1299,10 +1180,10 @@ class DanceStream:
             w = self._idle.step(x[i])
             e = 0.0
             if w <= 0.0:
-                self._fade_prev = None
+                self._idle_fade.reset()
             else:
                 e = w * w * (3 - 2 * w)  # smoothstep: no kink where the fade starts or ends
-                pose = self._fade(pose, self._sway(np.array([t]))[0], e)
+                pose = self._idle_fade(pose, self._sway(np.array([t]))[0], e)
             self._stage.step(pose, self._at, e)  # travel and turns, inside the stage (models/networks/stage.py)
             if self._feet is not None:  # the last step: planted feet stay put (models/networks/feet.py)
                 mode = "hold" if self._stage.active and self._travels else FEET_IN_PLACE

@@ -3,7 +3,7 @@
 :class:`IdleGate` reads one feature frame at a time (30 fps) and keeps a small state: whether
 music plays (``music``), the frames the input has disagreed with that (``run``), the idle
 weight (``w_idle``: 0 dancing, 1 idle; a smoothstep of it blends the pose,
-:meth:`models.networks.dance_stream.DanceStream._fade`), the music's running level and the
+:class:`models.networks.idle_fade.IdleFade`), the music's running level and the
 length of the current break. Which frames sound like music is the detector's call:
 
 * a model with a fitted presence detector (:class:`models.networks.music_gate.MusicGate`, the

@@ -159,7 +159,7 @@ def bend_deg(pose: np.ndarray, target: np.ndarray) -> float:
 
 def _mean_pose(poses: list[np.ndarray], ref: np.ndarray) -> torch.Tensor:
     """The clips' mean pose (P,): the mean hips position and, per bone, the mean of the rotations
-    put on ``ref``'s (P,) hemisphere, normalised. The stream's idle (dance_stream.idle_pose) stands in it:
+    put on ``ref``'s (P,) hemisphere, normalised. The stream's idle (idle_fade.idle_pose) stands in it:
     the user's own rest between songs, which the fades into and out of the dance start from (the
     default dancers' mean pose is 18 degrees a bone from the shared sample's, its hips 17 cm higher)."""
     r = ref[3:].reshape(-1, 4)
