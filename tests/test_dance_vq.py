@@ -13,7 +13,8 @@ from _streams import push_in_chunks
 
 from models.errors import CheckpointError, ConfigError
 from models.networks.checkpoint import build_model, load_checkpoint, save_checkpoint
-from models.networks.dance_stream import FADE_FRAMES, PRESENT_FRAMES, DanceStream, generate, idle_pose
+from models.networks.dance_stream import FADE_FRAMES, PRESENT_FRAMES, DanceStream, generate
+from models.networks.idle_fade import idle_pose
 from models.networks.idle_gate import BREAK_HOLD_SILENT
 from models.networks.dance_vq import DanceVQ, DanceVQConfig, style_token
 from models.rig.humanoid import BONES

@@ -50,7 +50,7 @@ from models.networks import feet as feet_part
 from models.networks.feet import FeetLock
 from models.networks.handover import Handover
 from models.networks.stage import SpotStage, Stage, cached_travel
-from models.networks.idle_fade import IdleFade, IdleSway, idle_pose  # noqa: F401 - idle_pose: this module's idle, public here too
+from models.networks.idle_fade import IdleFade, IdleSway
 from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate
 from models.networks import lead as lead_part
 from models.networks.lead import PhaseForecast
