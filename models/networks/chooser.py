@@ -235,7 +235,7 @@ class Chooser:
         """The code step: the window's new token in, the codes drawn (``DRAWS``, a library's more) and
         the tempo's tilt (:meth:`tempo_tilt`) they were drawn under. ``recent``: the codes drawn so
         far, oldest first (the repeat limit's); ``tempo_input``: what a predictor that hears the
-        tempo is given (DanceStream.tempo_input)."""
+        tempo is given (DanceStream.tempo_input; read only by such a predictor)."""
         m, pred = self.model, self.predictor
         guided = bool(self.pstyle) and STYLE_GUIDANCE != 1.0
         if self._embed_rows == self.seg - 1:  # its first seg - 1 frames were added as they came

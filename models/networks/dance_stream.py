@@ -293,7 +293,6 @@ class DanceStream:
     stagger and the prefix schedule (the chooser's ``_pieces_by``) are those of lead 0.
     """
 
-
     def __init__(self, model: DanceVQ, seed: int = 0, style: str | None = None, energy: float = 1.0,
                  lead_ms: float = 0.0, feet: bool | None = None, stage=0, facing: str = "free",
                  spot: tuple[int, int] | None = None) -> None:
@@ -529,7 +528,8 @@ class DanceStream:
         on the beat (one compiled call, :func:`~models.networks.dance_jit.match_exemplar`), and the player
         plays the best, bent to continue the motion, at its rate (:meth:`Player.rate_for`)."""
         chooser, player, handover, tempo = self._chooser, self._player, self._handover, self._tempo
-        draws, tilt = chooser.draw(tempo, self.codes_drawn, self.tempo_input)
+        heard = self.tempo_input if chooser.predictor.tempo is not None else 0.0  # a predictor that hears the tempo
+        draws, tilt = chooser.draw(tempo, self.codes_drawn, heard)
         if int(self._counts[draws[0]]) == 0:  # no exemplars (members = 0): the decoder writes the movement
             segment = chooser.decoded(draws[0])
             window = np.concatenate([segment, np.repeat(segment[-1:], self.seg, axis=0)])
@@ -621,7 +621,8 @@ class DanceStream:
         x = clean
         k = len(x)
         out = np.empty((k, self.pose_dim), np.float32)
-        chooser, player = self._chooser, self._player
+        player = self._player
+        hear, think, warped = self._chooser.hear, self._chooser.think, player.warped  # the parts' per-frame steps
         for i in range(k):
             t = self.frame
             if t % self.seg == 0:
@@ -630,7 +631,7 @@ class DanceStream:
                 self._forecast.push(float(x[i, self._onset_col]))
             row = self._ahead(x[i]) if self._lead and self._beat_cols is not None else x[i]
             j = t % self.seg
-            chooser.hear(row, j)  # the predictor's context (its first columns, standardised)
+            hear(row, j)  # the chooser's context: the row's first columns, standardised
             self._raw = row
             if self._beat_cols is not None:  # the tempo (the period is the same ahead or not)
                 if self._onset_col is not None:
@@ -643,8 +644,8 @@ class DanceStream:
             if t % self.seg == 0:
                 self._next_code()
             else:  # this frame's share of the next code step's pieces ahead
-                chooser.think(j)
-            pose = player.warped(j, row, self._tempo)
+                think(j)
+            pose = warped(j, row, self._tempo)  # the player's pose of the movement playing
             w = self._idle.step(x[i])
             e = 0.0
             if w <= 0.0:
