@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,6 +28,9 @@ from models.networks.dance_vq import DanceVQ
 from models.networks.library_folders import folder_choice
 from models.networks.library_player import NEAREST, STYLE_BASE, member_choice
 from models.networks.tempo import TempoFollower
+
+if TYPE_CHECKING:
+    from models.networks.stage import Stage
 
 #: Codes drawn from the predictor at each step; the exemplar of theirs that best continues the
 #: motion and dips in speed where the beat tracker expects the next beat is played.
@@ -349,7 +353,7 @@ class Chooser:
         return [(int(where[n, 0]), int(where[n, 1])) for n in np.argpartition(d, k - 1)[:k]]
 
     def candidates(self, pairs: list[tuple[int, int]],
-                   stage) -> tuple[list, np.ndarray, np.ndarray, np.ndarray | None]:
+                   stage: Stage) -> tuple[list, np.ndarray, np.ndarray, np.ndarray | None]:
         """(pairs (code, exemplar), their windows (n, 2 seg, P), dips (n, seg), liveliness weights (n,)
         or None) of ``pairs`` as the style and the ``stage`` (models/networks/stage.py) allow."""
         tok = self.style or self._own
