@@ -77,6 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     import models.features.steadiness as steadiness
     import models.features.spectral as spectral
     import models.features.streaming as streaming
+    import models.networks.chooser as chooser
     import models.networks.dance_numpy as dance_numpy
     import models.networks.dance_stream as dance_stream
     import models.networks.dance_vq as dance_vq
@@ -118,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     if hasattr(dance_stream, "match_exemplar"):  # (older trees: NumPy steps instead)
         dance_stream.match_exemplar = _timed(t, "dance_vq: code step: motion matching", dance_stream.match_exemplar)
     if args.guidance is not None:  # a script: the module's setting for this one run
-        dance_stream.STYLE_GUIDANCE = args.guidance
+        chooser.STYLE_GUIDANCE = args.guidance
     if args.no_feet:
         dance_stream.FEET_LOCK = False
 
@@ -149,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
                     EngineConfig(threads=1, warmup_s=3.0, duration_s=args.seconds, stats_size=frames + 64,
                                  runqueue_wait=True))  # the hop's worker CPU time too
     print(f"playing {args.seconds:.0f} s of {args.audio or 'the bundled clip'} in real time, style "
-          f"{args.style or 'auto'}, STYLE_GUIDANCE {dance_stream.STYLE_GUIDANCE:g} ...", file=sys.stderr)
+          f"{args.style or 'auto'}, STYLE_GUIDANCE {chooser.STYLE_GUIDANCE:g} ...", file=sys.stderr)
     engine.start()
     engine.wait()
     hop = np.asarray(engine.compute_ms.values(), float)

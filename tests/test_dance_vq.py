@@ -12,6 +12,8 @@ import torch
 from _streams import push_in_chunks
 
 from models.errors import CheckpointError, ConfigError
+from models.networks import chooser as chooser_part
+from models.networks import player as player_part
 from models.networks.checkpoint import build_model, load_checkpoint, save_checkpoint
 from models.networks.dance_stream import FADE_FRAMES, PRESENT_FRAMES, DanceStream, generate
 from models.networks.idle_fade import idle_pose
@@ -299,19 +301,21 @@ def test_streams_of_one_model_share_its_predictor_exemplars_and_dips_until_they_
         m.member_poses.copy_(m.pose_mean.to(m.member_poses.dtype))
         m.member_count.fill_(1)
     a, b = DanceStream(m), DanceStream(m)
-    assert a._dips is b._dips and a._members is b._members and a._predictor is b._predictor
+    assert a._chooser.dips is b._chooser.dips and a._chooser.members is b._chooser.members \
+        and a._chooser.predictor is b._chooser.predictor
     with torch.no_grad():
         m.member_poses[0, 0, :, 4] += 0.5  # written in place: the version counter moves
     c = DanceStream(m)
-    assert c._dips is not a._dips and c._dips.shape == a._dips.shape
-    assert c._members is not a._members and c._members[0, 0, 0, 4] != a._members[0, 0, 0, 4]
-    assert c._predictor is a._predictor  # the predictor did not change
+    assert c._chooser.dips is not a._chooser.dips and c._chooser.dips.shape == a._chooser.dips.shape
+    assert c._chooser.members is not a._chooser.members \
+        and c._chooser.members[0, 0, 0, 4] != a._chooser.members[0, 0, 0, 4]
+    assert c._chooser.predictor is a._chooser.predictor  # the predictor did not change
     with torch.no_grad():
         m.predictor.head.weight.add_(1.0)
     d = DanceStream(m)
-    assert d._predictor is not a._predictor
-    np.testing.assert_array_equal(d._predictor.w_head, NumpyPredictor(m.predictor).w_head)
-    np.testing.assert_allclose(d._predictor.w_head - a._predictor.w_head, 1.0, atol=1e-6)
+    assert d._chooser.predictor is not a._chooser.predictor
+    np.testing.assert_array_equal(d._chooser.predictor.w_head, NumpyPredictor(m.predictor).w_head)
+    np.testing.assert_allclose(d._chooser.predictor.w_head - a._chooser.predictor.w_head, 1.0, atol=1e-6)
 
 
 def test_decoder_is_causal_over_codes():
@@ -497,14 +501,14 @@ def test_no_movement_is_drawn_over_and_over(monkeypatch):
 
     lm = load_model(None)
     s = ds.DanceStream(lm.model, seed=0)
-    z = s._code_energy
+    z = s._chooser.code_energy
     lively, calm, other = int(np.argmax(z)), int(np.argmin(z)), int(np.argsort(z)[len(z) // 2 + 50])
     logits = np.zeros(lm.model.config.codebook, np.float32)
     s.codes_drawn = [calm] * 3 + [lively, lively, other, lively, lively, lively, other, other]  # the last 8: 5 and 3
-    out = s._repeat_penalty(logits)
+    out = s._chooser.repeat_penalty(logits, s.codes_drawn)
     assert out[lively] == -2.0 and np.count_nonzero(out) == 1 and not logits.any()
     s.codes_drawn += [calm] * 5  # a calm code (energy z <= -1) repeats freely: holding still is no shuffle
-    assert z[calm] <= -1.0 and not s._repeat_penalty(logits).any()
+    assert z[calm] <= -1.0 and not s._chooser.repeat_penalty(logits, s.codes_drawn).any()
 
     feats = extract_features(load_audio("models/assets/clip.ogg")[0], lm.features)
 
@@ -519,7 +523,7 @@ def test_no_movement_is_drawn_over_and_over(monkeypatch):
 
     r = runs()
     assert r[r >= 6].sum() <= 30 and r.max() <= 7
-    monkeypatch.setattr(ds, "REPEAT_PENALTY", 0.0)
+    monkeypatch.setattr(chooser_part, "REPEAT_PENALTY", 0.0)
     r = runs()
     assert r[r >= 6].sum() >= 60 and r.max() >= 8  # the clip asks for long runs: the limit above is the penalty's
 
@@ -549,7 +553,8 @@ def test_compiled_motion_matching_picks_and_bends_as_scipy_rotations_do():
     """match_exemplar (one numba call on the live path): the exemplar the cost picks (less each one's
     bias), sign-aligned to the motion, bent from it by rotation-space inertialization (SciPy's Rotation as the reference)."""
     from models.networks.dance_jit import match_exemplar
-    from models.networks.dance_stream import _unit, hermite_decay, sign_continuous
+    from models.networks.dance_stream import _unit, sign_continuous
+    from models.networks.player import hermite_decay
 
     rng = np.random.default_rng(5)
     decay = hermite_decay(16)
@@ -656,7 +661,8 @@ def test_the_code_steps_kernels_give_their_array_arithmetic_bit_for_bit():
     from numba import njit
 
     import models.networks.dance_jit as dj
-    from models.networks.dance_stream import _unit, hermite_decay, sign_continuous
+    from models.networks.dance_stream import _unit, sign_continuous
+    from models.networks.player import hermite_decay
     from models.rig.skeleton import POINT_PARENT_INDEX
 
     for f in (_qmul_arrays, _qlog_arrays, _qexp_arrays):  # the reference kernels call each other by these names
@@ -722,7 +728,8 @@ def test_inertialization_starts_on_the_motion_and_never_whips_a_bone():
     """The bent movement's first pose is the motion's next pose (each bone up to sign), and however far
     apart the two are, no bone turns faster than the exemplar, the offset and the capped velocity allow."""
     from models.networks.dance_jit import match_exemplar
-    from models.networks.dance_stream import _unit, hermite_decay, sign_continuous
+    from models.networks.dance_stream import _unit, sign_continuous
+    from models.networks.player import hermite_decay
 
     rng = np.random.default_rng(11)
     decay = hermite_decay(16)
@@ -780,8 +787,6 @@ def test_a_predictor_that_hears_the_tempo_is_given_it_and_chooses_by_it():
     """``tempo_input``: every token gets the followed tempo's ln(T / T_ref) (``DanceStream.tempo_input``);
     the same music draws other codes than with the input's weight zeroed (the tempo at T_ref), and the
     stream's offline twin (``tempo_inputs``) reads what the stream gave."""
-    import models.networks.dance_stream as ds
-
     torch.manual_seed(3)
     m = DanceVQ(dataclasses_replace(BEAT, tempo_input=True)).eval()
     turning_exemplars(m)
@@ -792,7 +797,7 @@ def test_a_predictor_that_hears_the_tempo_is_given_it_and_chooses_by_it():
     s = DanceStream(m, seed=1)
     s.push(x)
     assert s.tempo_input == pytest.approx(math.log(20.0 / 15.0), abs=0.02)
-    np.testing.assert_allclose(ds.tempo_inputs(m, x)[-1], s.tempo_input, atol=1e-6)
+    np.testing.assert_allclose(player_part.tempo_inputs(m, x)[-1], s.tempo_input, atol=1e-6)
     heard = list(s.codes_drawn)
     with torch.no_grad():
         m.predictor.tempo.weight.zero_()
@@ -802,8 +807,6 @@ def test_a_predictor_that_hears_the_tempo_is_given_it_and_chooses_by_it():
 
 
 def test_beat_warp_slows_the_motion_into_every_beat_and_streams_like_the_whole_song(monkeypatch):
-    import models.networks.dance_stream as ds
-
     m = DanceVQ(BEAT).eval()
     turning_exemplars(m)
     x = beat_music(900)
@@ -814,7 +817,7 @@ def test_beat_warp_slows_the_motion_into_every_beat_and_streams_like_the_whole_s
         i += k
     parts.append(s.push(x[i:]))
     np.testing.assert_allclose(np.concatenate(parts), warped, atol=1e-5)
-    monkeypatch.setattr(ds, "BEAT_WARP", 0.0)
+    monkeypatch.setattr(player_part, "BEAT_WARP", 0.0)
     plain = generate(m, x, seed=2)
 
     def speed_by_phase(p: np.ndarray) -> np.ndarray:
@@ -897,7 +900,7 @@ def test_a_requested_style_dances_with_its_own_dancers_exemplars(monkeypatch):
     hips = {s: generate(m, x, seed=0, style=s)[100:, 1] for s in ("chacha", "waltz")}
     np.testing.assert_allclose(hips["chacha"], 1.1, atol=1e-3)  # only the cha-cha dancers' movements
     np.testing.assert_allclose(hips["waltz"], 0.7, atol=1e-3)  # only the waltz dancers'
-    monkeypatch.setattr(ds, "STYLE_MEMBERS", False)  # without the filter motion matching keeps to the first
+    monkeypatch.setattr(chooser_part, "STYLE_MEMBERS", False)  # without the filter motion matching keeps to the first
     np.testing.assert_allclose(generate(m, x, seed=0, style="waltz")[100:, 1], 1.1, atol=1e-3)  # exemplar's kind
 
 
@@ -970,9 +973,9 @@ def test_energy_control_favours_calm_or_lively_movements_and_1_changes_nothing()
 
     m = speed_model(np.linspace(0.5, 8.0, TINY.codebook))
     s = DanceStream(m)
-    z = s._code_energy
+    z = s._chooser.code_energy
     assert np.all(np.diff(z) > 0) and abs(z.mean()) < 1e-5 and abs(z.std() - 1) < 1e-4  # the speeds' order
-    np.testing.assert_array_equal(z, code_energy(s._members, m.member_count.numpy(), m.config.seg))
+    np.testing.assert_array_equal(z, code_energy(s._chooser.members, m.member_count.numpy(), m.config.seg))
     x = music(800)
     np.testing.assert_array_equal(generate(m, x, seed=3, energy=1.0), generate(m, x, seed=3))
     drawn = {}
@@ -990,7 +993,7 @@ def test_energy_control_favours_calm_or_lively_movements_and_1_changes_nothing()
     for bad in (-0.1, 2.5, float("nan"), "high", None):
         with pytest.raises(ConfigError, match="energy must be"):
             s.set_energy(bad)
-    assert s.energy == 1.0 and s._energy_bias is None  # a refused value changes nothing
+    assert s.energy == 1.0 and s._chooser._energy_bias is None  # a refused value changes nothing
 
 
 def test_the_idle_fade_keeps_each_bone_on_one_arc():
@@ -1074,14 +1077,12 @@ def test_the_speed_dips_fall_beat_delay_frames_after_the_trackers_beat(monkeypat
     the training dances, beat_control.py --split train) moves where the warp slows and where the matching places a dip, and
     nothing else: the speed profile over the beat is the one on the tracker's beat (BEAT_DELAY
     0), one frame later."""
-    import models.networks.dance_stream as ds
-
     m = DanceVQ(BEAT).eval()
     turning_exemplars(m)
     x = beat_music(900)
-    assert ds.BEAT_DELAY == 1.0
+    assert player_part.BEAT_DELAY == 1.0
     v1 = speed_by_beat_phase(generate(m, x, seed=2))
-    monkeypatch.setattr(ds, "BEAT_DELAY", 0.0)
+    monkeypatch.setattr(player_part, "BEAT_DELAY", 0.0)
     v0 = speed_by_beat_phase(generate(m, x, seed=2))
     np.testing.assert_allclose(v1, np.roll(v0, 1), atol=0.1)
     assert int(np.argmin(v1)) == (int(np.argmin(v0)) + 1) % 15 and int(np.argmin(v0)) == 14

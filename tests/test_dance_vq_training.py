@@ -134,7 +134,7 @@ def test_a_predictor_that_hears_the_tempo_is_trained_on_what_the_stream_gives_it
     frame, clip and phase in encode_clips' order), and training moves the tempo input's weights."""
     from types import SimpleNamespace
 
-    from models.networks.dance_stream import tempo_inputs
+    from models.networks.player import tempo_inputs
     from models.training.dance_vq import DanceVQTrainOptions
     from models.training.tempo_predictor import tempo_codes, train_tempo_predictor, with_tempo_input
 

@@ -36,7 +36,7 @@ def _handovers(lm, feats: np.ndarray, bpm: float) -> tuple[list[float], list[flo
     s._tempo = _HeldTempo(bpm)
     rows, rates = [], []
     for t in range(len(feats)):
-        n, rate = s._handover.handovers, s._rate
+        n, rate = s._handover.handovers, s._player.rate
         s.push(feats[t: t + 1])
         if s._handover.handovers != n and n > 0:
             rows.append(s._handover.rows)

@@ -232,7 +232,7 @@ def test_a_far_handover_draws_the_next_code_then_the_nearest_exemplars(loaded, f
         s.push(features[t: t + 1])
         if s._handover.handovers != n and t >= s.seg:  # the played exemplar's own first pose against the motion's
             c, j = s.playing_member
-            bends.append(bend_deg(s._members[c, j, 0], s._played[s._handover.start]))
+            bends.append(bend_deg(s._chooser.members[c, j, 0], s._player._played[s._handover.start]))
     assert np.median(bends) < 15.0 and np.mean(np.array(bends) > 20.0) < 0.3, \
         f"median handover bend {np.median(bends):.1f} degrees a bone"
 
@@ -336,7 +336,8 @@ def test_the_shared_sample_hands_over_without_seams(loaded, tmp_path):
     from models.features.spectral import extract_features
     from models.generate import load_library_model
     from models.networks.blend import seam_ratio
-    from models.networks.dance_stream import WARP_LAG, generate
+    from models.networks.dance_stream import generate
+    from models.networks.player import WARP_LAG
 
     out, song = shared_sample(tmp_path, "nutcracker_sugarplum_kevinmacleod.ogg")
     model = load_library_model(loaded.model, out)

@@ -39,7 +39,7 @@ def test_a_moderate_seam_at_the_handover_is_caught(monkeypatch, capsys):
     centred on the code step (offset 0) it reads 0.51, smoother than the dance. The speed
     matching is off here: it slows a movement whose bend adds speed, which hides much of a
     short bend's seam from the ratio (3 frames with it: 1.03; 2 frames: 1.42)."""
-    import models.networks.dance_stream as ds
+    import models.networks.player as ds
 
     ckpt = str(default_checkpoint_path())
     monkeypatch.setattr(ds, "DECAY_FRAMES", 3)

@@ -10,7 +10,9 @@ import librosa
 import numpy as np
 import pytest
 
+import models.networks.chooser as chooser_part
 import models.networks.dance_stream as ds
+import models.networks.player as player_part
 import models.networks.tempo as tempo
 from models.features.audio_io import load_audio
 from models.features.spectral import extract_features
@@ -277,7 +279,7 @@ def test_the_tempo_a_predictor_is_trained_on_is_the_one_the_stream_gives_it():
     for t in range(len(feats)):
         s.push(feats[t: t + 1])
         live.append(s.tempo_input)
-    offline = ds.tempo_inputs(lm.model, feats)
+    offline = player_part.tempo_inputs(lm.model, feats)
     np.testing.assert_allclose(offline, live, atol=1e-6)
     assert np.abs(offline[-60:]).min() > 0.05  # a pulse, away from the memory's tempo: not all zeros
 
@@ -307,7 +309,7 @@ def test_the_same_music_faster_is_danced_faster(clip_stretched, monkeypatch):
     (slow, t_slow), (fast, t_fast) = _speed(lm, feats[0.8]), _speed(lm, feats[1.25])
     assert t_fast / t_slow == pytest.approx(1.25 / 0.8, rel=0.08)
     assert fast / slow > 1.4
-    monkeypatch.setattr(ds, "FOLLOW_TEMPO", False)
+    monkeypatch.setattr(player_part, "FOLLOW_TEMPO", False)
     (slow0, _), (fast0, _) = _speed(lm, feats[0.8]), _speed(lm, feats[1.25])
     assert fast0 / slow0 < 1.05  # the movements' own pace: the tempo is what made the difference
 
@@ -318,13 +320,13 @@ def test_a_checkpoint_without_a_tempo_memory_plays_every_movement_at_its_own_pac
     s = ds.DanceStream(lm.model, seed=0)
     s._tempo.update(0.0, 0.5)  # 120 bpm, clear
     s._tempo.conf = 1.0
-    assert s._rate_for(code, 0) > 1.0  # 120 bpm against the memory's 93
+    assert s._player.rate_for(code, 0, s._tempo) > 1.0  # 120 bpm against the memory's 93
     model = copy.deepcopy(lm.model)
     model.member_period.zero_()  # what an older checkpoint (no tempo memory) loads as
     old = ds.DanceStream(model, seed=0)
     old._tempo.update(0.0, 0.5)
     old._tempo.conf = 1.0
-    assert old._rate_for(code, 0) == 1.0
+    assert old._player.rate_for(code, 0, old._tempo) == 1.0
 
 
 def test_clip_periods_give_stretched_copies_of_a_song_the_same_octave():
@@ -364,19 +366,20 @@ def test_a_sped_up_movement_turns_no_bone_faster_than_the_dancers_largest(cap_on
     had this cause). The beat warp is off here: its depth is not what is tested."""
     lm = load_model(None)
     s = ds.DanceStream(lm.model, seed=0)
-    assert 20.0 < s._bone_cap < 50.0
+    p = s._player
+    assert 20.0 < p._bone_cap < 50.0
     if not cap_on:  # the behaviour switched off: the test must see the whip
-        monkeypatch.setattr(ds.DanceStream, "_bone_limit", lambda self, window, rate: np.inf)
-    window = _turning_head(s._idle_base, 2 * s.seg, 0.95 * s._bone_cap)
-    s._beat_cols = None
-    s.codes_drawn, s._rate = [0], 1.6
-    s._played[:] = window[0]
-    s._play(window, 1.6, s._bone_limit(window, 1.6))
-    steps = bone_steps_deg(np.stack([s._warped(j) for j in range(s.seg)]))
+        monkeypatch.setattr(player_part.Player, "bone_limit", lambda self, window, rate: np.inf)
+    window = _turning_head(s._idle_base, 2 * s.seg, 0.95 * p._bone_cap)
+    p._beat_cols = None
+    p.rate = 1.6
+    p._played[:] = window[0]
+    p.play(window, 1.6, p.bone_limit(window, 1.6), first=False)
+    steps = bone_steps_deg(np.stack([p.warped(j, None, s._tempo) for j in range(s.seg)]))
     if cap_on:
-        assert 0.85 * s._bone_cap < steps.max() <= s._bone_cap * 1.01
+        assert 0.85 * p._bone_cap < steps.max() <= p._bone_cap * 1.01
     else:
-        assert steps.max() > 1.4 * s._bone_cap
+        assert steps.max() > 1.4 * p._bone_cap
 
 
 class _HeldTempo:
@@ -399,7 +402,7 @@ def _drawn_mean(lm, feats: np.ndarray, bpm: float, seed: int, per_code) -> float
 
 def _drawn_liveliness(lm, feats: np.ndarray, bpm: float, seed: int) -> float:
     """Mean :func:`code_energy` z-score of the codes a stream draws on ``feats`` at a held tempo."""
-    return _drawn_mean(lm, feats, bpm, seed, lambda s: s._code_energy)
+    return _drawn_mean(lm, feats, bpm, seed, lambda s: s._chooser.code_energy)
 
 
 @pytest.mark.parametrize("tilt_on", [True, False])
@@ -408,7 +411,7 @@ def test_a_faster_tempo_chooses_livelier_movements(clip_stretched, tilt_on, monk
     livelier codes (TEMPO_ENERGY; the drawn codes' mean z-score is about 3.7 higher); with the
     coupling off the tempo does not enter the draw (the same codes)."""
     if not tilt_on:  # the behaviour switched off: the test must see no difference
-        monkeypatch.setattr(ds, "TEMPO_ENERGY", 0.0)
+        monkeypatch.setattr(chooser_part, "TEMPO_ENERGY", 0.0)
     lm, feats = clip_stretched
     gaps = [_drawn_liveliness(lm, feats[1.25], 150.0, seed) - _drawn_liveliness(lm, feats[1.25], 70.0, seed)
             for seed in (0, 1)]
@@ -420,7 +423,7 @@ def test_a_faster_tempo_chooses_livelier_movements(clip_stretched, tilt_on, monk
 
 def _drawn_quickness(lm, feats: np.ndarray, bpm: float, seed: int) -> float:
     """Mean :func:`code_frequency` z-score of the codes a stream draws on ``feats`` at a held tempo."""
-    return _drawn_mean(lm, feats, bpm, seed, lambda s: ds._cached_frequency(lm.model, s._members))
+    return _drawn_mean(lm, feats, bpm, seed, lambda s: ds._cached_frequency(lm.model, s._chooser.members))
 
 
 @pytest.mark.parametrize("freq_on", [True, False])
@@ -429,7 +432,7 @@ def test_a_faster_tempo_chooses_quicker_movements(clip_stretched, freq_on, monke
     quicker: their frequency z-score is about 2.3 higher (mean of two seeds); with the tilt
     reading liveliness only, 1.35 (livelier codes are quicker too, correlation 0.49)."""
     if not freq_on:  # the behaviour switched off: the tilt reads liveliness only
-        monkeypatch.setattr(ds, "TEMPO_FREQ", 0.0)
+        monkeypatch.setattr(chooser_part, "TEMPO_FREQ", 0.0)
     lm, feats = clip_stretched
     gap = np.mean([_drawn_quickness(lm, feats[1.25], 150.0, seed) - _drawn_quickness(lm, feats[1.25], 70.0, seed)
                    for seed in (0, 1)])
@@ -450,7 +453,7 @@ def test_joint_speed_is_member_speed():
     parents = np.array(POINT_PARENT_INDEX, np.int64)
     offsets = load_default_skeleton().point_offsets().astype(np.float64)
     for code, n in ((3, 16), (40, 13), (200, 5), (300, 2)):
-        w = s._members[code, 0]
+        w = s._chooser.members[code, 0]
         assert joint_speed(w, n, parents, offsets) == pytest.approx(float(ds.member_speed(w[None, None, :n]).mean()),
                                                                    rel=1e-9)
 
@@ -465,7 +468,7 @@ def test_a_handover_plays_the_chosen_movement_at_its_own_speed_times_the_rate(cl
     2-7 in pairs, 0.31 at seeds 0-1 before the follower's drift lead changed the draws);
     without the matching by 0.49 (0.49-0.61), the handover's noise."""
     if not match_on:
-        monkeypatch.setattr(ds, "SPEED_MATCH", 0.0)
+        monkeypatch.setattr(player_part, "SPEED_MATCH", 0.0)
     from models.evaluation.evaluate import positions
     from models.networks.dance_jit import joint_speed
 
@@ -483,18 +486,18 @@ def test_a_handover_plays_the_chosen_movement_at_its_own_speed_times_the_rate(cl
     for seed in (0, 1):
         s = ds.DanceStream(lm.model, seed=seed)
         starts: list = []
-        play, rate_for, asked = s._play, s._rate_for, [1.0]
+        play, rate_for, asked = s._player.play, s._player.rate_for, [1.0]
 
-        def logged_rate(code, member, rate=None, *, _rate_for=rate_for, _asked=asked):
-            _asked[0] = _rate_for(code, member, rate)  # the last before a _play: the tempo's rate for the movement
+        def logged_rate(code, member, tempo, rate=None, *, _rate_for=rate_for, _asked=asked):
+            _asked[0] = _rate_for(code, member, tempo, rate)  # the last before a play: the tempo's rate for the movement
             return _asked[0]
 
         def logged_play(window, rate, limit=np.inf, contact=None, *where, _play=play, _s=s, _starts=starts,
-                        _asked=asked):
-            _play(window, rate, limit, contact, *where)  # where: the rows it starts after (handover.py)
+                        _asked=asked, **how):
+            _play(window, rate, limit, contact, *where, **how)  # where: the rows it starts after (handover.py)
             _starts.append((_s.frame, min(_asked[0], limit)))
 
-        s._rate_for, s._play = logged_rate, logged_play
+        s._player.rate_for, s._player.play = logged_rate, logged_play
         log.clear()
         pos = positions(s.push(feats[1.25]))
         speed = np.linalg.norm(np.diff(pos, axis=0), axis=-1).mean(-1)  # m a frame
@@ -503,7 +506,7 @@ def test_a_handover_plays_the_chosen_movement_at_its_own_speed_times_the_rate(cl
             if frame < 90 or frame + s.seg >= len(speed):
                 continue
             n = min(len(own), int(math.ceil(s.seg * rate)) + 1)
-            v = joint_speed(own, n, s._fk_parents, s._fk_offsets)
+            v = joint_speed(own, n, s._player._fk_parents, s._player._fk_offsets)
             if v > 1e-4:
                 ratios.append(speed[frame: frame + s.seg].mean() / (rate * v))
     r = np.log(np.array(ratios))
@@ -528,7 +531,7 @@ def test_the_memory_is_read_through_a_low_pass():
     raw = sign_continuous(lm.model.member_poses.float().numpy())
     real = np.arange(raw.shape[1])[None, :] < lm.model.member_count.numpy()[:, None]
     third = lambda x: np.abs(np.diff(x[real][:, :, 3:], n=3, axis=1)).mean()  # noqa: E731
-    assert third(stream._members) < 0.7 * third(raw)
+    assert third(stream._chooser.members) < 0.7 * third(raw)
     base = stream._idle_base
     t = np.arange(16)
     slow = _turning_head(base, 16, 0.0)
@@ -554,20 +557,20 @@ def test_at_a_fast_tempo_lively_movements_are_sped_up_too(cap_on, monkeypatch):
     lm = load_model(None)
     s = ds.DanceStream(lm.model, seed=0)
     s._tempo = _HeldTempo(150.0)
-    cap150 = s._cap_now(s._tempo.period)
+    cap150 = s._player.cap_now(s._tempo.period)
     speed, counts = s._member_speed, lm.model.member_count.numpy()
     real = np.arange(speed.shape[1])[None, :] < counts[:, None]
-    lively = np.argwhere(real & (speed > 1.05 * s._speed_cap) & (speed < 0.9 * cap150))
-    assert cap150 > 1.2 * s._speed_cap and len(lively) > 10  # between the 90th percentile and the cap at 150 bpm
+    lively = np.argwhere(real & (speed > 1.05 * s._player._speed_cap) & (speed < 0.9 * cap150))
+    assert cap150 > 1.2 * s._player._speed_cap and len(lively) > 10  # between the 90th percentile and the cap at 150 bpm
     if not cap_on:  # the behaviour switched off: the lively movements must stay at their own pace
-        monkeypatch.setattr(ds, "SPEED_CAP_TEMPO", False)
-    rates = np.array([s._rate_for(int(k), int(m)) for k, m in lively])
+        monkeypatch.setattr(player_part, "SPEED_CAP_TEMPO", False)
+    rates = np.array([s._player.rate_for(int(k), int(m), s._tempo) for k, m in lively])
     if cap_on:
         assert rates.min() > 1.05
     else:
         assert np.all(rates == 1.0)
-    s._tempo = _HeldTempo(60.0 * FPS / s._ref_period)  # at the memory's own tempo the cap is the 90th percentile either way
-    assert s._cap_now(s._tempo.period) == s._speed_cap
+    s._tempo = _HeldTempo(60.0 * FPS / s._player._ref_period)  # at the memory's own tempo the cap is the 90th percentile either way
+    assert s._player.cap_now(s._tempo.period) == s._player._speed_cap
 
 
 def test_a_calm_energy_stays_calm_at_a_fast_tempo():
@@ -581,8 +584,8 @@ def test_a_calm_energy_stays_calm_at_a_fast_tempo():
     for energy in (0.0, 0.5, 1.0, 2.0):
         s = ds.DanceStream(lm.model, seed=0, energy=energy)
         s._tempo = _HeldTempo(150.0)
-        tilt[energy] = s._tempo_tilt()
-        rise[energy] = s._cap_now(s._tempo.period) - s._speed_cap_at(1.0)
+        tilt[energy] = s._chooser.tempo_tilt(s._tempo)
+        rise[energy] = s._player.cap_now(s._tempo.period) - s._player.speed_cap_at(1.0)
     assert tilt[0.0] == 0.0 and rise[0.0] == 0.0
     assert tilt[1.0] > 1.5 and tilt[0.5] == pytest.approx(tilt[1.0] / 2)
     assert 0.0 < rise[0.5] < rise[1.0]

@@ -53,7 +53,7 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], pa
 
     from models.evaluation.evaluate import positions
     from models.evaluation.metrics import DANCE_BAND, FPS, band_energy_points, in_place
-    from models.networks import dance_stream
+    from models.networks import dance_stream, player
     from models.networks.dance_jit import joint_speed
     from models.rig.skeleton import POINT_INDEX
 
@@ -78,21 +78,25 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], pa
                 return w
 
             self._idle.step = noted
+            self._player.speed_matched = self._speed_matched  # the player's, noted (models/networks/player.py)
 
         def _speed_matched(self, own: np.ndarray, bent: np.ndarray, rate: float) -> float:
+            pl = self._player
+            if player.SPEED_MATCH <= 0.0:  # the matching off: no handover is matched (nor noted)
+                return rate
             n = min(len(bent), int(math.ceil(self.seg * rate)) + 1)
             if self.chord:
                 ends = [0, n - 1]
                 own, bent, n = np.ascontiguousarray(own[ends]), np.ascontiguousarray(bent[ends]), 2
-                v_own = joint_speed(own, n, self._fk_parents, self._fk_offsets)
-                v_bent = joint_speed(bent, n, self._fk_parents, self._fk_offsets)
-                lo, hi = dance_stream.SPEED_MATCH_RANGE
-                f = min(max((v_own / v_bent) ** dance_stream.SPEED_MATCH, lo), hi) if v_own > 0 and v_bent > 0 else 1.0
-                out = min(max(rate * f, dance_stream.RATE_RANGE[0]), dance_stream.RATE_RANGE[1])
+                v_own = joint_speed(own, n, pl._fk_parents, pl._fk_offsets)
+                v_bent = joint_speed(bent, n, pl._fk_parents, pl._fk_offsets)
+                lo, hi = player.SPEED_MATCH_RANGE
+                f = min(max((v_own / v_bent) ** player.SPEED_MATCH, lo), hi) if v_own > 0 and v_bent > 0 else 1.0
+                out = min(max(rate * f, player.RATE_RANGE[0]), player.RATE_RANGE[1])
             else:
-                out = super()._speed_matched(own, bent, rate)
-                v_own = joint_speed(own, n, self._fk_parents, self._fk_offsets)
-                v_bent = joint_speed(bent, n, self._fk_parents, self._fk_offsets)
+                out = type(pl).speed_matched(pl, own, bent, rate)
+                v_own = joint_speed(own, n, pl._fk_parents, pl._fk_offsets)
+                v_bent = joint_speed(bent, n, pl._fk_parents, pl._fk_offsets)
             self.log.append((v_own / v_bent if v_bent > 0 else 1.0, rate, out))
             return out
 

@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--beat-delay", type=float, nargs="+", default=None, metavar="D",
                    help="score the checkpoints at each of these BEAT_DELAY values (frames; default: as shipped)")
     a = p.parse_args(argv)
-    import models.networks.dance_stream as ds
+    import models.networks.player as ds
     import torch
 
     from models.evaluation.evaluate import (EvalOptions, _audio_kw, clip_music_beats, load_clips, pooled_beats,

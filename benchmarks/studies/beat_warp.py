@@ -33,7 +33,7 @@ def speeds(checkpoint: str | None, data_root: str | Path, dance: str, cache_dir:
            seed: int = 0) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """(``{label: FK positions (T, 30, 3) m}`` for the real dance, the warp off and on; the
     music beat frames (n,) at 30 fps) of ``dance``'s whole tempo-1 clip."""
-    import models.networks.dance_stream as ds
+    import models.networks.player as ds
     from models.errors import PerformerError
     from models.evaluation.evaluate import EvalOptions, clip_music_beats, load_clips, positions
     from models.generate import load_model, run_model

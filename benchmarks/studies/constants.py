@@ -6,7 +6,7 @@ follow it. The figures then are the variant's; the same command without the assi
 default's. Single-process scripts only (a worker process would start with the shipped constants).
 Example (the tempo's tilt reading liveliness only, the listening benchmark's stretch set and ramp)::
 
-    PYTHONPATH=. .venv/bin/python benchmarks/studies/constants.py models.networks.dance_stream.TEMPO_FREQ=0 -- \\
+    PYTHONPATH=. .venv/bin/python benchmarks/studies/constants.py models.networks.chooser.TEMPO_FREQ=0 -- \\
         benchmarks/listening.py --checkpoint models/assets/default.pt --sets stretch,ramp --out /tmp/freq0 --quiet
 """
 

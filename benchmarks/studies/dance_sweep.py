@@ -48,7 +48,8 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    import models.networks.dance_stream as ds
+    import models.networks.chooser as ds
+    import models.networks.player as pl
     from models.errors import PerformerError
     from models.evaluation.evaluate import EvalOptions, clip_music_beats, load_clips, pooled_beats, positions
     from models.evaluation.metrics import band_ratios
@@ -95,16 +96,16 @@ def main(argv: list[str] | None = None) -> int:
           "| beat coverage |")
     print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     config0 = lm.model.config
-    warp0 = ds.BEAT_WARP
+    warp0 = pl.BEAT_WARP
     for s in specs:
         ds.DRAWS, ds.BEAT_WEIGHT = int(s[0]), s[1]
         temp = s[2] if len(s) >= 3 and s[2] > 0 else config0.temperature
-        ds.BEAT_WARP = s[3] if len(s) == 4 else warp0
+        pl.BEAT_WARP = s[3] if len(s) == 4 else warp0
         lm.model.config = dataclasses.replace(config0, temperature=temp)
         for seed in args.seeds:
             gen = [positions(run_model(lm.model, c.features, seed=seed, style=args.style)) for c in clips]
             r, b = band_ratios(gen, real), pooled_beats(gen, beats)
-            print(f"| {int(s[0])} | {s[1]:g} | {temp:g} | {ds.BEAT_WARP:g} | {seed} | {r['band_amp']:.3f} | {r['jitter']:.3f} | "
+            print(f"| {int(s[0])} | {s[1]:g} | {temp:g} | {pl.BEAT_WARP:g} | {seed} | {r['band_amp']:.3f} | {r['jitter']:.3f} | "
                   f"{jerk(gen) / jerk(real):.2f} | {b['beat_hit_rate']:.4f} | {b['beat_coverage']:.3f} |", flush=True)
     return 0
 

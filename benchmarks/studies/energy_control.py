@@ -88,7 +88,7 @@ def measure_song(model, features: np.ndarray, real_pos: np.ndarray, levels: Sequ
         out[f"{level:g}"] = {"energy_ratio": energy_ratio(pos, real_pos),
                              "hand_speed": hand_speed(pos) / hand_speed(real_pos), "band_amp": bands["band_amp"],
                              "jitter": bands["jitter"],
-                             "code_energy": float(stream._code_energy[codes].mean()) if len(codes) else 0.0,
+                             "code_energy": float(stream._chooser.code_energy[codes].mean()) if len(codes) else 0.0,
                              "max_step_deg": largest_bone_step(poses)}
     return out
 

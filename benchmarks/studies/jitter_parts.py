@@ -5,9 +5,9 @@ The validation dances, the shipped checkpoint's live stream (seeds ``--seeds``) 
 (its ``interior``: the jitter band's energy, above 6 Hz, with the first and last ``--ends`` s of
 every song left out, the FFT over the whole song). For every seed and stage the variants run one
 after the other in the same process (same load), each a set of constants (``--part NAME=SETS``,
-SETS ``part.CONST=VALUE`` joined by ``,``; part ``stream`` (models/networks/dance_stream.py),
-``stage``, ``feet``, ``tables`` (member_tables.py) or ``handover``; ``nofeet`` as a SET: the feet
-step off). Default parts:
+SETS ``part.CONST=VALUE`` joined by ``,``; part ``stream`` (models/networks/dance_stream.py and its
+parts chooser.py and player.py, wherever the constant lives), ``stage``, ``feet``, ``tables``
+(member_tables.py) or ``handover``; ``nofeet`` as a SET: the feet step off). Default parts:
 
 - ``shipped``: as shipped;
 - ``warp``: the beat warp off (``BEAT_WARP=0``);
@@ -25,7 +25,7 @@ share within one frame of a handover (3 of every 8 frames), ``clamp`` the share 
 whose beat-warp lag sits at a bound (0 or 2 ``WARP_LAG``: its read-out speed jumps there) and
 the share of the hands' energy within 2 frames of such a frame. ``--songs``: per song too, the
 hands' interior RMS above 6 Hz (mm, summed over the hand points) against the dancer's, its share of
-the run's hand energy, and the mean tempo z (``DanceStream._tempo_z``) of the codes drawn, above each run's row;
+the run's hand energy, and the mean tempo z (``Chooser.tempo_z``) of the codes drawn, above each run's row;
 then by the drawn code's tempo z (:func:`by_z`) the movements' share and their share of the hands' energy.
 ``--fd`` (in place only): ``performer evaluate``'s FD and beat hit rate too. A SET ``tail=Z:SIGMA`` plays
 the exemplars of the codes whose tempo z is above Z low-passed by a further Gaussian of SIGMA frames,
@@ -57,8 +57,6 @@ DEFAULT_PARTS = ("shipped=", "warp=stream.BEAT_WARP=0", "tempo=stream.FOLLOW_TEM
 def parse_part(text: str) -> tuple[str, list[tuple[str, str, str]], bool, tuple[float, float] | None]:
     """``NAME=part.CONST=V,...`` -> (name, [(part, const, value)], feet on, (tail z, sigma) or None);
     ValueError on a bad one."""
-    from models.networks import dance_stream, feet, handover, member_tables, stage
-
     name, _, sets = text.partition("=")
     if not name:
         raise ValueError(f"--part wants NAME=part.CONST=VALUE,..., got {text!r}")
@@ -76,8 +74,7 @@ def parse_part(text: str) -> tuple[str, list[tuple[str, str, str]], bool, tuple[
             tail = (z, sigma, key)
             continue
         part, _, const = key.partition(".")
-        mod = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables,
-               "handover": handover}.get(part)
+        mod = _module(part, const)
         if mod is None or not const.isupper() or not hasattr(mod, const) or not value:
             raise ValueError(f"--part {name}: wants stream.|stage.|feet.|tables.|handover.CONST=VALUE of an existing "
                              f"constant, got {item!r}")
@@ -98,14 +95,21 @@ def lowpass_windows(windows: np.ndarray, hz: float) -> np.ndarray:
     return x.astype(np.float32)
 
 
+def _module(part: str, const: str):
+    """The module a ``part.CONST`` names (``stream``: dance_stream.py, chooser.py or player.py, the one
+    holding CONST); None for an unknown part."""
+    from models.networks import chooser, dance_stream, feet, handover, member_tables, player, stage
+
+    if part == "stream":
+        return next((m for m in (dance_stream, chooser, player) if hasattr(m, const)), dance_stream)
+    return {"feet": feet, "stage": stage, "tables": member_tables, "handover": handover}.get(part)
+
+
 def _apply(sets: list[tuple[str, str, str]]) -> dict:
     """Set the constants; returns what to restore."""
-    from models.networks import dance_stream, feet, handover, member_tables, stage
-
-    mods = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables, "handover": handover}
     old = {}
     for part, const, value in sets:
-        mod = mods[part]
+        mod = _module(part, const)
         was = getattr(mod, const)
         old[(part, const)] = was
         if isinstance(was, bool):
@@ -118,11 +122,8 @@ def _apply(sets: list[tuple[str, str, str]]) -> dict:
 
 
 def _restore(old: dict) -> None:
-    from models.networks import dance_stream, feet, handover, member_tables, stage
-
-    mods = {"stream": dance_stream, "feet": feet, "stage": stage, "tables": member_tables, "handover": handover}
     for (part, const), was in old.items():
-        setattr(mods[part], const, was)
+        setattr(_module(part, const), const, was)
 
 
 def hann_energy(pos: dict[str, np.ndarray], band: tuple[float, float], fps: float = 30.0) -> tuple[float, int]:
@@ -146,7 +147,7 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
 
     from models.evaluation.evaluate import positions
     from models.evaluation.metrics import JITTER_BAND, band_ratios, in_place, jerk
-    from models.networks import dance_stream
+    from models.networks import dance_stream, player
     from models.rig.skeleton import POINT_INDEX
 
     from jitter_wrap import FEET, HANDS, style_judge, summary, validation_clips
@@ -164,8 +165,8 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
             super().__init__(*args, **kw)
             if tail is not None:
                 if tail not in tails:
-                    mem = self._members.copy()
-                    for c in np.where((self._tempo_z > tail[0]) & (self._counts > 0))[0]:
+                    mem = self._chooser.members.copy()
+                    for c in np.where((self._chooser.tempo_z > tail[0]) & (self._counts > 0))[0]:
                         n = int(self._counts[c])
                         if tail[2] == "lowpass":  # zero-phase Butterworth
                             mem[c, :n] = lowpass_windows(mem[c, :n], tail[1])
@@ -173,16 +174,20 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                         mem[c, :n] = dance_stream._unit(gaussian_filter1d(mem[c, :n], tail[1], axis=1,
                                                                           mode="nearest").astype(np.float32))
                     tails[tail] = mem
-                self._members = tails[tail]
+                self._chooser.members = tails[tail]
 
         def reset(self) -> None:
             super().reset()
             self.clamped: list[bool] = []
+            pl = self._player
+            warped = type(pl).warped.__get__(pl)
 
-        def _warped(self, j: int) -> np.ndarray:
-            out = super()._warped(j)
-            self.clamped.append(self._lag <= 0.0 or self._lag >= 2.0 * dance_stream.WARP_LAG)
-            return out
+            def noted(j: int, row: np.ndarray, tempo) -> np.ndarray:  # the player's read-out, noted
+                out = warped(j, row, tempo)
+                self.clamped.append(pl._lag <= 0.0 or pl._lag >= 2.0 * player.WARP_LAG)
+                return out
+
+            pl.warped = noted
 
     lm, clips = validation_clips(data_root, checkpoint, cache)
     if fd:  # performer evaluate's FD and beat hit (in place), its style classifier
@@ -211,7 +216,7 @@ def run(data_root: str, checkpoint: str, seeds: list[int], stages: list[str], en
                         world.append(positions(poses))
                         pos[c.name] = in_place(world[-1])
                         clamp[c.name] = np.array(s.clamped)
-                        zs[c.name] = s._tempo_z[np.array(s.codes_drawn)]  # movement i: frames 8i .. 8i + 7
+                        zs[c.name] = s._chooser.tempo_z[np.array(s.codes_drawn)]  # movement i: frames 8i .. 8i + 7
                         drawn[c.name] = float(zs[c.name].mean())
                 finally:
                     _restore(old)

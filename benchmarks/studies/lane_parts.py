@@ -53,6 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     import models.networks.dance_numpy as dance_numpy
     import models.networks.dance_stream as ds
     import models.networks.feet as feet
+    import models.networks.player as player
     import models.networks.stage as stage
     from models.errors import PerformerError
     from models.features.audio_io import bundled_clip_path, load_audio
@@ -85,8 +86,8 @@ def main(argv: list[str] | None = None) -> int:
             code_cpu.append((time.thread_time_ns() - c0) / 1e3)
 
     ds.DanceStream._next_code = code_step
-    for owner, name in ((ds.DanceStream, "push"), (ds.DanceStream, "_next_code"), (ds.DanceStream, "_warped"),
-                        (ds.DanceStream, "_contact_at"), (ds.DanceStream, "_play"), (stage.SpotStage, "step"),
+    for owner, name in ((ds.DanceStream, "push"), (ds.DanceStream, "_next_code"), (player.Player, "warped"),
+                        (player.Player, "contact_at"), (player.Player, "play"), (stage.SpotStage, "step"),
                         (stage.Stage, "handover"), (stage.Stage, "inwards"), (feet.FeetLock, "step")):
         wrap(owner, name)
     loaded: dict = {}

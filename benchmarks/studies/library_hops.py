@@ -69,8 +69,8 @@ def main(argv: list[str] | None = None) -> int:
     clock = time.thread_time if a.cpu else time.perf_counter
     ms: dict[str, list[float]] = {k: [] for k in streams}
     searches = []  # frames on which the library's stream searched every exemplar (its last resort)
-    own = streams["library"]._nearest
-    streams["library"]._nearest = lambda pose: searches.append(streams["library"].frame) or own(pose)
+    own = streams["library"]._chooser.nearest
+    streams["library"]._chooser.nearest = lambda pose: searches.append(streams["library"].frame) or own(pose)
     order = list(streams)
     for t in range(len(feats)):
         for k in order[t % 3:] + order[: t % 3]:

@@ -152,7 +152,7 @@ def perform(model, feats: np.ndarray, style: str | None = None, windows: np.ndar
         dance[t] = s.idle_weight == 0.0 and t >= SETTLE
         token[t] = styles[s.playing_member] if s.playing_member is not None else -1
         if bends is not None and s._handover.handovers != n and s.playing_member is not None and dance[t]:
-            bends.append(bend_deg(s._members[s.playing_member][0], s._played[s._handover.start]))
+            bends.append(bend_deg(s._chooser.members[s.playing_member][0], s._player._played[s._handover.start]))
         if windows is not None and s._handover.handovers != n and s.playing_member is not None:
             w = windows[s.playing_member]
             if prev is not None and dance[t]:
@@ -204,7 +204,7 @@ def summarize_folders(rows: list[dict], names) -> dict:
 
 def handover_seam(model, poses: np.ndarray) -> float:
     from models.networks.blend import seam_ratio
-    from models.networks.dance_stream import WARP_LAG
+    from models.networks.player import WARP_LAG
 
     seg = model.config.seg
     return seam_ratio(poses[int(round(WARP_LAG)) % seg:], seg, seg, radius=1)

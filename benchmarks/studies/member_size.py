@@ -61,6 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("::")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--checkpoint", default="models/assets/default.pt", help="the checkpoint (default the shipped one)")
     a = p.parse_args(argv)
+    import models.networks.chooser as chooser
     import models.networks.dance_stream as ds
     from models.generate import load_model
 
@@ -84,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"ln {n}: {share:.0%} of its variance within codes")
     has = counts > 0
     code = {n: (np.where(real, x, 0.0).sum(1) / np.maximum(counts, 1))[has] for n, x in logs.items()}
-    z = (tables.energy + np.float32(ds.TEMPO_FREQ) * tables.frequency)[has]
+    z = (tables.energy + np.float32(chooser.TEMPO_FREQ) * tables.frequency)[has]
     print("over codes, the tilt's z against: " + ", ".join(f"ln {n} {_corr(z, code[n]):+.2f}" for n in code))
     q = logs["quick"][real]
     edges = np.quantile(q, np.linspace(0.0, 1.0, 6))
@@ -95,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     period = model.member_period.numpy().astype(np.float64)
     t_ref = 1800.0 / float(np.exp(np.log(period[real & (period > 0)]).mean()))  # bpm
     for bpm in (70.0, 90.0, 112.0, 140.0, 162.0):
-        g = ds.TEMPO_ENERGY * np.log(bpm / t_ref) * z
+        g = chooser.TEMPO_ENERGY * np.log(bpm / t_ref) * z
         w = np.exp(g - g.max())
         w /= w.sum()
         print(f"{bpm:.0f} bpm, the codes weighted by the tilt alone: excursion {np.exp((w * code['exc']).sum()) * 100:.2f} cm, "

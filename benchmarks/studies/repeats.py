@@ -115,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from tqdm import tqdm
 
-    import models.networks.dance_stream as ds
+    import models.networks.chooser as ds
     from models.errors import PerformerError
     from models.evaluation import listening as L
     from models.generate import load_model

@@ -29,8 +29,8 @@ from pathlib import Path
 
 def handover_offset() -> int:
     """Frames from a dance_vq code step (8k) to where its movement's handover shows: the beat
-    warp's mean lag, rounded (``models.networks.dance_stream.WARP_LAG``)."""
-    from models.networks.dance_stream import WARP_LAG
+    warp's mean lag, rounded (``models.networks.player.WARP_LAG``)."""
+    from models.networks.player import WARP_LAG
 
     return int(round(WARP_LAG))
 
@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max", type=float, default=1.2, help="exit 1 above this ratio (default 1.2)")
     p.add_argument("--handover-offset", type=int, default=None, metavar="FRAMES",
                    help="dance_vq: frames from the code step 8k to the handover the ratio is centred on "
-                        "(default round(WARP_LAG) of models/networks/dance_stream.py: 2)")
+                        "(default round(WARP_LAG) of models/networks/player.py: 2)")
     a = p.parse_args(argv)
     import torch
 

@@ -217,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
         p.error("--guidance must be > 0")
     import torch
 
-    import models.networks.dance_stream as ds
+    import models.networks.chooser as ds
     from models.errors import PerformerError
 
     requests = [r for r in REQUESTS if (r or "auto") in (a.styles or [r or "auto"])]

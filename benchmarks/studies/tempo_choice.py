@@ -87,6 +87,7 @@ def targets(data: Path, cache: str) -> None:
 
 def choices(path: str | None, data: Path, cache: str, seeds: list[int]) -> None:
     """Reading 3 for the checkpoint at ``path`` (None: the shipped one)."""
+    import models.networks.chooser as chooser
     import models.networks.dance_stream as ds
     from models.evaluation import listening as L
     from models.features.spectral import extract_features
@@ -105,7 +106,7 @@ def choices(path: str | None, data: Path, cache: str, seeds: list[int]) -> None:
         for rate in (0.8, 1.25):
             feats = extract_features(audio.excerpt(song, start, secs, rate), lm.features)
             for gain in (0.0, 4.0):
-                ds.TEMPO_ENERGY = ds.TEMPO_ENERGY_HEARD = gain
+                chooser.TEMPO_ENERGY = chooser.TEMPO_ENERGY_HEARD = gain
                 codes = []
                 for seed in seeds:
                     s = ds.DanceStream(m, seed=seed)

@@ -149,7 +149,7 @@ def perform_ramp(lm, y: np.ndarray, bpm: float, seeds: int, lead: bool) -> dict:
 def _nominal_rate(tempo_bpm: np.ndarray, seg: int = 8) -> np.ndarray:
     """The tempo's share of each movement's rate: the followed tempo taken at each movement's
     start (every ``seg`` frames) and ramped from the last movement's over the movement, as
-    ``DanceStream._advance`` ramps it (caps, speed matching and the pulse's fade left out)."""
+    ``Player.advance`` ramps it (caps, speed matching and the pulse's fade left out)."""
     x = np.asarray(tempo_bpm, np.float64)
     at = x[::seg]
     prev = np.concatenate([at[:1], at[:-1]])

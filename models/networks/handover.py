@@ -15,7 +15,7 @@ the coming movement. At ``r >= 1`` the exemplar has played its frames by the cod
 handover is at once, as before.
 
 State (:class:`Handover`, one per stream, ``reset`` with it): ``base``, the row of the player's
-buffer (``DanceStream._played``) the current code step's frame 0 reads (un-warped; ``seg``
+buffer (``Player._played``, models/networks/player.py) the current code step's frame 0 reads (un-warped; ``seg``
 after a handover, moved on by a hold), ``start``, the row of the playing exemplar's frame 0,
 the counts of handovers and holds, and ``rows``, the rows the exemplar last handed over from
 had played (all three for measuring).
@@ -25,7 +25,7 @@ from __future__ import annotations
 
 #: True: an exemplar is handed over when it has played its ``seg`` recorded frames (8 frames over
 #: ``8 / r`` output frames). False (shipped): at every code step (every 8 output frames, ``8 r``
-#: recorded frames). On, with the beat warp at 0.5 (``dance_stream.BEAT_WARP``), the headline's
+#: recorded frames). On, with the beat warp at 0.5 (``player.BEAT_WARP``), the headline's
 #: band amplitude reads 0.854 (0.833 off) at FD 3.04, beat hit 0.593, jerk 101.4 (3.10, 0.566,
 #: 103.2), but the default 3x2 stage's raw jitter passes 1.3 at 4 of seeds 0-7 and its FD at seed 2
 #: reads 13.43 against 12.11: not shipped (docs/history.md, "The amplitude gap"). Measure it with
@@ -35,7 +35,7 @@ ON_FRAMES: bool = False
 
 class Handover:
     """Where the playing exemplar stands in the player's buffer and whether a code step hands
-    over (see the module docstring). Rows are of ``DanceStream._played`` (30 fps exemplar
+    over (see the module docstring). Rows are of ``Player._played`` (30 fps exemplar
     frames; ``4 seg`` rows: at most ``seg`` rows of the last exemplar before the new window)."""
 
     def __init__(self, seg: int) -> None:

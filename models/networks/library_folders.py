@@ -33,7 +33,7 @@ FOLDER_MARGIN: float = 0.5
 #: Code steps (267 ms each) a folder plays at least before the music's choice may move the stream on.
 FOLDER_DWELL: int = 8
 #: The tempo's say: each code step's evidence for a folder also gains the tempo's tilt (dance_stream's
-#: ``_tempo_tilt``: + above the memory's tempo, - below) times this times the folder's liveliness (the
+#: ``Chooser.tempo_tilt``: + above the memory's tempo, - below) times this times the folder's liveliness (the
 #: mean z-score of ln its exemplars' joint speed over the memory): a faster tempo, the livelier folder.
 FOLDER_TEMPO: float = 1.0
 

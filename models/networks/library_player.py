@@ -62,7 +62,7 @@ MAX_STYLES: int = 16
 #: library in 4 folders, benchmarks/studies/startup_memory.py: 32 a code holds 604 MB once started,
 #: over the 600-MB budget; 16 a code 517-520 MB; docs/library.md).
 MAX_MEMBERS: int = 16
-#: Codes a library's stream may draw a code step (the default's: 1, dance_stream.DRAWS). Most of a
+#: Codes a library's stream may draw a code step (the default's: 1, chooser.DRAWS). Most of a
 #: library's codes hold windows that the encoder gave to other codes (the shared 63-s sample's windows
 #: chose 99 of the 512), so all of one drawn code's exemplars can be far from the playing pose; on a
 #: calm song such a handover bent the motion by 35 degrees a bone (125 the worst bone), the worst
@@ -77,7 +77,7 @@ NEAREST: int = 16
 #: never left the folder it started in nor a still stretch of a clip (it always found an exemplar
 #: that near); handovers on lively songs bend 5-16 degrees (median), so 20 stops only the far ones.
 HANDOVER_GUARD: float = 20.0
-#: Above the memory's tempo, the tempo's tilt (dance_stream.TEMPO_ENERGY: +0.5 to +0.9 at 1.25x on
+#: Above the memory's tempo, the tempo's tilt (chooser.TEMPO_ENERGY: +0.5 to +0.9 at 1.25x on
 #: the listening songs) times this times an exemplar's liveliness (z-score of ln its mean joint
 #: speed over the memory) is taken off its matching cost: livelier exemplars of the drawn codes. A
 #: library's exemplars of one code come from unlike clips (a pop dance, a waltz), and the matching
@@ -141,7 +141,7 @@ def member_choice(model, speed: np.ndarray, real: np.ndarray, draws: int) -> tup
     once), each exemplar's liveliness weight (K, M) or None) of a stream of ``model``: a library
     model's ``code_draws``, ``handover_guard`` and ``exemplar_tilt`` (:func:`library_model`) times
     the z-score of ln ``speed`` (K, M, m/frame) over the ``real`` (K, M) exemplars; (draws, 0, None)
-    for a checkpoint's own memory (its choice as it always was: ``draws``, dance_stream.DRAWS)."""
+    for a checkpoint's own memory (its choice as it always was: ``draws``, chooser.DRAWS)."""
     draws, guard = int(getattr(model, "code_draws", draws)), float(getattr(model, "handover_guard", 0.0))
     gain = float(getattr(model, "exemplar_tilt", 0.0))
     if gain == 0.0 or not real.any():

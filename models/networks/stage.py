@@ -8,7 +8,7 @@ plays them back: :class:`Stage` holds a world position (x, z, metres) and headin
 about +Y, 0 = facing the audience at +Z), and every frame
 
 1. reads the playing movement's travel track at the **same fractional position** the player
-   reads its pose (:meth:`DanceStream._warped`), so the tempo rate, the beat warp and the
+   reads its pose (:meth:`~models.networks.player.Player.warped`), so the tempo rate, the beat warp and the
    handover's blend move the travel exactly as they move the pose: the track is rebuilt at
    each handover as the pose rows are (the last movement's frames, then the new exemplar's
    travel carried on from where the last one's reached, its velocity blended from the last
@@ -216,7 +216,7 @@ class Stage:
 
     # -- the player's side ---------------------------------------------------------------
     def handover(self, at: float, travel: np.ndarray | None, first: bool, lead: int | None = None) -> None:
-        """A new movement starts (``DanceStream._play``): the track's first ``lead`` rows (``seg``
+        """A new movement starts (``Player.play``): the track's first ``lead`` rows (``seg``
         unless told; up to ``2 seg``, :mod:`models.networks.handover`) become the last movement's
         at ``at + i`` (as the pose rows do), then ``travel`` (2 seg, 3: the exemplar's
         displacement and heading change from its frame 0, or None: in place) carried on from the

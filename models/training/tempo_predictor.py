@@ -6,10 +6,10 @@ features) but not the tempo the performer follows. This trains a fresh predictor
 :func:`models.training.dance_vq.train_dance_vq` does (the same steps, batch, learning rate, noise
 and style dropout, on the verified dances at every tempo factor of the config), with each token
 also given ``ln(T / T_ref)``: the tempo the stream's own follower reads at the token's last frame
-over the memory's mean tempo, faded with the pulse (:func:`models.networks.dance_stream.tempo_inputs`,
+over the memory's mean tempo, faded with the pulse (:func:`models.networks.player.tempo_inputs`,
 the stream's arithmetic). Everything else of the checkpoint (codebook, choreographic memory, style
 memory, music gate, presence detector) is kept as it is: the stream plays the new predictor's
-codes from the same memory, with the tempo's logit tilt :data:`~models.networks.dance_stream.TEMPO_ENERGY_HEARD`.
+codes from the same memory, with the tempo's logit tilt :data:`~models.networks.chooser.TEMPO_ENERGY_HEARD`.
 
 Not shipped: the codebook's codes hardly tell a movement played fast from the same played slow (the
 stretched corpus's target codes are as quick at 1.25x as at 0.75x), so the predictor has nothing of the
@@ -38,9 +38,9 @@ from models.training.style_memory import load_dance_vq, refit_parser, save_as_lo
 
 def tempo_codes(model: DanceVQ, clips: list, phases: range) -> tuple[CodeSet, list[np.ndarray]]:
     """:func:`~models.training.dance_vq.encode_clips` of ``clips`` at ``phases``, and per (clip, phase),
-    in the same order, each token's tempo input (N,): :func:`~models.networks.dance_stream.tempo_inputs`
+    in the same order, each token's tempo input (N,): :func:`~models.networks.player.tempo_inputs`
     at the token's last frame (token k of phase p ends at frame p + seg k)."""
-    from models.networks.dance_stream import tempo_inputs
+    from models.networks.player import tempo_inputs
 
     data = encode_clips(model, clips, phases)
     s = model.config.seg
