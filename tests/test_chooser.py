@@ -69,3 +69,25 @@ def test_the_energy_control_draws_calmer_or_livelier_codes(clip):
         codes = drive(chooser, song, tempo)
         drawn[e] = float(chooser.code_energy[codes].mean())
     assert drawn[2.0] - drawn[0.0] > 1.0, drawn
+
+
+def test_a_style_changed_after_the_window_filled_plays_on(clip):
+    """The show desk changes the style mid-song: once the token window is full (128 frames), the
+    new style's window is rebuilt from its last ``window - 1`` tokens, as every step's is (it was
+    built from all of them, one too many: the next push raised IndexError). The new style takes
+    effect: the codes drawn after it differ from the same stream's without the change."""
+    lm, feats = clip
+    n = min(len(feats), 420)
+    assert n >= 380, "the bundled clip is shorter than the test needs"
+    changed, kept = DanceStream(lm.model, seed=0), DanceStream(lm.model, seed=0)
+    for s in (changed, kept):
+        s.push(feats[:300])
+    assert len(changed._chooser._tokens) == changed._chooser._tokens.maxlen  # the window is full
+    changed.set_style("waltz")  # guided: both the style's and auto's windows rebuilt
+    poses = changed.push(feats[300:340])
+    changed.set_style(None)  # back to auto: the auto window rebuilt
+    poses = np.concatenate([poses, changed.push(feats[340:n])])
+    assert np.isfinite(poses).all()
+    kept.push(feats[300:n])
+    assert changed.codes_drawn[:38] == kept.codes_drawn[:38]  # the same until the change
+    assert changed.codes_drawn[38:] != kept.codes_drawn[38:]

@@ -250,10 +250,10 @@ class Chooser:
         if pred.tempo is not None:  # a predictor that hears the tempo (DanceVQConfig.tempo_input)
             token = pred.with_tempo(token, tempo_input)
         prefix = self._prefix
+        held = list(self._tokens)[-(pred.window - 1):]  # the window but its new token (a full deque holds one more)
         if prefix is None or prefix.style != self.pstyle:  # the first step, or the style changed since
-            prefix = Prefix(pred, list(self._tokens), self.pstyle)
-        auto = (self._prefix_auto if self._prefix_auto is not None else Prefix(pred, list(self._tokens), 0)) \
-            if guided else None
+            prefix = Prefix(pred, held, self.pstyle)
+        auto = (self._prefix_auto if self._prefix_auto is not None else Prefix(pred, held, 0)) if guided else None
         if prefix.done and (auto is None or auto.done) and self._match is None:  # the new rows: compiled, no BLAS
             logits = self.logits(token, prefix, auto, tempo)
         else:  # a window's pieces not computed ahead, or a library's chooser: BLAS products
