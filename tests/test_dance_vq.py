@@ -15,7 +15,8 @@ from models.errors import CheckpointError, ConfigError
 from models.networks import chooser as chooser_part
 from models.networks import player as player_part
 from models.networks.checkpoint import build_model, load_checkpoint, save_checkpoint
-from models.networks.dance_stream import FADE_FRAMES, PRESENT_FRAMES, DanceStream, generate
+from models.networks.dance_stream import DanceStream, generate
+from models.networks.idle_gate import FADE_FRAMES, PRESENT_FRAMES
 from models.networks.idle_fade import idle_pose
 from models.networks.idle_gate import BREAK_HOLD_SILENT
 from models.networks.dance_vq import DanceVQ, DanceVQConfig, style_token

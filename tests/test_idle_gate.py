@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from models.networks.dance_stream import FADE_FRAMES, DanceStream
+from models.networks.dance_stream import DanceStream
+from models.networks.idle_gate import FADE_FRAMES
 from models.networks.idle_gate import BREAK_DB, BREAK_HOLD, BREAK_HOLD_SILENT, RETURN_DB, SONG_DANCE, SONG_IDLE
 from models.networks.music_gate import FRESH_SILENCE
 from test_dance_vq import music, tiny_model

@@ -64,7 +64,7 @@ from models.networks.dance_numpy import NumpyPredictor
 from models.networks.dance_vq import DanceVQ
 from models.networks.feet import FeetLock
 from models.networks.idle_fade import IdleFade, IdleSway
-from models.networks.idle_gate import ABSENT_FRAMES, FADE_FRAMES, PRESENT_FRAMES, IdleGate  # noqa: F401
+from models.networks.idle_gate import IdleGate
 from models.networks.lead import PhaseForecast
 from models.networks.library_player import bend_deg, resolve_style
 from models.networks.member_tables import (CHUNK_FRAMES, MemberTables, code_energy, code_frequency, member_dips,  # noqa: F401
