@@ -100,8 +100,7 @@ frame whatever the voice network hears in a dance the voice-over context heard n
 voice network: ``return_confirm.CONFIRM_VOICE``, which ``--confirm-voice`` sets), ``unsure-voice`` (the
 voice-over context counts only its rules' kept frames, not a voice heard where the stop network wavers:
 ``unsure_voice.UNSURE_TOP``, which ``--unsure-top`` sets), ``host`` (the voice-over and pause rules keep a host's
-words after a song that stopped at once: ``song_end.py``), ``modulation`` (the presence networks give their 13th
-statistic, the log energy's 4-Hz modulation, no weight: ``modulation.py``; networks fitted before it have none). ``--trace`` prints the gate's
+words after a song that stopped at once: ``song_end.py``). ``--trace`` prints the gate's
 state frame by frame at each stop of a recording with the readers over it, through a reader
 after a recording and the next recording's start, or through a gap between songs and the music's
 return (``gap:LABEL``), or through an espeak-ng host after a training song (``espeak:SONG/K``),
@@ -173,7 +172,7 @@ SWITCHES: dict[str, tuple[str, str]] = {"break-count": ("idle", "void_breaks_onl
                                         "agree": ("presence", "agree_rule"), "false-start": ("false_start", "rule"), "lone-voice": ("lone", "rule"),
                                         "voiced-song": ("idle", "voiced_song"), "return-confirm": ("return_confirm", "rule"),
                                         "unsure-voice": ("unsure", "rule"), "sharp-return": ("sharp_return", "rule"),
-                                        "host": ("song_end", "rule"), "modulation": ("presence", "modulation_rule")}
+                                        "host": ("song_end", "rule")}
 #: The switches ``--off`` named (set by main).
 OFF: set[str] = set()
 
@@ -693,8 +692,7 @@ def main(argv: list[str] | None = None) -> int:
                    "not a voice heard where the stop network wavers: unsure_voice.py), sharp-return (an idle performer does not "
                    "take the stop or the voice network's word alone right after a silence or on a rise over the gap's level: "
                    "sharp_return.py), host (the voice-over and pause rules keep a host's words after a song that stopped at "
-                   "once: song_end.py), modulation (the presence networks give their 13th statistic, the log energy's "
-                   "4-Hz modulation, no weight: modulation.py)")
+                   "once: song_end.py)")
     p.add_argument("--trace", help="print the gate's state frame by frame instead of the tables: RECORDING@DB (a shared "
                    "recording, a prefix of its name, with the readers over it at DB dB: every stop after 3 s) or "
                    "RECORDING@READER (a reader, a prefix of its name, after 20 s of the recording from --reader-at: "

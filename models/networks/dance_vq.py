@@ -358,14 +358,10 @@ class DanceVQ(nn.Module):
     def _load_from_state_dict(self, state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys,
                               error_msgs) -> None:
         """Checkpoints saved before the style, tempo or travel memory or the presence detector
-        existed load without them (zeros: unknown, not fitted, in place); presence networks fitted
-        before the modulation statistic keep their shorter parameters (models.networks.music_gate)."""
+        existed load without them (zeros: unknown, not fitted, in place)."""
         for name in ("member_style", "style_prior", "member_period", "member_travel", "presence", "presence_stop",
                      "presence_voice"):
             state_dict.setdefault(prefix + name, torch.zeros_like(getattr(self, name)))
-        for name in ("presence", "presence_stop", "presence_voice"):  # networks fitted before the 13th statistic
-            if state_dict[prefix + name].shape != getattr(self, name).shape:
-                setattr(self, name, torch.zeros_like(state_dict[prefix + name]))  # keep their 12 (music_gate.unpack)
         super()._load_from_state_dict(state_dict, prefix, local_metadata, strict, missing_keys, unexpected_keys,
                                       error_msgs)
 

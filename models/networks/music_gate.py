@@ -23,10 +23,7 @@ and keeps :data:`N_STATS` causal running statistics (one compiled call a frame,
 * 9: the mean absolute log-energy difference (dB a frame);
 * 10: the beat phase's coherence (time constant :data:`TAU_BEAT`), the mean of ``cos(theta[t] - theta[t-1] - 2 pi / P[t])``
   (a steady pulse advances its phase by one period's share a frame);
-* 11: the beat period's jitter, the log mean of ``|log2 P[t] - log2 P[t-1]|``;
-* 12: the log energy's 4-Hz modulation (dB; speech's syllable rate, :mod:`models.networks.modulation`, its own
-  1-s time constant). Networks fitted before it read the first 12 only (:data:`N_STATS_BEFORE`: their packed
-  parameters are shorter, :func:`unpack`); ``modulation_rule = False`` gives it no weight.
+* 11: the beat period's jitter, the log mean of ``|log2 P[t] - log2 P[t-1]|``.
 
 A small network (:data:`N_STATS` -> :data:`HIDDEN` tanh -> 1) turns them into a logit
 (music > 0), its weights and the statistics' standardisation in the model's ``presence``
@@ -124,7 +121,6 @@ from numba import njit
 from models.networks.agreement import Agreement
 from models.networks.false_start import FalseStart
 from models.networks.lone_voice import LoneVoice
-from models.networks.modulation import N_MOD_STATE, modulation_step
 from models.networks.return_confirm import ReturnConfirm
 from models.networks.sharp_return import SharpReturn
 from models.networks.song_end import SongEnd
@@ -135,11 +131,7 @@ from models.networks.voice_pauses import VoicePauses, pause_steadiness
 from models.networks.voice_start import VoiceStart
 
 #: Statistics the detector reads (see the module docstring).
-N_STATS: int = 13
-#: Statistics of networks fitted before the modulation (statistic 12): they read the first 12.
-N_STATS_BEFORE: int = 12
-#: The modulation's statistic.
-MOD_STAT: int = 12
+N_STATS: int = 12
 #: Hidden units of the detector's network.
 HIDDEN: int = 16
 #: Time constant (frames) of the statistics while the performer dances (0.5 s), the default:
@@ -192,33 +184,24 @@ DENERGY_COL: int = 27
 ONSET_COL: int = 28
 #: State numbers: MFCC 1-2 means, flux, energy mean, energy square deviation, low-energy
 #: share, onset mean, onset square deviation, |d energy| mean, frames seen, previous beat
-#: phase and log period, phase coherence, period jitter; then the modulation's (from :data:`MOD_AT`).
-MOD_AT: int = 14
-N_STATE: int = MOD_AT + N_MOD_STATE
-
-
-def n_params(n_stats: int = N_STATS) -> int:
-    """Length of a network's packed parameters on ``n_stats`` statistics: their mean and std, W1, b1, w2, b2."""
-    return 2 * n_stats + HIDDEN * n_stats + HIDDEN + HIDDEN + 1
-
-
-#: Length of the packed parameters (:func:`n_params`).
-N_PARAMS: int = n_params()
+#: phase and log period, phase coherence, period jitter.
+N_STATE: int = 14
+#: Length of the packed parameters: statistics mean and std, W1, b1, w2, b2.
+N_PARAMS: int = 2 * N_STATS + HIDDEN * N_STATS + HIDDEN + HIDDEN + 1
 
 
 def pack(mean: np.ndarray, std: np.ndarray, w1: np.ndarray, b1: np.ndarray, w2: np.ndarray, b2: float) -> np.ndarray:
-    """The detector's parameters as one float32 vector (:func:`n_params` of S, :data:`N_PARAMS` for all):
-    statistics mean (S,), std (S,), W1 (HIDDEN, S), b1 (HIDDEN,), w2 (HIDDEN,), b2."""
+    """The detector's parameters as one float32 vector (:data:`N_PARAMS`,): statistics
+    mean (N_STATS,), std (N_STATS,), W1 (HIDDEN, N_STATS), b1 (HIDDEN,), w2 (HIDDEN,), b2."""
     return np.concatenate([mean, std, np.ravel(w1), b1, w2, [b2]]).astype(np.float32)
 
 
 def unpack(p: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Inverse of :func:`pack` (float64 arrays): :data:`N_STATS` statistics or, fitted before the
-    modulation, :data:`N_STATS_BEFORE`."""
+    """Inverse of :func:`pack` (float64 arrays)."""
     p = np.asarray(p, np.float64)
-    if p.shape not in ((N_PARAMS,), (n_params(N_STATS_BEFORE),)):
-        raise ValueError(f"presence parameters must have shape ({N_PARAMS},) or ({n_params(N_STATS_BEFORE)},), got {p.shape}")
-    s, h = (N_STATS if p.shape == (N_PARAMS,) else N_STATS_BEFORE), HIDDEN
+    if p.shape != (N_PARAMS,):
+        raise ValueError(f"presence parameters must have shape ({N_PARAMS},), got {p.shape}")
+    s, h = N_STATS, HIDDEN
     i = 2 * s
     return p[:s], p[s:i], p[i: i + h * s].reshape(h, s), p[i + h * s: i + h * s + h], \
         p[i + h * s + h: i + h * s + 2 * h], p[-1:]
@@ -283,14 +266,12 @@ def presence_step(row, mfcc_mean, mfcc_std, dmfcc_std, ccol, scol, state, stats,
     stats[9] = state[8]
     stats[10] = state[12]
     stats[11] = math.log(state[13] + 1e-3)
-    stats[12] = modulation_step(e, state, MOD_AT)
 
 
 @njit(cache=True, nogil=True)
 def presence_logit(stats, mean, std, w1, b1, w2, b2):  # pragma: no cover - compiled
-    """The detector's logit (music > 0) for the statistics ``stats`` (N_STATS,); a network fitted on fewer
-    (``w1`` (HIDDEN, S)) reads the first S."""
-    s = w1.shape[1]
+    """The detector's logit (music > 0) for the statistics ``stats`` (N_STATS,)."""
+    s = stats.shape[0]
     out = b2
     for h in range(w1.shape[0]):
         acc = b1[h]
@@ -371,13 +352,11 @@ class MusicGate:
         self._mfcc_mean = np.asarray(feat_mean, np.float64)[list(MFCC_COLS)]
         self._mfcc_std = np.asarray(feat_std, np.float64)[list(MFCC_COLS)]
         self._dmfcc_std = np.asarray(feat_std, np.float64)[list(DMFCC_COLS)]
-        start = self._network(params)
+        self._start = self._network(params)
         self.has_stop = stop_params is not None and bool(np.any(np.asarray(stop_params) != 0))
+        self._stop = self._network(stop_params) if self.has_stop else self._start
         self.has_voice = voice_params is not None and bool(np.any(np.asarray(voice_params) != 0))
-        # the networks as fitted (start, stop, voice); modulation_rule sets the ones that judge
-        self._fitted = (start, self._network(stop_params) if self.has_stop else start,
-                        self._network(voice_params) if self.has_voice else start)
-        self.modulation_rule = True
+        self._voice = self._network(voice_params) if self.has_voice else self._start
         self.voice_rule = bool(voice_rule)
         self.fresh_rule = bool(fresh_rule)
         self.context_rule = bool(context_rule)
@@ -409,25 +388,6 @@ class MusicGate:
         """(mean, std, W1, b1, w2, b2) of packed parameters, as :func:`presence_logit` takes them."""
         mean, std, w1, b1, w2, b2 = unpack(params)
         return mean, np.maximum(std, 1e-6), w1, b1, w2, float(b2[0])
-
-    @property
-    def modulation_rule(self) -> bool:
-        """False gives the modulation (statistic :data:`MOD_STAT`) no weight in any network (as if it read
-        each network's mean); networks fitted before it have none."""
-        return self._modulation_rule
-
-    @modulation_rule.setter
-    def modulation_rule(self, on: bool) -> None:
-        self._modulation_rule = bool(on)
-
-        def judged(net: tuple) -> tuple:
-            if on or net[2].shape[1] <= MOD_STAT:
-                return net
-            w1 = net[2].copy()
-            w1[:, MOD_STAT] = 0.0
-            return (*net[:2], w1, *net[3:])
-
-        self._start, self._stop, self._voice = (judged(n) for n in self._fitted)
 
     def reset(self) -> None:
         self._state = np.zeros(N_STATE)

@@ -526,7 +526,7 @@ def fit_network(x: np.ndarray, y: np.ndarray, seed: int = 0, steps: int = 400, m
     if music_weight != 1.0:
         wt = torch.where(yt > 0.5, music_weight * wt, wt)
         wt = wt / wt.mean()
-    net = torch.nn.Sequential(torch.nn.Linear(x.shape[1], mg.HIDDEN), torch.nn.Tanh(), torch.nn.Linear(mg.HIDDEN, 1))
+    net = torch.nn.Sequential(torch.nn.Linear(mg.N_STATS, mg.HIDDEN), torch.nn.Tanh(), torch.nn.Linear(mg.HIDDEN, 1))
     opt = torch.optim.LBFGS(net.parameters(), max_iter=steps, line_search_fn="strong_wolfe")
 
     def closure() -> torch.Tensor:
@@ -563,7 +563,8 @@ def fit_presence(model, fcfg, songs: list[np.ndarray], rng: np.random.Generator,
         ys = np.minimum(ys, 1.0)  # a voice over music is music
         rng.integers(1 << 30)  # the detector's seed, unused: the same draws as --voice-over --stop-only
         pv = fit_network(xs, ys, int(rng.integers(1 << 30)), music_weight=music_weight, drop=mg.BEAT_STATS)
-        model.presence_voice = torch.from_numpy(pv)  # the buffer, at this fit's length (a 12-statistic one is replaced)
+        with torch.no_grad():
+            model.presence_voice.copy_(torch.from_numpy(pv))
         acc = {f"voice_{k}": v for k, v in _accuracy(pv, xs, ys).items()}
         if progress:
             print(f"music gate: voice network {acc['voice_music_acc']:.3f} of music frames (voiced too), "
@@ -581,7 +582,9 @@ def fit_presence(model, fcfg, songs: list[np.ndarray], rng: np.random.Generator,
         ys = np.minimum(ys, 1.0)  # a voice over music is music
         ps = fit_network(xs, ys, int(rng.integers(1 << 30)), music_weight=music_weight, drop=mg.BEAT_STATS)
         acc.update({f"stop_{k}": v for k, v in _accuracy(ps, xs, ys).items()})
-    model.presence, model.presence_stop = torch.from_numpy(p), torch.from_numpy(ps)  # the buffers, at this fit's length
+    with torch.no_grad():
+        model.presence.copy_(torch.from_numpy(p))
+        model.presence_stop.copy_(torch.from_numpy(ps))
     if progress:
         print(f"music gate: {acc['music_acc']:.3f} of music frames, {acc['other_acc']:.3f} of other frames right "
               f"({len(y)} rows)" + (f"; stop network (dancing, no beat statistics): {acc['stop_music_acc']:.3f}, "
@@ -592,7 +595,6 @@ def fit_presence(model, fcfg, songs: list[np.ndarray], rng: np.random.Generator,
 def _accuracy(p: np.ndarray, x: np.ndarray, y: np.ndarray) -> dict[str, float]:
     """Share of music rows (``y`` 1) with a positive logit and of the others with a non-positive one."""
     mean, std, w1, b1, w2, b2 = mg.unpack(p)
-    x = x[:, : w1.shape[1]]  # a network fitted before the 13th statistic reads the first 12
     logit = np.tanh(((x - mean) / np.maximum(std, 1e-6)) @ w1.T + b1) @ w2 + b2[0]
     return {"music_acc": float((logit[y > 0.5] > 0).mean()), "other_acc": float((logit[y < 0.5] <= 0).mean())}
 
