@@ -509,7 +509,7 @@ def training_rows(model, progs: list[tuple[np.ndarray, np.ndarray]],
 def fit_network(x: np.ndarray, y: np.ndarray, seed: int = 0, steps: int = 400, music_weight: float = 1.0,
                 drop: tuple[int, ...] = ()) -> np.ndarray:
     """The detector's packed parameters (:func:`models.networks.music_gate.pack`) fitted on
-    statistics ``x`` (N, N_STATS) and labels ``y`` (N,) by weighted cross-entropy (classes equal,
+    statistics ``x`` (N, N_STATS; a study may pass others, N, S) and labels ``y`` (N,) by weighted cross-entropy (classes equal,
     then music frames ``music_weight`` times the others), L-BFGS for ``steps`` iterations. The
     statistics in ``drop`` are left out: they read 0 in the fit and get no weight (mean 0, std 1,
     zero columns of W1), whatever their values at run time."""
@@ -526,7 +526,7 @@ def fit_network(x: np.ndarray, y: np.ndarray, seed: int = 0, steps: int = 400, m
     if music_weight != 1.0:
         wt = torch.where(yt > 0.5, music_weight * wt, wt)
         wt = wt / wt.mean()
-    net = torch.nn.Sequential(torch.nn.Linear(mg.N_STATS, mg.HIDDEN), torch.nn.Tanh(), torch.nn.Linear(mg.HIDDEN, 1))
+    net = torch.nn.Sequential(torch.nn.Linear(x.shape[1], mg.HIDDEN), torch.nn.Tanh(), torch.nn.Linear(mg.HIDDEN, 1))
     opt = torch.optim.LBFGS(net.parameters(), max_iter=steps, line_search_fn="strong_wolfe")
 
     def closure() -> torch.Tensor:
