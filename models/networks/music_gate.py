@@ -151,7 +151,7 @@ LOGIT_TAU: float = 4.0
 MARGIN_STOP: float = 2.0
 #: A dancing performer's frame whose logit (the running mean) lies ``k`` times
 #: :data:`MARGIN_STOP` below 0 counts ``k`` frames, from 1 up to this many, towards the stop
-#: (``dance_stream.ABSENT_FRAMES``, :meth:`MusicGate.stop_count`): a detector that is sure
+#: (``idle_gate.ABSENT_FRAMES``, :meth:`MusicGate.stop_count`): a detector that is sure
 #: stops in 8 frames, one near its margin still waits 15 (loud applause right after a song:
 #: fully idle at 1.93 s instead of 2.10; the song's own dips below the margin stay shallow).
 SURE_COUNT: float = 2.0
