@@ -297,3 +297,63 @@ def test_a_library_performer_takes_every_live_control_over_long_streams(tmp_path
     if model is None:
         pytest.skip(f"needs the shared motion sample at {REPO.parent / 'shared' / 'data' / 'motion'}")
     run_machine(model, "3x2", 10)
+
+
+def test_the_engine_with_the_shipped_performer_plays_on_through_osc_controls_after_5_s():
+    """One level up: the real engine (realtime/engine.py) plays the bundled clip twice (fast, not paced)
+    through the shipped performer, and after 5 s of audio (frame 150: the token window full) real OSC
+    datagrams over UDP change its style (guided waltz, cha-cha by letter, back to auto), energy and lead,
+    and send a bad style. Every good message is applied, the bad one counted, and the engine plays the
+    audio to its end: not "failed". With dc52637's fix reverted the engine stops "failed" with IndexError."""
+    import socket
+    import time
+
+    from pythonosc.osc_message_builder import OscMessageBuilder
+
+    from models.features.audio_io import load_audio
+    from models.features.streaming import StreamingFeatureExtractor
+    from realtime.audio_input import FileSource
+    from realtime.engine import Engine, EngineConfig
+    from realtime.osc_control import OscControl
+
+    lm = shipped()
+    y, _ = load_audio(REPO / "models" / "assets" / "clip.ogg", SAMPLE_RATE)
+    audio = np.concatenate([y, y])
+    total = len(audio) // (SAMPLE_RATE // FPS)
+    eng = Engine(FileSource(audio, SAMPLE_RATE, realtime=False), lambda sr: StreamingFeatureExtractor(lm.features, sr),
+                 DanceStream(lm.model, seed=0), [], EngineConfig(warmup_s=0))
+
+    def message(address: str, *args) -> bytes:
+        b = OscMessageBuilder(address)
+        for a in args:
+            b.add_arg(a)
+        return b.build().dgram
+
+    sent = [message("/performer/style", "waltz"), message("/performer/energy", 2.0),
+            message("/performer/style", "C"), message("/performer/lead", 100.0), message("/performer/style", "salsa"),
+            message("/performer/style", "auto")]
+    with OscControl(port=0, control=eng.control) as osc, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
+        osc.start()
+        eng.start()
+        try:
+            deadline = time.monotonic() + 60.0
+            while eng.frames_out < 5 * FPS:
+                assert eng.state != "failed" and time.monotonic() < deadline, f"the engine did not play 5 s: {eng.state}"
+                time.sleep(0.002)
+            at = eng.frames_out
+            for dgram in sent:
+                udp.sendto(dgram, ("127.0.0.1", osc.port))
+                seen = eng.frames_out
+                while osc.stats()["applied"] + osc.stats()["bad"] < sent.index(dgram) + 1:
+                    assert time.monotonic() < deadline, "a control message was never applied"
+                    time.sleep(0.001)
+                while eng.frames_out < seen + 2 * lm.model.config.seg and eng.running:  # a code step or two on
+                    time.sleep(0.001)
+            assert at < total - 300, f"the controls came at frame {at} of {total}: too late to test anything"
+            eng.wait(timeout=120.0)
+        finally:
+            eng.stop()
+        stats = osc.stats()
+    assert eng.error is None and eng.state != "failed", f"the engine stopped: {eng.state}: {eng.error!r}"
+    assert eng.frames_out == total, (eng.frames_out, total)
+    assert (stats["applied"], stats["bad"]) == (len(sent) - 1, 1), stats  # salsa: no such style
