@@ -223,6 +223,10 @@ class Chooser:
                 self.predictor.embed_frame(self._embed_acc, self._hist[-1], j - 1)
                 self._embed_rows = j
 
+    def _held(self) -> list[np.ndarray]:
+        """The window's tokens but the new one: the last ``window - 1`` (a full deque holds one more)."""
+        return list(self._tokens)[-(self.predictor.window - 1):]
+
     def think(self, j: int) -> None:
         """Frame ``j`` (1..seg-1) of the cycle: its share of the next code step's pieces ahead (:data:`PIECES_BY_8`)."""
         if self._pieces_by[j] > self._pieces_by[j - 1]:
@@ -250,10 +254,9 @@ class Chooser:
         if pred.tempo is not None:  # a predictor that hears the tempo (DanceVQConfig.tempo_input)
             token = pred.with_tempo(token, tempo_input)
         prefix = self._prefix
-        held = list(self._tokens)[-(pred.window - 1):]  # the window but its new token (a full deque holds one more)
         if prefix is None or prefix.style != self.pstyle:  # the first step, or the style changed since
-            prefix = Prefix(pred, held, self.pstyle)
-        auto = (self._prefix_auto if self._prefix_auto is not None else Prefix(pred, held, 0)) if guided else None
+            prefix = Prefix(pred, self._held(), self.pstyle)
+        auto = (self._prefix_auto if self._prefix_auto is not None else Prefix(pred, self._held(), 0)) if guided else None
         if prefix.done and (auto is None or auto.done) and self._match is None:  # the new rows: compiled, no BLAS
             logits = self.logits(token, prefix, auto, tempo)
         else:  # a window's pieces not computed ahead, or a library's chooser: BLAS products
@@ -271,7 +274,7 @@ class Chooser:
             logits = self.repeat_penalty(logits, recent)
         self._tokens.append(token)
         # the next step's window but its newest token is known now: its layers run on the frames between
-        nxt = list(self._tokens)[-(pred.window - 1):]
+        nxt = self._held()
         self._prefix = Prefix(pred, nxt, self.pstyle)
         self._prefix_auto = Prefix(pred, nxt, 0) if guided else None
         return [m.sample(logits, self.rng) for _ in range(self._draws)], tilt
