@@ -991,7 +991,7 @@ def test_energy_control_favours_calm_or_lively_movements_and_1_changes_nothing()
     np.testing.assert_array_equal(run_model(m, x, seed=3, energy=0.0), generate(m, x, seed=3, energy=0.0))
     with pytest.raises(ConfigError, match="has no energy control"):
         run_model(build_model("causal", {"feature_dim": 10}), x, energy=1.5)
-    for bad in (-0.1, 2.5, float("nan"), "high", None):
+    for bad in (-0.1, 2.5, float("nan"), "high", None, "1.5", True):
         with pytest.raises(ConfigError, match="energy must be"):
             s.set_energy(bad)
     assert s.energy == 1.0 and s._chooser._energy_bias is None  # a refused value changes nothing
@@ -1128,7 +1128,7 @@ def test_a_lead_streams_like_the_whole_song_reads_no_audio_ahead_and_changes_at_
     np.testing.assert_array_equal(run_model(m, x, seed=2, lead=67.0), generate(m, x, seed=2, lead=67.0))
     with pytest.raises(ConfigError, match="has no lead control"):
         run_model(build_model("causal", {"feature_dim": 10}), x[:, :10], lead=67.0)
-    for bad in (-1.0, 250.0, float("nan"), "soon", None):
+    for bad in (-1.0, 250.0, float("nan"), "soon", None, "100", True):
         with pytest.raises(ConfigError, match="lead must be"):
             s.set_lead(bad)
     assert s.lead_ms == 133.0  # a refused value changes nothing

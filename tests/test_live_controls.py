@@ -115,7 +115,7 @@ def styles_of(model) -> tuple[str, ...]:
 FRAMES = st.integers(0, 300)
 BAD_STYLES = st.one_of(st.sampled_from(["", "Waltz", "salsa", "auto ", "none", "chacha\x00", "x" * 80]),
                        st.text(max_size=12))
-BAD_NUMBERS = st.sampled_from([math.nan, math.inf, -math.inf, -1e-3, -1.0, 1e308, None, "x", [1.0]])
+BAD_NUMBERS = st.sampled_from([math.nan, math.inf, -math.inf, -1e-3, -1.0, 1e308, None, "x", [1.0], "1.5", True])
 #: The number controls: (least, most, the fresh stream's argument).
 NUMBERS: dict[str, tuple[float, float, str]] = {"energy": (*ENERGY_RANGE, "energy"), "lead": (*LEAD_RANGE_MS, "lead_ms")}
 BAD_STAGES = st.sampled_from(["", "3", "3x", "x2", "axb", "-3x2", "3x-2", "nanx2", "infx2", "3x2x1", -1, 2.5,

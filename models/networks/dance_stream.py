@@ -48,6 +48,7 @@ jumps. ``set_idle(True)`` holds the idle whatever the music (the show control's 
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 
@@ -110,6 +111,14 @@ LEAD_RANGE_MS: tuple[float, float] = (0.0, 200.0)
 #: days holds at most 2.4 MB of history (one trim moves 0.5 MB in memory, every 4.5 minutes).
 CODES_KEPT: int = 65536
 CODES_TRIM: int = 1024
+
+
+def _real(value: object) -> float | None:
+    """``value`` as a float if it is a real number (a Python or numpy int or float), else None:
+    a string such as ``"1.5"`` or a bool is not a number a control takes."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        return None
+    return float(value)
 
 
 def _renorm_frame(pose: np.ndarray, prev_quat: np.ndarray | None) -> np.ndarray:
@@ -392,11 +401,10 @@ class DanceStream:
         outside :data:`ENERGY_RANGE` or not a number. See :data:`models.networks.chooser.ENERGY_GAIN`
         and :data:`models.networks.player.SPEED_CAP`."""
         lo, hi = ENERGY_RANGE
-        try:
-            e = float(energy)
-        except (TypeError, ValueError):
+        e = _real(energy)
+        if e is None:
             raise ConfigError(f"energy must be a number in [{lo:g}, {hi:g}] (1: as the music asks), "
-                              f"got {energy!r}") from None
+                              f"got {energy!r}")
         if not lo <= e <= hi:  # NaN fails too
             raise ConfigError(f"energy must be in [{lo:g}, {hi:g}] (1: as the music asks), got {energy!r}")
         self._chooser.set_energy(e)  # the codes' tilt
@@ -408,10 +416,9 @@ class DanceStream:
         audio, from the next code step on (see the class docstring, "Lead"); ConfigError
         outside :data:`LEAD_RANGE_MS` or not a number."""
         lo, hi = LEAD_RANGE_MS
-        try:
-            ms = float(lead_ms)
-        except (TypeError, ValueError):
-            raise ConfigError(f"lead must be a number of ms in [{lo:g}, {hi:g}], got {lead_ms!r}") from None
+        ms = _real(lead_ms)
+        if ms is None:
+            raise ConfigError(f"lead must be a number of ms in [{lo:g}, {hi:g}], got {lead_ms!r}")
         if not lo <= ms <= hi:  # NaN fails too
             raise ConfigError(f"lead must be in [{lo:g}, {hi:g}] ms, got {lead_ms!r}")
         self._lead_next = int(round(ms * FPS / 1000.0))
