@@ -79,7 +79,8 @@ def module_tree(path: str) -> ast.Module:
     return ast.parse((REPO / path).read_text(encoding="utf-8"))
 
 
-def _targets(node: ast.AST) -> list[str]:
+def _targets(node: ast.AST, imports: bool = True) -> list[str]:
+    """The names a statement binds (with ``imports`` False: not the names it imports)."""
     names = []
     if isinstance(node, ast.Assign):
         for t in node.targets:
@@ -90,25 +91,31 @@ def _targets(node: ast.AST) -> list[str]:
         names.append(node.target.id)
     elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
         names.append(node.name)
-    elif isinstance(node, (ast.Import, ast.ImportFrom)):
+    elif isinstance(node, (ast.Import, ast.ImportFrom)) and imports:
         names += [(a.asname or a.name).split(".")[0] for a in node.names]
     return names
 
 
-def _body_names(body: list[ast.stmt]) -> set[str]:
+def _body_names(body: list[ast.stmt], imports: bool = True) -> set[str]:
     names: set[str] = set()
     for node in body:
-        names.update(_targets(node))
+        names.update(_targets(node, imports))
         if isinstance(node, (ast.If, ast.Try, ast.With)):  # try/except imports, if TYPE_CHECKING
             for sub in ("body", "orelse", "finalbody", "handlers"):
                 for part in getattr(node, sub, []) or []:
-                    names |= _body_names(part.body if isinstance(part, ast.ExceptHandler) else [part])
+                    names |= _body_names(part.body if isinstance(part, ast.ExceptHandler) else [part], imports)
     return names
 
 
 @functools.cache
 def top_names(path: str) -> frozenset[str]:
     return frozenset(_body_names(module_tree(path).body))
+
+
+@functools.cache
+def own_names(path: str) -> frozenset[str]:
+    """What a module defines itself (not what it imports): where a constant is set, a class lives."""
+    return frozenset(_body_names(module_tree(path).body, imports=False))
 
 
 @functools.cache
@@ -202,8 +209,9 @@ def class_has(cls: str, attr: str, seen: frozenset[str] = frozenset()) -> bool |
     return False
 
 
-def resolve_dotted(parts: list[str]) -> str | None:
-    """None when ``a.b.c.Name.attr`` exists (a module path, then names defined in it), else why not."""
+def resolve_dotted(parts: list[str], own: bool = False) -> str | None:
+    """None when ``a.b.c.Name.attr`` exists (a module path, then names defined in it; with ``own``
+    defined there, not imported: what setting it changes), else why not."""
     path = None
     i = 0
     for j in range(len(parts), 0, -1):
@@ -219,7 +227,7 @@ def resolve_dotted(parts: list[str]) -> str | None:
     rest = parts[i:]
     if not rest:
         return None
-    if rest[0] not in top_names(path):
+    if rest[0] not in (own_names if own else top_names)(path):
         if path.endswith("__init__.py") and any(p.startswith(path[:-11] + rest[0]) for p in py_files()):
             return None
         return f"{path} defines no {rest[0]}"
@@ -363,7 +371,7 @@ def _check_script(tokens: list[str], i: int) -> tuple[int, list[str]]:
         for a in args:
             if re.fullmatch(r"[\w.]+=.*", a):
                 mod, _, name = a.split("=")[0].rpartition(".")
-                w = resolve_dotted(mod.split(".") + [name])
+                w = resolve_dotted(mod.split(".") + [name], own=True)
                 if w:
                     why.append(f"constants.py {a}: {w}")
     return j, why
@@ -406,6 +414,7 @@ CONST_RE = re.compile(r"^[A-Z][A-Z0-9]*(?:_[A-Z0-9]+)+$|^[A-Z]{4,}$")
 LINK_RE = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
 MAKE_RE = re.compile(r"\bmake ([a-z][\w-]*)")
 # `CONST` (models/x/y.py) | `CONST` in `y.py` | `y.py`'s `CONST` | y.py: `CONST`
+CLASS_HOME_RE = re.compile(r"`?(?P<m>(?:\w+/)*\w+\.py)`?(?:,|:|'s)? `(?P<c>[A-Z][a-z]\w*)(?:\.\w+)?(?:\([^`]*\))?`")
 HOME_RE = re.compile(r"`(?P<c1>[A-Z][A-Z0-9_]+)`,? (?:\(|in |of )`?(?P<m1>[\w/]*\w\.py)\b"
                      r"|`?(?P<m2>[\w/]*\w\.py)`?(?:'s|:) `(?P<c2>[A-Z][A-Z0-9_]+)(?: ?=[^`]*)?`")
 
@@ -505,7 +514,7 @@ def _names(span: str) -> Found:
     for m in SHORT_RE.finditer(span):
         mod, name = m.group(1), m.group(2)
         files = [p for s in ALIASES.get(mod, (mod,)) for p in by_stem().get(s, []) if not p.startswith("tests/")]
-        if files and not any(name in top_names(p) for p in files):
+        if files and not any(name in own_names(p) for p in files):
             yield f"{mod}.{name}", f"not defined in {', '.join(files)}"
     for m in re.finditer(r"(?<![\w/.:-])((?:[a-z_]+/)*[a-z_]\w*\.py)\b", span):
         f = m.group(1)
@@ -520,13 +529,23 @@ def _names(span: str) -> Found:
         yield name, "named nowhere in the code"
 
 
+def _module_files(mod: str) -> list[str]:
+    """models/ and realtime/ files a ``y.py`` or ``models/x/y.py`` of the docs may mean."""
+    return [p for p in by_stem().get(Path(mod).stem, []) if p.startswith(("models/", "realtime/"))
+            and (p == mod or p.endswith("/" + mod))]
+
+
 def _homes(line: str) -> Found:
-    """A CONSTANT the text beside it says lives in a module (``CONST`` (y.py), ``y.py``'s ``CONST``): there."""
+    """A CONSTANT or class the text beside it says lives in a module (``CONST`` (y.py), ``y.py``'s ``CONST``,
+    ``y.py``, ``Class.method``): there."""
+    for m in CLASS_HOME_RE.finditer(line):
+        files = _module_files(m.group("m"))
+        if files and not any(m.group("c") in own_names(p) for p in files):
+            yield f"{m.group('m')}, {m.group('c')}", "the class is not defined there"
     for m in HOME_RE.finditer(line):
         name, mod = m.group("c1") or m.group("c2"), m.group("m1") or m.group("m2")
-        files = [p for p in by_stem().get(Path(mod).stem, []) if p.startswith(("models/", "realtime/"))
-                 and ("/" not in mod or p == mod)]
-        if files and CONST_RE.fullmatch(name) and not any(name in top_names(p) for p in files):
+        files = _module_files(mod)
+        if files and CONST_RE.fullmatch(name) and not any(name in own_names(p) for p in files):
             yield f"{name} in {mod}", "lives in " + (", ".join(constants_where(name)) or "no module")
 
 

@@ -65,6 +65,7 @@ PLANTED = """\
 `NO_SUCH_CONSTANT_ANYWHERE`
 the beat warp's depth (`BEAT_WARP` (models/networks/dance_stream.py))
 `DanceStream._tempo_z`
+the repeat limit (`dance_stream.py`, `Chooser.draw`)
 `performer dance --audio song.wav`
 `performer run --no-such-flag`
 `performer bench latency --no-such-flag`
@@ -87,6 +88,7 @@ LIVE
 `stream.BEAT_WARP`
 the beat warp's depth (`BEAT_WARP` (models/networks/player.py))
 `Chooser.tempo_z`
+the repeat limit (`chooser.py`, `Chooser.draw`)
 `performer run --stage 3x2 --facing audience`
 `performer bench latency --cores 0,1`
 `.venv/bin/python benchmarks/hop_profile.py --seconds 20`
