@@ -470,18 +470,21 @@ def _paths(line: str) -> Found:
 
 
 def _test_ids(line: str) -> Found:
-    """``tests/test_x.py::test_y``, ``test_x.py::test_y``, ``::test_y`` (some test file has it), ``test_x.py``."""
+    """``tests/test_x.py::test_y``, ``test_x.py::test_y``, ``::test_y`` (in the file named before it on the
+    line, else in some test file), ``test_x.py``."""
     tests = defined_tests()
+    last = None
     for m in TEST_RE.finditer(line):
         f, name = m.group(1), m.group(3) or m.group(2)
+        if f:
+            last = f = f if f.startswith("tests/") else "tests/" + f
         if line[m.end():].startswith(("...", "*")):  # a family: test_nan_guard_...
             if not any(n.startswith(name) for d in tests.values() for n in d):
                 yield name + "...", "no test starts so"
-        elif f:
-            f = f if f.startswith("tests/") else "tests/" + f
-            if f in tests and name not in tests[f]:  # a missing file is reported as a file
-                yield f"{f}::{name}", "no such test in that file"
-        elif name.startswith("test_") and not any(name in d for d in tests.values()):
+        elif last in tests:  # a missing file is reported as a file
+            if name not in tests[last]:
+                yield f"{last}::{name}", "no such test in that file"
+        elif not f and name.startswith("test_") and not any(name in d for d in tests.values()):
             yield f"::{name}", "no such test anywhere"
     for m in re.finditer(r"(?<![\w/])(test_\w+\.py)\b", line):
         if "tests/" + m.group(1) not in tests and not line[:m.start()].endswith("tests/") \

@@ -60,6 +60,7 @@ def test_every_known_exception_is_still_named_in_the_docs() -> None:
 PLANTED = """\
 `models/networks/nowhere.py`
 `tests/test_chooser.py::test_no_such_behaviour`
+`tests/test_chooser.py::test_a_reset_chooser_draws_what_a_fresh_one_draws`, `::test_a_faster_tempo_chooses_quicker_movements`
 `models.networks.chooser.NO_SUCH_NAME`
 `dance_stream.BEAT_WARP`
 `NO_SUCH_CONSTANT_ANYWHERE`
@@ -82,7 +83,7 @@ nice -n 19 .venv/bin/performer train --config configs/dtm.toml --no-such-flag
 ```
 LIVE
 `models/networks/player.py`
-`tests/test_chooser.py::test_a_reset_chooser_draws_what_a_fresh_one_draws`
+`tests/test_chooser.py::test_a_reset_chooser_draws_what_a_fresh_one_draws`, `::test_the_energy_control_draws_calmer_or_livelier_codes`
 `models.networks.player.BEAT_WARP`
 `player.BEAT_WARP`
 `stream.BEAT_WARP`
