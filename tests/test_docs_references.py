@@ -4,7 +4,7 @@ script's flags, a make target, a linked page and heading (tests/_doc_refs.py say
 
 The docs quote each figure beside the command that produced it; code moved under them (DanceStream's
 chooser and player into chooser.py and player.py, their constants with them) leaves a reader a
-command that does not run or a name to look for in the wrong file. 3-4 s (`--durations`), no data.
+command that does not run or a name to look for in the wrong file. 3-5 s on the 2-core machine (`--durations`), no data.
 """
 
 from __future__ import annotations
