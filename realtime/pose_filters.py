@@ -4,7 +4,7 @@
 :mod:`realtime.pose_jit`; state: the last smoothed pose), :class:`IdleFader` (the engine's own
 idle crossfade for a model without ``set_idle``; state: the blend weight as a frame count), and
 :func:`rest_pose` / :func:`idle_pose`. Each lane of the engine (:mod:`realtime.lanes`) owns one
-smoother and one fader; every call works in place, without allocation.
+smoother and one fader; both work in place, without allocation.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from models.rig.humanoid import NUM_BONES
 from models.rig.motion import POSE_DIM
 from realtime.pose_jit import guard_smooth
 
-log = logging.getLogger("realtime.engine")  # the engine's log, as before these moved out of it
+log = logging.getLogger("realtime.engine")  # the engine's log: these warnings are the engine's
 
 
 def rest_pose() -> np.ndarray:
