@@ -262,7 +262,8 @@ def _play(seconds: float, block: int, broker_url: str, publisher_cpus: set[int] 
 
     from models.features.audio_io import bundled_clip_path, load_audio
     from realtime.audio_input import FileSource
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.nats_server import PUBLISHER
     from realtime.osc_out import OscSink
     from realtime.pipeline import build_pipeline

@@ -86,7 +86,8 @@ def main(argv: list[str] | None = None) -> int:
     from models.errors import PerformerError
     from models.features.audio_io import bundled_clip_path, load_audio
     from realtime.audio_input import FileSource
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.osc_out import OscSink
     from realtime.pipeline import build_pipeline
     from realtime.ws_server import WebSocketSink

@@ -421,7 +421,8 @@ def paced_run(pipeline, audio: np.ndarray, sr: int, seconds: float, sinks, durin
     """Replay ``audio`` (looped) in real time for ``seconds`` through a fresh engine; ``during(engine)``
     runs on this thread once the engine started. Returns ``Engine.stats()`` plus ``rss_delta``."""
     from realtime.audio_input import FileSource
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
 
     src = FileSource(audio, sr, realtime=True, loop=True, name="clip")
     eng = Engine(src, pipeline.extractor_factory, pipeline.model, sinks,
@@ -508,7 +509,8 @@ def soak(minutes: float, checkpoint: str | None = None, progress: bool = True,
     """
     from models.evaluation.stability import StabilityMonitor
     from realtime.audio_input import FileSource
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.osc_out import OscSink
     from realtime.ws_server import WebSocketSink
 

@@ -28,7 +28,7 @@ level::
     osc = "127.0.0.1:39600"
 
 While running, ``performer run`` re-reads the file on SIGHUP and applies the
-settings that can change live (:data:`realtime.engine.LIVE_SETTINGS`: ``offset_ms``,
+settings that can change live (:data:`realtime.engine_config.LIVE_SETTINGS`: ``offset_ms``,
 ``smoothing``); see :func:`live_changes`.
 """
 
@@ -279,7 +279,7 @@ class RunConfig:
         """
         if not self.performer:
             return []
-        from realtime.engine import check_performer_name
+        from realtime.performer import check_performer_name
         from realtime.recorder import record_paths
         from realtime.ws_server import check_ws_path
 
@@ -460,7 +460,7 @@ def live_changes(old: RunConfig, new: RunConfig) -> tuple[dict[str, float], list
     can ``stage`` and ``facing`` (:func:`realtime.commands.run.reload_settings` sends them as
     controls); the other fields only take effect at the next start.
     """
-    from realtime.engine import LIVE_SETTINGS
+    from realtime.engine_config import LIVE_SETTINGS
 
     live = {k: float(getattr(new, k)) for k in LIVE_SETTINGS if getattr(new, k) != getattr(old, k)}
     other = [f for f in _FIELDS if f not in LIVE_SETTINGS and getattr(new, f) != getattr(old, f)]
@@ -472,7 +472,7 @@ def performer_live_changes(old: RunConfig, new: RunConfig) -> tuple[dict[str, di
     changes])``. Live: each performer's resolved ``offset_ms`` and ``smoothing`` (its own, or
     the top level's it takes); a performer added, removed or otherwise changed, and the
     non-live top-level fields, need a restart."""
-    from realtime.engine import LIVE_SETTINGS
+    from realtime.engine_config import LIVE_SETTINGS
 
     olds = {p.name: p for p in old.performer_specs()}
     news = {p.name: p for p in new.performer_specs()}

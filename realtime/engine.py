@@ -35,405 +35,39 @@ import logging
 import math
 import threading
 import time
-from collections import deque
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from collections.abc import Sequence
 
 import numpy as np
 
 from models.errors import ConfigError, short_repr
 from models.networks.dance_numpy import hold_single_thread_blas
-from models.rig.humanoid import NUM_BONES
 from models.rig.motion import POSE_DIM
-from models.timebase import FPS, HOP, SAMPLE_RATE
-from realtime.audio_input import AudioSource, RingBuffer
-from realtime.controls import (CONTROL_ACTIONS, MAX_STYLE_CHARS, applied, apply_control, check_finite, check_style_name,
-                               check_switch, publish_state)
+from models.timebase import HOP, SAMPLE_RATE
+from realtime.audio_input import AudioSource
+from realtime.contracts import ExtractorFactory, FeatureStream, PoseModel
+from realtime.controls import applied, apply_control, publish_state
+from realtime.engine_config import EngineConfig, check_live_setting
 from realtime.frame import PoseFrame, Sink
-from realtime.pose_jit import guard_smooth
+from realtime.lanes import FeatureGroup, Lane
+from realtime.performer import Performer, cycle_frames
+from realtime.pose_filters import PoseSmoother
+from realtime.rolling_stats import RollingStats
 from realtime.runqueue_clock import RunQueueClock, hop_wait
+from realtime.source_fallback import SourceFallback, SourceState
 
 log = logging.getLogger(__name__)
-
-
-@runtime_checkable
-class FeatureStream(Protocol):
-    """Streaming audio features (e.g. ``StreamingFeatureExtractor``).
-
-    ``push(block)`` takes (n,) float32 mono samples at the rate it was built for and
-    returns (k, D) float32: every 30 fps frame whose audio is complete, in order. It
-    must copy what it keeps (the engine reuses the block's buffer). Optional, for
-    exact time stamps: ``samples_needed(i)``, the input samples after which frame ``i``
-    is returned; otherwise ``latency_samples`` (input samples needed after the frame's
-    nominal end ``(i + 1) * HOP / 22050`` s) is used.
-    """
-
-    def push(self, block: np.ndarray) -> np.ndarray: ...
-
-    def reset(self) -> None: ...
-
-
-@runtime_checkable
-class PoseModel(Protocol):
-    """Streaming pose model (e.g. ``StreamingGenerator``): one pose out per feature frame in.
-
-    ``push(features)`` takes (k, feature_dim) float32 and returns (k, POSE_DIM)
-    float32 in the :mod:`models.rig.motion` flat layout, causally.
-
-    Optional show controls, used by :meth:`Engine.control` when present (looked up with
-    ``getattr``, so a model without them still fits): ``set_idle(bool)`` (True: settle
-    into the model's idle pose and hold it, False: dance again; the model does the
-    transition, without a jump), ``set_style(name: str)``, ``set_energy(x: float)`` and
-    ``set_lead(ms: float)`` (send the poses that far ahead, for a display chain's delay).
-    Each validates its value and raises :class:`~models.errors.ConfigError` (one line
-    naming it) for a bad one without changing anything. They are called on a control
-    thread (OSC or WebSocket), not the engine's worker, so they must be cheap, must not
-    block, and should only record the setting for the next ``push`` to use.
-    """
-
-    feature_dim: int
-
-    def push(self, features: np.ndarray) -> np.ndarray: ...
-
-    def reset(self) -> None: ...
-
-
-ExtractorFactory = Callable[[int], FeatureStream]
-"""Builds a fresh feature stream for a given input sample rate (Hz)."""
-
-
-def rest_pose() -> np.ndarray:
-    """(POSE_DIM,) float32 T-pose: root at the origin, identity rotations."""
-    pose = np.zeros(POSE_DIM, dtype=np.float32)
-    pose[6::4] = 1.0  # w of every quaternion (layout: root xyz, then x y z w per bone)
-    return pose
-
-
-def idle_pose() -> np.ndarray:
-    """(POSE_DIM,) float32 idle pose of the engine's own idle control: :func:`rest_pose`
-    standing up, i.e. identity rotations (the T-pose) with the root (Hips) at the shipped
-    rest skeleton's hips position (0, 0.93, 0) m instead of on the floor. Falls back to
-    :func:`rest_pose` when that skeleton cannot be read."""
-    pose = rest_pose()
-    try:
-        from models.rig.skeleton import load_default_skeleton
-
-        hips = load_default_skeleton().offsets[0]
-    except Exception as exc:  # noqa: BLE001 - a missing asset must not stop the engine
-        log.warning("rest skeleton unavailable (%s); the idle pose stands at the origin", exc)
-        return pose
-    pose[:3] = hips
-    return pose
-
-
-class IdleFader:
-    """Crossfades flat poses towards a fixed idle pose and back, in place, no allocation.
-
-    ``idle`` (settable any time, from any thread) is the target: each call moves the
-    blend weight ``w`` one step of ``1 / frames`` towards 1 (idle) or 0 (dance), so a
-    full fade takes ``frames`` frames (30 = 1 s at 30 fps) and a reversal mid-fade
-    continues from where it is. The blend uses ``e = smoothstep(w) = w^2 (3 - 2w)``
-    (no jolt at either end; at most ``1.5 / frames`` per frame): the root moves linearly
-    ``(1 - e) * root + e * idle_root`` (metres), each quaternion by hemisphere-aligned
-    nlerp towards the idle one. At ``w == 0`` the pose is left untouched (bit-exact); at
-    ``w == 1`` it becomes the idle pose exactly.
-    """
-
-    def __init__(self, idle: np.ndarray, frames: int = 30) -> None:
-        idle = np.asarray(idle, dtype=np.float32)
-        if idle.shape != (POSE_DIM,) or not np.isfinite(idle).all():
-            raise ValueError(f"idle pose must be finite with shape ({POSE_DIM},), got {idle.shape}")
-        if frames < 1:
-            raise ValueError(f"fade frames must be >= 1, got {frames}")
-        self.pose = idle.copy()
-        self.frames = int(frames)
-        self.idle = False
-        self._k = 0  # weight w = _k / frames, an integer count so both ends are exact
-        self._tmp = np.zeros(POSE_DIM, dtype=np.float32)
-        self._dot = np.zeros(NUM_BONES, dtype=np.float32)
-        self._norm = np.zeros(NUM_BONES, dtype=np.float32)
-
-    @property
-    def weight(self) -> float:
-        """Current blend weight w in [0, 1] (0: the dance as is, 1: the idle pose)."""
-        return self._k / self.frames
-
-    @property
-    def active(self) -> bool:
-        """True while the output is not the dance untouched (idle, or fading back)."""
-        return self.idle or self._k > 0
-
-    def __call__(self, pose: np.ndarray) -> np.ndarray:
-        """Step the weight, blend ``pose`` ((POSE_DIM,) float32, unit quaternions) in place, return it."""
-        if self.idle:
-            self._k = min(self._k + 1, self.frames)
-        else:
-            self._k = max(self._k - 1, 0)
-        if self._k == 0:
-            return pose
-        if self._k == self.frames:
-            pose[:] = self.pose
-            return pose
-        w = self._k / self.frames
-        e = w * w * (3.0 - 2.0 * w)
-        q = pose[3:].reshape(NUM_BONES, 4)
-        np.einsum("ij,ij->i", q, self.pose[3:].reshape(NUM_BONES, 4), out=self._dot)
-        q[self._dot < 0] *= -1.0
-        pose *= 1.0 - e
-        np.multiply(self.pose, e, out=self._tmp)
-        pose += self._tmp
-        # after the alignment the blend's norm is >= sqrt((1-e)^2 + e^2) >= 0.7: no zero
-        np.einsum("ij,ij->i", q, q, out=self._norm)
-        np.sqrt(self._norm, out=self._norm)
-        q /= self._norm[:, None]
-        return pose
-
-
-class PoseSmoother:
-    """Exponential smoothing of flat poses, rotation-aware, in place, no allocation.
-
-    ``alpha`` in [0, 1) is the weight of the previous output (0 = off; the lag is
-    about ``alpha / (1 - alpha)`` frames). Quaternions are blended by hemisphere-
-    aligned nlerp (the result lies on the shortest arc between the two rotations;
-    cheaper than slerp and indistinguishable at per-frame steps). Whether or not it
-    smooths, it renormalises every quaternion (a zero one becomes identity). One compiled
-    call a frame (:func:`realtime.pose_jit.guard_smooth`, NumPy's float32 arithmetic).
-    """
-
-    def __init__(self, alpha: float = 0.0) -> None:
-        if not 0.0 <= alpha < 1.0:
-            raise ValueError(f"smoothing must be in [0, 1), got {alpha}")
-        self.alpha = float(alpha)
-        self._state = np.zeros(POSE_DIM, dtype=np.float32)
-        self._has_state = False
-
-    def reset(self) -> None:
-        self._has_state = False
-
-    def smooth_into(self, row: np.ndarray, pose: np.ndarray) -> bool:
-        """``pose`` (POSE_DIM,) float32 = ``row`` (POSE_DIM,) float32 smoothed; False, leaving both
-        and the state untouched, when ``row`` is not finite (the engine's guard)."""
-        if not guard_smooth(row, pose, self._state, self._has_state, self.alpha):
-            return False
-        self._has_state = True
-        return True
-
-    def __call__(self, pose: np.ndarray) -> np.ndarray:
-        """Smooth ``pose`` ((POSE_DIM,) float32, finite) in place and return it."""
-        if not self.smooth_into(pose, pose):
-            raise ValueError("PoseSmoother needs a finite pose (the engine sends the last good pose instead)")
-        return pose
-
-
-class RollingStats:
-    """Last ``size`` values of one measurement, preallocated, for percentiles."""
-
-    def __init__(self, size: int = 2048) -> None:
-        self._buf = np.zeros(size, dtype=np.float64)
-        self._n = 0
-
-    def add(self, value: float) -> None:
-        self._buf[self._n % len(self._buf)] = value
-        self._n += 1
-
-    def clear(self) -> None:
-        self._n = 0
-
-    @property
-    def count(self) -> int:
-        return self._n
-
-    def values(self) -> np.ndarray:
-        return self._buf[: min(self._n, len(self._buf))].copy()
-
-    def percentile(self, q: float) -> float:
-        """q-th percentile of the kept values (NaN when empty)."""
-        vals = self._buf[: min(self._n, len(self._buf))]
-        return float(np.percentile(vals, q)) if len(vals) else float("nan")
-
 
 #: Seconds of noise the warm-up runs before its silence (:meth:`Engine._warm_up`): the live
 #: path's kernels that only sound reaches get compiled (or loaded) before the first frame.
 KERNEL_NOISE_S: float = 1.0
 
 
-@dataclass
-class EngineConfig:
-    """Knobs of :class:`Engine`. ``performer run`` sets the first five from ``--smoothing``,
-    ``--offset-ms``, ``--threads``, ``--warmup`` and ``--duration``."""
-
-    smoothing: float = 0.0  # [0, 1): exponential smoothing weight (see PoseSmoother)
-    offset_ms: float = 0.0  # >0 delays sending and shifts audio_time; <0 only shifts audio_time
-    threads: int | None = 1  # torch.set_num_threads at start (None: leave torch alone)
-    warmup_s: float = 3.0  # s of silence run through the pipeline at start after KERNEL_NOISE_S of noise (0: none)
-    duration_s: float | None = None  # stop after this much input audio (None: until the source ends)
-    ring_seconds: float = 2.0  # audio ring capacity
-    max_read: int = 8192  # most input samples processed per worker step
-    stall_timeout_s: float = 1.0  # no audio for this long (source alive) -> state "stalled"
-    retry_s: float = 1.0  # after a source error, retry start() this often
-    stats_size: int = 2048  # frames kept for p50/p99
-    fallback_after_s: float = 2.0  # no audio from the source this long -> switch to the fallback source
-    idle_fade_s: float = 1.0  # the engine's own idle crossfade, each way (models without set_idle)
-    # Linux, for the benchmark: also keep each hop's run-queue wait (the time this process's
-    # threads were ready to run but other processes had the CPUs, /proc/self/task/*/schedstat,
-    # at most the hop less the worker's CPU time) in compute_wait_ms
-    runqueue_wait: bool = False
-
-
 #: Input samples beyond +-MAX_SAMPLE (full scale = 1; 12 dB of headroom) are treated like NaN
 #: (replaced by 0) before the features: no converter delivers them, a broken driver's garbage does.
 MAX_SAMPLE: float = 4.0
 
-#: Settings :meth:`Engine.update` can change while running.
-LIVE_SETTINGS: tuple[str, ...] = ("offset_ms", "smoothing")
 
-def check_live_setting(name: str, value: object) -> float:
-    """Validate one live setting; return it as a float or raise :class:`ConfigError` naming it."""
-    if name not in LIVE_SETTINGS:
-        raise ConfigError(f"{short_repr(name)} cannot be changed while running "
-                          f"(live settings: {', '.join(LIVE_SETTINGS)})")
-    value = check_finite(name, value)
-    if name == "offset_ms" and not -10000 <= value <= 10000:
-        raise ConfigError(f"offset_ms must be -10000..10000 ms, got {value!r}")
-    if name == "smoothing" and not 0.0 <= value < 1.0:
-        raise ConfigError(f"smoothing must be in [0, 1), got {value!r}")
-    return value
-
-
-#: Longest performer name, characters (names appear in OSC addresses and WebSocket paths).
-MAX_NAME_CHARS: int = 32
-_NAME_CHARS = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-")
-
-
-def check_performer_name(value: object) -> str:
-    """A performer name: 1..:data:`MAX_NAME_CHARS` ASCII letters, digits, ``_`` or ``-`` (it becomes
-    part of OSC addresses and WebSocket paths); :class:`ConfigError` otherwise."""
-    if not isinstance(value, str) or not value or len(value) > MAX_NAME_CHARS or not set(value) <= _NAME_CHARS:
-        raise ConfigError(f"performer name must be 1..{MAX_NAME_CHARS} letters, digits, '_' or '-', "
-                          f"got {short_repr(value)}")
-    return value
-
-
-def cycle_frames(model: object) -> int:
-    """The period, in frames, of a pose model's cost: ``cycle_frames`` when the model declares it,
-    else a :class:`~models.networks.dance_stream.DanceStream`'s ``seg`` (its code step, the
-    expensive frame, comes once every ``seg`` frames), else 1 (an even cost: nothing to stagger)."""
-    for attr in ("cycle_frames", "seg"):
-        value = getattr(model, attr, None)
-        if isinstance(value, int) and not isinstance(value, bool) and value >= 1:
-            return value
-    return 1
-
-
-def silence_features(extractor_factory: ExtractorFactory) -> np.ndarray | None:
-    """The feature frame a fresh extractor gives for digital silence (built for 22050 Hz, so
-    the same whatever the input rate): what a staggered performer hears before the input's
-    first frame (:attr:`Performer.phase`). None if the extractor gives no frame for 1 s of it."""
-    feats = np.asarray(extractor_factory(SAMPLE_RATE).push(np.zeros(SAMPLE_RATE, dtype=np.float32)))
-    return feats[0].astype(np.float32, copy=True) if len(feats) else None
-
-
-def stagger_lead(model: PoseModel, extractor_factory: ExtractorFactory, phase: int) -> np.ndarray | None:
-    """The feature frames a performer with this ``phase`` hears after a reset, before the input:
-    ``phase % cycle_frames(model)`` copies of :func:`silence_features` ((k, D); None for none). Its
-    stream then equals the offline pass on these frames followed by the input's, from frame k on."""
-    k = int(phase) % cycle_frames(model)
-    row = silence_features(extractor_factory) if k else None
-    return None if row is None else np.repeat(row[None], k, axis=0)
-
-
-@dataclass
-class Performer:
-    """One performer of an :class:`Engine`: a pose model and everything after it.
-
-    ``extractor_factory`` builds its feature stream; performers whose ``feature_key`` is
-    equal (and not None) share one extractor (:func:`realtime.pipeline.build_pipeline`
-    sets it to the feature config's fingerprint), the others get one each.
-    ``smoothing`` / ``offset_ms``: None takes :class:`EngineConfig`'s. ``phase``: feature
-    frames of silence the model hears after every reset, before the input's first frame
-    (taken modulo :func:`cycle_frames`), so that the expensive frames of the performers'
-    cycles fall on different hops; None spreads the engine's performers evenly (performer
-    ``i`` of ``n``: ``i * cycle // n``). Phase 0 is today's single performer exactly.
-    """
-
-    name: str
-    model: PoseModel
-    extractor_factory: ExtractorFactory
-    sinks: list = field(default_factory=list)
-    feature_key: object = None
-    smoothing: float | None = None
-    offset_ms: float | None = None
-    phase: int | None = None
-
-
-class _FeatureGroup:
-    """The input stage's part for one feature configuration: one extractor, the performers it
-    feeds, and the frame numbering and time stamps of its frames."""
-
-    def __init__(self, factory: ExtractorFactory, key: object) -> None:
-        self.factory = factory
-        self.key = key
-        self.extractor: FeatureStream | None = None
-        self.lanes: list[_Lane] = []
-        self.index = 0  # frames emitted since the last full reset
-        self.seg_index0 = 0  # frame index where the current extractor segment began
-        self.time0 = 0.0  # stream audio time (s) where it began
-        self._silence: list[np.ndarray | None] = []
-
-    def silence_row(self) -> np.ndarray | None:
-        """:func:`silence_features` of this group's extractor, computed once."""
-        if not self._silence:
-            self._silence.append(silence_features(self.factory))
-        return self._silence[0]
-
-
-class _Lane:
-    """One performer inside the engine: its model, guard, smoothing, idle fade, offset queue,
-    sinks and counters (all touched on the worker thread only, but for the settings)."""
-
-    def __init__(self, spec: Performer, config: EngineConfig, phase: int) -> None:
-        self.name = check_performer_name(spec.name)
-        self.model = spec.model
-        self.sinks: list[Sink] = spec.sinks if isinstance(spec.sinks, list) else list(spec.sinks)
-        self.offset_ms = float(config.offset_ms if spec.offset_ms is None else
-                               check_live_setting("offset_ms", spec.offset_ms))
-        self.smoother = PoseSmoother(config.smoothing if spec.smoothing is None else
-                                     check_live_setting("smoothing", spec.smoothing))
-        self.fader = IdleFader(idle_pose(), max(1, round(config.idle_fade_s * FPS)))
-        self.cycle = cycle_frames(spec.model)
-        if phase < 0:
-            raise ConfigError(f"performer {self.name!r}: phase must be >= 0, got {phase}")
-        self.phase = int(phase) % self.cycle
-        self.idle = False
-        self.group: _FeatureGroup | None = None
-        self.last_good = rest_pose()
-        self.delayed: deque[tuple[float, PoseFrame, float]] = deque()
-        self.sink_errors: dict[str, int] = {}
-        self.compute_ms = RollingStats(config.stats_size)
-        self.compute_cpu_ms = RollingStats(config.stats_size)  # the worker thread's CPU time in compute_ms
-        self.latency_ms = RollingStats(config.stats_size)
-        self.reset_requested = threading.Event()
-        self.last_frame: PoseFrame | None = None
-        self.zero()
-
-    def zero(self) -> None:
-        self.frames_out = 0
-        self.nan_frames = 0
-        self.resets = 0
-
-
-@dataclass
-class _SourceState:
-    """The engine's view of one audio source: its ring and its failure/restart state."""
-
-    ring: RingBuffer
-    down: bool = False  # reported failed; being restarted every retry_s until audio flows
-    need_start: bool = False  # stopped after a failure; start() not yet successful
-    retry_at: float = 0.0
-
-
-class Engine:
+class Engine(SourceFallback):
     """Runs one audio source through features and one or more pose models to their sinks.
 
     One performer: ``Engine(source, extractor_factory, model, sinks, config)``. An
@@ -494,25 +128,25 @@ class Engine:
             if not specs:
                 raise ConfigError("an engine needs at least one performer")
         n = len(specs)
-        self._lanes = [_Lane(s, self.config, s.phase if s.phase is not None else i * cycle_frames(s.model) // n)
+        self._lanes = [Lane(s, self.config, s.phase if s.phase is not None else i * cycle_frames(s.model) // n)
                        for i, s in enumerate(specs)]
-        self._by_name: dict[str, _Lane] = {}
+        self._by_name: dict[str, Lane] = {}
         for lane in self._lanes:
             if lane.name in self._by_name:
                 raise ConfigError(f"performer names must differ: {lane.name!r} is given twice")
             self._by_name[lane.name] = lane
-        self._groups: list[_FeatureGroup] = []
-        keyed: dict[object, _FeatureGroup] = {}
+        self._groups: list[FeatureGroup] = []
+        keyed: dict[object, FeatureGroup] = {}
         for lane, spec in zip(self._lanes, specs):
             group = keyed.get(spec.feature_key) if spec.feature_key is not None else None
             if group is None:
-                group = _FeatureGroup(spec.extractor_factory, spec.feature_key)
+                group = FeatureGroup(spec.extractor_factory, spec.feature_key)
                 self._groups.append(group)
                 if spec.feature_key is not None:
                     keyed[spec.feature_key] = group
             group.lanes.append(lane)
             lane.group = group
-        self._states: dict[int, _SourceState] = {}
+        self._states: dict[int, SourceState] = {}
         self._active: AudioSource = source
         self.ring = self._state(source).ring
         self.compute_ms = RollingStats(self.config.stats_size)  # the whole hop, every performer
@@ -775,7 +409,7 @@ class Engine:
         for lane in [self._lane(performer)] if self._named(performer) else self._lanes:
             self._set_lane_idle(lane, bool(idle))
 
-    def _set_lane_idle(self, lane: _Lane, idle: bool) -> None:
+    def _set_lane_idle(self, lane: Lane, idle: bool) -> None:
         set_model_idle = getattr(lane.model, "set_idle", None)
         if callable(set_model_idle):
             set_model_idle(bool(idle))
@@ -789,13 +423,13 @@ class Engine:
     def _named(performer: object) -> bool:
         return performer is not None and performer != "*"
 
-    def _lane(self, name: object) -> _Lane:
+    def _lane(self, name: object) -> Lane:
         lane = self._by_name.get(name) if isinstance(name, str) else None
         if lane is None:
             raise ConfigError(f"unknown performer {short_repr(name)} (performers: {', '.join(self._by_name)})")
         return lane
 
-    def _who(self, lane: _Lane) -> str:
+    def _who(self, lane: Lane) -> str:
         """``"performer NAME: "`` in an ensemble, ``""`` for a single performer (log prefixes)."""
         return f"performer {lane.name}: " if len(self._lanes) > 1 else ""
 
@@ -825,32 +459,6 @@ class Engine:
         return self._thread is not None and not self._done.is_set()
 
     # -- statistics --------------------------------------------------------------------
-    @staticmethod
-    def _sink_stats(lane: _Lane) -> dict[str, dict]:
-        sinks = {}
-        for s in lane.sinks:
-            try:
-                sinks[s.name] = dict(s.stats())
-            except Exception as exc:  # noqa: BLE001
-                sinks[s.name] = {"stats_error": 1.0}
-                log.debug("stats() of %s failed: %s", s.name, exc)
-        return sinks
-
-    @staticmethod
-    def _sink_notices(lane: _Lane) -> list[str]:
-        """What the lane's sinks with a ``notice()`` say now (e.g. no OSC receiver listening)."""
-        out = []
-        for s in lane.sinks:
-            notice = getattr(s, "notice", None)
-            try:
-                text = notice() if notice is not None else None
-            except Exception as exc:  # noqa: BLE001
-                text = None
-                log.debug("notice() of %s failed: %s", getattr(s, "name", s), exc)
-            if text:
-                out.append(str(text))
-        return out
-
     def stats(self) -> dict:
         """Counters for the status line: frames, idle, the live settings (offset_ms, smoothing),
         compute/latency p50/p99 (ms), faults, sinks, the sinks' notices; and per performer under
@@ -859,26 +467,11 @@ class Engine:
         sinks: dict[str, dict] = {}
         notices: list[str] = []
         for lane in self._lanes:
-            notices += [n for n in self._sink_notices(lane) if n not in notices]
-            lane_sinks = self._sink_stats(lane)
+            notices += [n for n in lane.sink_notices() if n not in notices]
+            lane_sinks = lane.sink_stats()
             sinks.update(lane_sinks if len(self._lanes) == 1 else
                          {f"{lane.name}/{k}": v for k, v in lane_sinks.items()})
-            per[lane.name] = {
-                "frames": lane.frames_out,
-                "idle": lane.idle,
-                "offset_ms": lane.offset_ms,
-                "smoothing": lane.smoother.alpha,
-                "phase": lane.phase,
-                "cycle": lane.cycle,
-                "compute_ms_p50": lane.compute_ms.percentile(50),
-                "compute_ms_p99": lane.compute_ms.percentile(99),
-                "latency_ms_p50": lane.latency_ms.percentile(50),
-                "latency_ms_p99": lane.latency_ms.percentile(99),
-                "nan_frames": lane.nan_frames,
-                "sink_errors": sum(lane.sink_errors.values()),
-                "resets": lane.resets,
-                "sinks": lane_sinks,
-            }
+            per[lane.name] = lane.stats(lane_sinks)
         src = {}
         try:
             src = dict(self.source.stats())
@@ -972,7 +565,7 @@ class Engine:
         self._origin = self._consumed
         self.resets += 1
 
-    def _reset_lane(self, lane: _Lane) -> None:
+    def _reset_lane(self, lane: Lane) -> None:
         """Restart one lane's model and smoothing; then its stagger: as many silence feature frames
         as put its cycle at ``phase`` frames ahead of the group's frame numbering."""
         lane.model.reset()
@@ -1009,17 +602,6 @@ class Engine:
                     lane.offset_ms = value
                 if who is not None and old != value:
                     log.info("performer %s: %s changed from %g to %g", who, name, old, value)
-
-    def _state(self, source: AudioSource) -> _SourceState:
-        """The ring and failure state of ``source`` (made on first use, remade if its format changed)."""
-        st = self._states.get(id(source))
-        if st is None or st.ring.channels != source.channels or st.ring.capacity < self._ring_capacity(source):
-            st = _SourceState(RingBuffer(self._ring_capacity(source), source.channels))
-            self._states[id(source)] = st
-        return st
-
-    def _ring_capacity(self, source: AudioSource) -> int:
-        return max(int(self.config.ring_seconds * source.sample_rate), 4 * self.config.max_read)
 
     def _worker(self, warmed: threading.Event, go: threading.Event) -> None:
         # With one torch thread (config.threads, the default) BLAS is held to one thread too for the
@@ -1161,7 +743,7 @@ class Engine:
         np.mean(self._chunk[:n], axis=1, out=self._mono[:n])
         return self._mono[:n]
 
-    def _frame_samples(self, g: _FeatureGroup, count: int, p0: int) -> list[int]:
+    def _frame_samples(self, g: FeatureGroup, count: int, p0: int) -> list[int]:
         """The completing input sample of the group's next ``count`` frames (this step read
         samples ``p0`` up to ``_consumed``)."""
         sr = self._active.sample_rate
@@ -1177,7 +759,7 @@ class Engine:
             out.append(min(max(need, p0 + 1), self._consumed) - 1)
         return out
 
-    def _run_lanes(self, ready: list[tuple[_FeatureGroup, np.ndarray]], p0: int) -> None:
+    def _run_lanes(self, ready: list[tuple[FeatureGroup, np.ndarray]], p0: int) -> None:
         """Every lane of every group that has frames: model, then guard, smoothing, stamps and sends."""
         plans = [(g, feats, self._frame_samples(g, len(feats), p0)) for g, feats in ready]
         if len(plans) == 1:
@@ -1192,7 +774,7 @@ class Engine:
             for sink in self._hop_sinks:
                 sink.end_hop()
 
-    def _run_groups(self, plans: list[tuple[_FeatureGroup, np.ndarray, list[int]]], released: dict[int, float]) -> None:
+    def _run_groups(self, plans: list[tuple[FeatureGroup, np.ndarray, list[int]]], released: dict[int, float]) -> None:
         """Each group's lanes on its frames ``plans`` (group, features (k, D), completing samples)."""
         for g, feats, samples in plans:
             rel = [released[s] for s in samples]
@@ -1210,7 +792,7 @@ class Engine:
                     lane.compute_cpu_ms.add(cpu_ms)
             g.index += len(feats)
 
-    def _emit(self, lane: _Lane, g: _FeatureGroup, poses: np.ndarray, samples: list[int],
+    def _emit(self, lane: Lane, g: FeatureGroup, poses: np.ndarray, samples: list[int],
               released: list[float]) -> None:
         """Guard, smooth, stamp and send (or hold back) one lane's poses from one push."""
         offset_s = lane.offset_ms / 1000.0
@@ -1244,7 +826,7 @@ class Engine:
                 _, frame, released = lane.delayed.popleft()
                 self._send(lane, frame, released)
 
-    def _send(self, lane: _Lane, frame: PoseFrame, released: float) -> None:
+    def _send(self, lane: Lane, frame: PoseFrame, released: float) -> None:
         frame.wall_time = time.monotonic()
         frame.released = released
         for sink in lane.sinks:
@@ -1264,79 +846,6 @@ class Engine:
             lane.latency_ms.add(ms)
             self.latency_ms.add(ms)
 
-    def _revive(self, src: AudioSource, st: _SourceState, now: float) -> None:
-        """Report a failed source once, stop it, and try to restart it every ``retry_s``.
-
-        The engine keeps its own ``down`` flag, because a source may clear ``error`` when a
-        restart is attempted even if that attempt fails. Cleared when audio arrives.
-        """
-        if src.error and not st.need_start:
-            if not st.down:
-                st.down = True
-                self.source_errors += 1
-                log.warning("audio source %s failed: %s; holding the last pose and retrying every %.1f s",
-                            src.name, src.error, self.config.retry_s)
-            src.stop()
-            st.need_start, st.retry_at = True, now + self.config.retry_s
-        elif st.need_start and now >= st.retry_at:
-            try:
-                src.start(st.ring)
-                st.need_start = False
-            except Exception as exc:  # noqa: BLE001 - still gone; try again later
-                log.debug("restarting %s failed: %s", src.name, exc)
-                src.stop()
-            st.retry_at = now + self.config.retry_s
-
-    def _watch_fallback(self, now: float) -> None:
-        """Switch to the fallback after ``fallback_after_s`` without audio; back when the source returns."""
-        main, fallback = self.source, self.fallback_source
-        assert fallback is not None
-        mst = self._state(main)
-        if self._active is main:
-            # the ring check matters when one step computed longer than fallback_after_s
-            if not main.finished and mst.ring.available == 0 and now - self._last_audio > self.config.fallback_after_s:
-                fst = self._states.get(id(fallback))
-                if fst is None or now >= fst.retry_at:
-                    log.warning("no audio from %s for %.1f s; switching to the fallback %s",
-                                main.name, now - self._last_audio, fallback.name)
-                    self._switch_to(fallback, now)
-            return
-        if main.error or mst.down:  # keep trying to bring the main source back
-            self._revive(main, mst, now)
-        if mst.ring.available > 0 and not main.error:
-            log.warning("audio from %s is back; leaving the fallback %s", main.name, fallback.name)
-            mst.down = False
-            self._switch_to(main, now)
-
-    def _switch_to(self, src: AudioSource, now: float) -> bool:
-        """Make ``src`` the active source without resetting the models (frame numbers and
-        audio time continue on the 30 fps grid). The fallback is started on a clear ring
-        when switched to and stopped when left. False (logged) if it cannot start."""
-        st = self._state(src)
-        if src is not self.source:
-            st.ring.clear()
-            try:
-                src.start(st.ring)
-            except Exception as exc:  # noqa: BLE001 - try again after retry_s
-                log.warning("cannot start the fallback %s: %s", src.name, exc)
-                src.stop()
-                st.retry_at = now + self.config.retry_s
-                return False
-            self.fallbacks += 1
-        else:
-            self.fallback_source.stop()  # type: ignore[union-attr]
-        for g in self._groups:
-            g.time0 += (g.index - g.seg_index0) * HOP / SAMPLE_RATE
-            g.seg_index0 = g.index
-            g.extractor = g.factory(src.sample_rate)
-        self._active, self.ring = src, st.ring
-        if self._chunk.shape[1] != src.channels:
-            self._chunk = np.zeros((self.config.max_read, src.channels), dtype=np.float32)
-        self._consumed = self._origin = st.ring.read_position
-        self._last_audio = now
-        self.state = "running" if src is self.source else "fallback"
-        return True
-
     def _finish(self) -> None:
         """End of input: send what ``offset_ms`` still holds back, then mark done."""
         while not self._stop.is_set():
@@ -1350,9 +859,4 @@ class Engine:
         self.state = "finished"
 
 
-__all__ = [
-    "Engine", "EngineConfig", "Performer", "FeatureStream", "PoseModel", "ExtractorFactory", "PoseSmoother",
-    "IdleFader", "RollingStats", "rest_pose", "idle_pose", "cycle_frames", "silence_features", "stagger_lead", "LIVE_SETTINGS", "CONTROL_ACTIONS",
-    "MAX_SAMPLE", "MAX_STYLE_CHARS", "MAX_NAME_CHARS", "check_live_setting", "check_switch", "check_finite",
-    "check_style_name", "check_performer_name",
-]
+__all__ = ["Engine", "KERNEL_NOISE_S", "MAX_SAMPLE"]

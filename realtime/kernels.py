@@ -70,7 +70,8 @@ def compile_live_kernels(checkpoint: str | Path | None = None, sample_rate: int 
     """Warm an engine up on the default (or ``checkpoint``'s) pipeline as ``performer run`` does,
     then stream 1 s of noise at ``sample_rate`` Hz through it; seconds taken."""
     from realtime.audio_input import FileSource
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.pipeline import build_pipeline
 
     t0 = time.perf_counter()

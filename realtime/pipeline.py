@@ -5,7 +5,7 @@ rebuilds the feature configuration it was trained with, and returns
 
 * ``extractor_factory(input_sr)`` → a fresh :class:`models.features.streaming.StreamingFeatureExtractor`;
 * ``model`` → a :class:`models.networks.streaming.StreamingGenerator` (128-frame windows,
-  64-frame hop, overlap blending), which is an engine :class:`~realtime.engine.PoseModel`.
+  64-frame hop, overlap blending), which is an engine :class:`~realtime.contracts.PoseModel`.
 
 Without ``--checkpoint`` the packaged default ``models/assets/default.pt`` is used.
 
@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from models.errors import CheckpointError, PerformerError
 from models.generate import DEFAULT_CHECKPOINT, default_checkpoint_path, load_model  # noqa: F401  (re-exported)
-from realtime.engine import ExtractorFactory, PoseModel
+from realtime.contracts import ExtractorFactory, PoseModel
 
 
 @dataclass
@@ -31,7 +31,7 @@ class Pipeline:
     """What :func:`build_pipeline` returns: the engine's two model-side inputs, plus provenance.
 
     ``feature_key``: the feature config's fingerprint; an ensemble's performers with equal
-    keys share one extractor (:class:`realtime.engine.Performer`)."""
+    keys share one extractor (:class:`realtime.performer.Performer`)."""
 
     extractor_factory: ExtractorFactory
     model: PoseModel
@@ -144,7 +144,8 @@ def _bench(pipeline: Pipeline, seconds: float, threads: int, sample_rate: int, b
     import numpy as np
 
     from realtime.audio_input import FileSource
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
 
     audio = 0.2 * np.random.default_rng(0).standard_normal(int(seconds * sample_rate)).astype(np.float32)
     src = FileSource(audio, sample_rate, block_size=block, realtime=paced, name="noise")

@@ -5,7 +5,7 @@ check, a copy, the smoother's einsums, comparisons and division, the state copy)
 5-10 µs on the live path's cold caches; an ensemble pays them once per performer per
 hop. :func:`guard_smooth` does the same arithmetic in one call, in float32 and in the
 order NumPy computes it (a quaternion's squared norm paired as ``einsum`` adds its four
-products), so the poses are those of :class:`realtime.engine.PoseSmoother`'s NumPy code
+products), so the poses are those of :class:`realtime.pose_filters.PoseSmoother`'s NumPy code
 bit for bit (tests/test_engine.py). ``make setup`` compiles it ahead (realtime/kernels.py).
 """
 

@@ -48,7 +48,7 @@ from models.errors import ConfigError, NetworkError, PerformerError
 from models.errors import short_repr as _short
 from models.timebase import FPS
 from realtime import sched
-from realtime.engine import CONTROL_ACTIONS as ENGINE_CONTROL_ACTIONS
+from realtime.controls import CONTROL_ACTIONS as ENGINE_CONTROL_ACTIONS
 from realtime.frame import PoseFrame
 from realtime.wire import decode_frame, encode_frame, frame_json, hello_message, rest_offsets
 
@@ -67,7 +67,7 @@ _DESK = "#desk"  # the route key of desk clients (no performer's path can be it)
 CLOSE_POLICY = 1008  # bad or missing token, unknown format, message rate exceeded
 CLOSE_FULL = 1013  # client cap reached ("try again later")
 #: Control actions a token-authenticated client may send (docs/protocol.md): the engine's,
-#: :data:`realtime.engine.CONTROL_ACTIONS` (the OSC control input sends the same).
+#: :data:`realtime.controls.CONTROL_ACTIONS` (the OSC control input sends the same).
 CONTROL_ACTIONS: tuple[str, ...] = ENGINE_CONTROL_ACTIONS
 ControlHandler = Callable[[str, object], None]
 """Applies one control action (e.g. :meth:`realtime.engine.Engine.control`); raises

@@ -40,7 +40,8 @@ def test_outputs_are_named_by_their_state():
 def test_a_desk_gets_status_and_no_frames_and_the_engine_sends_nothing_without_one(clip):  # noqa: F811
     from realtime.audio_input import FileSource
     from realtime.desk import start_desk
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.pipeline import build_pipeline
     from realtime.ws_server import WebSocketSink
 

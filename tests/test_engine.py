@@ -22,8 +22,10 @@ from models.rig.humanoid import NUM_BONES
 from models.rig.motion import POSE_DIM
 from models.timebase import FPS, HOP, SAMPLE_RATE
 from realtime.audio_input import FileSource, RingBuffer
-from realtime.engine import Engine, EngineConfig, IdleFader, PoseSmoother, idle_pose, rest_pose
+from realtime.engine import Engine
+from realtime.engine_config import EngineConfig
 from realtime.frame import PoseFrame
+from realtime.pose_filters import IdleFader, PoseSmoother, idle_pose, rest_pose
 
 CFG = FeatureConfig()
 

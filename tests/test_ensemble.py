@@ -27,7 +27,9 @@ from realtime.audio_input import FileSource
 from realtime.config import (
     PerformerConfig, RunConfig, load_run_config, parse_performer, performer_live_changes, resolve_run_config,
 )
-from realtime.engine import Engine, EngineConfig, Performer, stagger_lead
+from realtime.engine import Engine
+from realtime.engine_config import EngineConfig
+from realtime.performer import Performer, stagger_lead
 from realtime.pipeline import build_pipeline
 from realtime.vmc import osc_message
 from _proc import default_sigint

@@ -141,7 +141,8 @@ def server():
     from test_engine import TinyConvModel, extractor, noise
 
     from realtime.audio_input import FileSource
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.ws_server import WebSocketSink
 
     eng = Engine(FileSource(noise(0.2), 22050), extractor, TinyConvModel(), [], EngineConfig(warmup_s=0))

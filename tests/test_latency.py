@@ -33,7 +33,9 @@ from realtime.bench.measure import (
 from realtime.bench.suite import save_random_checkpoint
 from realtime.bench.worker import ScheduledSource, TimingSink
 from realtime.cli import main
-from realtime.engine import Engine, EngineConfig, rest_pose
+from realtime.engine import Engine
+from realtime.engine_config import EngineConfig
+from realtime.pose_filters import rest_pose
 from realtime.vmc import VmcEncoder
 from realtime.wire import encode_frame
 

@@ -350,7 +350,8 @@ def test_the_engine_with_the_shipped_performer_plays_on_through_osc_controls_aft
     from models.features.audio_io import load_audio
     from models.features.streaming import StreamingFeatureExtractor
     from realtime.audio_input import FileSource
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.osc_control import OscControl
 
     lm = shipped()

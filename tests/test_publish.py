@@ -237,7 +237,8 @@ def test_broker_killed_and_restarted_mid_show(broker):
     the same ports: the engine never falls behind its input, the frames missed are counted, and
     the viewer (reconnecting by itself) gets frames again within 2 s of the broker's return."""
     from realtime.audio_input import FileSource
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
 
     viewer = Viewer(broker.url)
     pub = _process(broker.url, Credentials(user=PUBLISHER[0], password=PUBLISHER[1]))

@@ -29,7 +29,8 @@ from test_run_cli import PERFORMER, REPO, drain, one_line_error, run_main, tiny_
 from models.errors import ConfigError
 from models.timebase import HOP, SAMPLE_RATE
 from realtime.audio_input import FileSource
-from realtime.engine import Engine, EngineConfig
+from realtime.engine import Engine
+from realtime.engine_config import EngineConfig
 
 from script_loader import load_script
 

@@ -21,7 +21,9 @@ from models.errors import ConfigError
 from models.timebase import HOP, SAMPLE_RATE
 from realtime.audio_input import FileSource
 from realtime.config import DEFAULT_WS, TOKEN_ENV, RunConfig, resolve_run_config
-from realtime.engine import Engine, EngineConfig, idle_pose
+from realtime.engine import Engine
+from realtime.engine_config import EngineConfig
+from realtime.pose_filters import idle_pose
 from realtime.ws_server import WebSocketSink, is_loopback
 
 TOKEN = "s3cret-token"

@@ -28,9 +28,9 @@ from _proc import default_sigint
 from models.errors import ConfigError, NetworkError
 from models.timebase import FPS
 from realtime.config import load_run_config, resolve_run_config
-from realtime.engine import idle_pose
 from realtime.endpoints import parse_networks
 from realtime.osc_control import MAX_BUNDLE_DEPTH, OscControl, parse_packet
+from realtime.pose_filters import idle_pose
 from realtime.receiver import OscReceiver, ReceivedFrame
 from realtime.vmc import osc_message
 

@@ -304,7 +304,8 @@ def test_stage_facing_and_home_are_engine_and_osc_controls():
 
     from models.timebase import SAMPLE_RATE
     from realtime.audio_input import FileSource
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.osc_control import OscControl
 
     s = DanceStream(walking_model(), seed=0)
@@ -352,7 +353,8 @@ def test_home_over_a_real_websocket_and_osc_udp_walks_the_performer_back_to_the_
 
     from models.timebase import SAMPLE_RATE
     from realtime.audio_input import FileSource
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.osc_control import OscControl
     from realtime.ws_server import WebSocketSink
 

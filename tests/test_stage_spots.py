@@ -112,7 +112,9 @@ def test_a_reload_of_an_ensemble_recuts_every_performers_spot(tmp_path):
     from realtime.audio_input import FileSource
     from realtime.commands.run import reload_settings
     from realtime.config import resolve_run_config
-    from realtime.engine import Engine, EngineConfig, Performer
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
+    from realtime.performer import Performer
     from realtime.pipeline import build_pipeline
 
     conf = tmp_path / "show.toml"

@@ -375,7 +375,8 @@ def test_the_engine_tells_the_viewer_its_performers_stage_at_start_and_on_contro
     from models.networks.dance_stream import DanceStream
     from models.timebase import SAMPLE_RATE
     from realtime.audio_input import FileSource
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
 
     sink = sink_factory()
     stream = DanceStream(walking_model(), seed=0)

@@ -46,7 +46,8 @@ def one_run(desks: int, seconds: float) -> dict:
     from realtime.audio_input import FileSource
     from realtime.bench.suite import own_hop_ms
     from realtime.desk import start_desk
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.pipeline import build_pipeline
     from realtime.ws_server import WebSocketSink
 

@@ -94,8 +94,10 @@ class _Timed:
 
 def run(mode: str, performers: int, seconds: float, audio: np.ndarray, sr: int, loaded: dict) -> str:
     from realtime.audio_input import FileSource
-    from realtime.engine import Engine, EngineConfig, Performer
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.osc_out import OscSink
+    from realtime.performer import Performer
     from realtime.pipeline import build_pipeline
     from realtime.ws_server import WebSocketSink
 

@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     import models.networks.stage as stage
     from models.errors import PerformerError
     from models.features.audio_io import bundled_clip_path, load_audio
-    from realtime.engine import stagger_lead
+    from realtime.performer import stagger_lead
     from realtime.pipeline import build_pipeline
 
     times: dict[str, list[float]] = defaultdict(list)

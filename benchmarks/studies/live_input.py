@@ -76,7 +76,8 @@ def run_engine(source, seconds: float, play=None, seed: int = 0) -> tuple[Collec
     """Stream ``source`` through the engine and the shipped model (``seed``); ``play``: started after
     2 s of the input (the live run), the engine stopped 1 s after it ends; else until the source ends.
     Returns the frames and the monotonic time ``play`` was started (None without it)."""
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.pipeline import build_pipeline
 
     pipe = build_pipeline(None, seed=seed)

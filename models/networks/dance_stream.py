@@ -1,6 +1,6 @@
 """The dancing performer, live: :class:`DanceStream` runs a ``dance_vq`` model frame by frame.
 
-The engine's contract (:class:`realtime.engine.PoseModel`): ``push(features (k, D)) ->
+The engine's contract (:class:`realtime.contracts.PoseModel`): ``push(features (k, D)) ->
 poses (k, POSE_DIM)``, one pose per feature frame at once, 30 fps, no look-ahead.
 
 Every ``seg`` frames (frame ``t = seg * k``) the stream appends audio token ``k`` to its

@@ -401,12 +401,12 @@ def stream_vs_offline(checkpoint: Path, features: np.ndarray, seed: int = 0, pha
     ``dance_stream.generate`` for dance_vq) on the same features. Returns frames, the chunking
     and the largest absolute difference of any pose value.
 
-    ``phase``: a staggered performer of an ensemble (:attr:`realtime.engine.Performer.phase`):
-    its model first hears :func:`~realtime.engine.stagger_lead`'s silence frames, as the engine
+    ``phase``: a staggered performer of an ensemble (:attr:`realtime.performer.Performer.phase`):
+    its model first hears :func:`~realtime.performer.stagger_lead`'s silence frames, as the engine
     feeds them after a reset, and the offline pass runs on those frames followed by
     ``features``; the frames after the lead-in are compared."""
     from models.generate import run_model
-    from realtime.engine import stagger_lead
+    from realtime.performer import stagger_lead
     from realtime.pipeline import build_pipeline
 
     pipeline = build_pipeline(checkpoint)
@@ -597,7 +597,7 @@ def run_latency(audio: Path, cfg: BenchConfig, seconds: float = 30.0, naive_seco
     from models.features.audio_io import load_audio
     from models.features.spectral import extract_features
     from models.generate import load_model
-    from realtime.engine import cycle_frames
+    from realtime.performer import cycle_frames
     from realtime.pipeline import build_pipeline
 
     audio = Path(audio)
@@ -801,7 +801,7 @@ def run_ensemble(audio: Path, cfg: BenchConfig, counts: Sequence[int] = (1, 2, 4
     from models.features.audio_io import load_audio
     from models.features.spectral import extract_features
     from models.generate import load_model
-    from realtime.engine import cycle_frames
+    from realtime.performer import cycle_frames
     from realtime.pipeline import build_pipeline
 
     if not counts or min(counts) < 1:

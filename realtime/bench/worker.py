@@ -178,8 +178,10 @@ def run(spec: dict) -> dict:
     """Steps 1-5 of the module docstring; returns what it wrote to ``spec["out"]``."""
     import torch
 
-    from realtime.engine import Engine, EngineConfig, Performer
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.osc_out import OscSink
+    from realtime.performer import Performer
     from realtime.pipeline import build_pipeline
     from realtime.ws_server import WebSocketSink
 

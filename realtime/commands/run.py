@@ -234,8 +234,10 @@ def _open_ensemble(cfg, specs, source, fallback):
     server). Returns (engine, every sink, the server or None, description lines).
     Closes what it opened if anything fails."""
     from models.errors import PerformerError
-    from realtime.engine import Engine, EngineConfig, Performer
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.osc_out import OscSink
+    from realtime.performer import Performer
     from realtime.pipeline import build_pipeline
     from realtime.publish_process import open_routes
     from realtime.recorder import Recorder
@@ -328,7 +330,8 @@ def _describe(sinks, source, pipeline, control=None) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from realtime.config import resolve_run_config
-    from realtime.engine import Engine, EngineConfig
+    from realtime.engine import Engine
+    from realtime.engine_config import EngineConfig
     from realtime.kernels import compile_unreached_kernels, uncached_kernels
     from realtime.pipeline import build_pipeline
     from realtime.status import StatusLine
