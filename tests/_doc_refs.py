@@ -409,7 +409,7 @@ def anchors(path: Path) -> frozenset[str]:
 PATH_RE = re.compile(r"(?<![\w/.:@-])((?:%s)/[\w.*/-]*[\w*])" % "|".join(TOP))
 TEST_RE = re.compile(r"(?<![\w/])((?:tests/)?test_\w+\.py)?::(\w+)(?:::(\w+))?")
 DOTTED_RE = re.compile(r"(?<![\w./])((?:models|realtime)(?:\.\w+)+)")
-SHORT_RE = re.compile(r"(?<![\w./])([a-z_][a-z0-9_]*)\.([A-Z][A-Za-z0-9_]*)\b")
+SHORT_RE = re.compile(r"(?<![\w./=])([a-z_][a-z0-9_]*)\.([A-Z][A-Za-z0-9_]*)\b")
 CONST_RE = re.compile(r"^[A-Z][A-Z0-9]*(?:_[A-Z0-9]+)+$|^[A-Z]{4,}$")
 LINK_RE = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
 MAKE_RE = re.compile(r"\bmake ([a-z][\w-]*)")
