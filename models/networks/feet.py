@@ -94,7 +94,7 @@ RELEASE_FRAMES: int = 20
 ROTATION_RELEASE: bool = True
 #: The held leg's ankle target is the dance's ankle over the plant, but at least this far (m) below
 #: the hip joint (:data:`ROTATION_RELEASE`): a target passing by the hip swings the thigh round.
-RELEASE_CLEARANCE: float = 0.3
+RELEASE_CLEARANCE: float = 0.4
 #: Frames over which a foot planted again while it is handed back goes from the leg as shown to the
 #: planted solution (:data:`ROTATION_RELEASE`; smoothstep): the hand-back's leg is not the IK's.
 REPLANT_FRAMES: int = 10
@@ -263,21 +263,22 @@ def _leg_target(pose, f, bones, offs, planted, plant, weight, contact, leash, pu
                 target, shown, legs, rel, rotation, clearance, carry_rate, soft):  # pragma: no cover - compiled
     """Leg f's state stepped (plant, release, leash) and its ankle target written to ``target[f]``:
     x, y, z (the dance's ankle, moved by the blend weight towards the plant horizontally), the
-    smoothstepped weight, the mode (0: solved for it, :func:`_leg_ik`; with ``rotation``,
-    :data:`ROTATION_RELEASE`: 1, handed back, 2, a replant's carry, :func:`_leg_blend`; x, y, z then
-    the weight 1's target, handed back at least ``clearance`` below the hip joint) and the carry's
-    weight. ``shown``, ``legs``, ``rel``: see :func:`_leg_blend`."""
+    blend weight, the mode (0: solved for it, :func:`_leg_ik`; with ``rotation``,
+    :data:`ROTATION_RELEASE`: 1, handed back in rotation space, the weight then the share of it left
+    since the switch; 2, a replant's carry, x, y, z then the planted target: :func:`_leg_blend`) and
+    the carry's weight. ``shown``, ``legs``, ``rel``: see :func:`_leg_blend`."""
     hip, ankle, heel, toe, _, _, _, _, _ = _leg_fk(pose, f, bones, offs)
     ax, ay, az = ankle
     mx, mz = ax + 0.5 * (heel[0] + toe[0]), az + 0.5 * (heel[2] + toe[2])  # the dance's heel-toe midpoint
     w = weight[f]
+    c = shown[f, 4]
     if contact[f] > 0.5:
         if planted[f] == 0:  # planted where it is shown now
             if w > 0.0:  # mid-release (between plant and dance): held at once
-                if rotation:  # where the leg was shown last frame, the planted solution carried in from it
+                if shown[f, 5] > 0.0:  # handed back in rotation space: the planted leg carried in from the leg shown
                     tx, ty, tz = _unsoft(pose, f, bones, offs, hip, (shown[f, 0], shown[f, 1], shown[f, 2]), soft)
                     plant[f, 0], plant[f, 2] = mx + tx - ax, mz + tz - az
-                    shown[f, 3], shown[f, 4] = ty - ay, 1.0
+                    c, shown[f, 3], shown[f, 5] = 1.0, ty - ay, 0.0
                     legs[f, 0:8] = legs[f, 8:16]
                     rel[f] = 0.0
                 else:
@@ -290,18 +291,21 @@ def _leg_target(pose, f, bones, offs, planted, plant, weight, contact, leash, pu
             planted[f] = 1
         w = min(1.0, w + plant_rate)
     else:
-        if planted[f] == 1 and rotation:  # released: handed back from the leg as shown
-            legs[f, 0:8] = legs[f, 8:16]
-            rel[f] = 0.0
+        if planted[f] == 1 and c > 0.0:  # released while carried in: handed back in rotation space at once
+            shown[f, 5] = -1.0
         planted[f] = 0
         w = max(0.0, w - release)
+        if w <= 0.0:
+            shown[f, 5] = 0.0
     weight[f] = w
     dx, dz = plant[f, 0] - mx, plant[f, 2] - mz
-    c = shown[f, 4]
     k = c * c * (3.0 - 2.0 * c)
-    if c > 0.0:  # a replant's carry: its height from the leg shown's to the dance's (handed back: as well)
+    shown[f, 4] = 0.0
+    if c > 0.0 and planted[f] == 1:  # a replant's carry: its height from the leg shown's to the dance's
         ay += k * shown[f, 3]
         shown[f, 4] = max(0.0, c - carry_rate)
+    else:
+        k = 0.0
     if planted[f] == 1:
         d = math.sqrt(dx * dx + dz * dz)
         if d > leash:  # pulled after the dance's foot, by pull of the way past the leash a frame (a carry: less)
@@ -310,17 +314,19 @@ def _leg_target(pose, f, bones, offs, planted, plant, weight, contact, leash, pu
             plant[f, 2] = mz + dz * s
             dx, dz = plant[f, 0] - mx, plant[f, 2] - mz
     e = w * w * (3.0 - 2.0 * w)
+    tx, ty, tz = ax + e * dx, ay, az + e * dz
     mode = 0.0
-    if rotation and planted[f] == 0 and w > 0.0:
-        mode, ay = 1.0, min(ay, hip[1] - clearance)
-    elif k > 0.0 and planted[f] == 1:
-        mode = 2.0
-    if mode > 0.0:
-        e = 1.0 if mode == 2.0 else e
-        target[f, 0], target[f, 1], target[f, 2] = ax + dx, ay, az + dz
-    else:
-        target[f, 0], target[f, 1], target[f, 2] = ax + e * dx, ay, az + e * dz
-    target[f, 3], target[f, 4], target[f, 5] = e, mode, k
+    if planted[f] == 0 and w > 0.0 and rotation:
+        hx, hy, hz = tx - hip[0], ty - hip[1], tz - hip[2]
+        if shown[f, 5] < 0.0 or (shown[f, 5] == 0.0 and hx * hx + hy * hy + hz * hz < clearance * clearance):
+            shown[f, 5] = e  # the target would pass by the hip: from here on the leg shown turns to the dance's
+            legs[f, 0:8] = legs[f, 8:16]
+            rel[f] = 0.0
+        if shown[f, 5] > 0.0:
+            mode, e = 1.0, e / shown[f, 5]
+    elif k > 0.0:
+        mode, e, tx, tz = 2.0, 1.0, ax + dx, az + dz
+    target[f, 0], target[f, 1], target[f, 2], target[f, 3], target[f, 4], target[f, 5] = tx, ty, tz, e, mode, k
 
 
 @njit(cache=True, nogil=True)
@@ -437,16 +443,18 @@ def _leg_blend(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, kn
     (:func:`_towards`, ``rel``), the foot keeps the dance's world orientation; a blend that would put
     the heel or toe under the floor is solved once more for its own ankle raised onto it."""
     mode = target[f, 4]
-    _, du, dl, df = _leg_solve(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target[f, 0], target[f, 1],
+    low = floor if mode == 1.0 else -1e9  # a carry's target lies beyond the ankle (undone soft reach): floor after
+    _, du, dl, df = _leg_solve(pose, f, bones, offs, ang_rest, low, knee_min, soft, target[f, 0], target[f, 1],
                                target[f, 2], mode == 2.0, knee_max, wrap_forward)
     gh = _unitq(_q(pose, 3))
     gf = _mul(_mul(_mul(gh, du), dl), df)  # the dance's foot in the world
     hu, hl = _q(legs[f], 0), _q(legs[f], 4)
-    _put(pose, f, bones, hu, hl, _unitq(_mul(_conj(_mul(_mul(gh, hu), hl)), gf)))
-    _, hu, hl, _ = _leg_solve(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target[f, 0], target[f, 1],
-                              target[f, 2], True, knee_max, wrap_forward)
-    for i in range(4):
-        legs[f, i], legs[f, 4 + i] = hu[i], hl[i]
+    if mode == 2.0:  # the carried leg re-aimed at the planted target
+        _put(pose, f, bones, hu, hl, _unitq(_mul(_conj(_mul(_mul(gh, hu), hl)), gf)))
+        _, hu, hl, _ = _leg_solve(pose, f, bones, offs, ang_rest, low, knee_min, soft, target[f, 0], target[f, 1],
+                                  target[f, 2], True, knee_max, wrap_forward)
+        for i in range(4):
+            legs[f, i], legs[f, 4 + i] = hu[i], hl[i]
     e = target[f, 3] if mode == 1.0 else target[f, 5]
     ou, ol = _towards(du, hu, e, rel, f, 0), _towards(dl, hl, e, rel, f, 1)
     _put(pose, f, bones, ou, ol, _unitq(_mul(_conj(_mul(_mul(gh, ou), ol)), gf)))
@@ -531,7 +539,7 @@ class FeetLock:
         self.weight = np.zeros(2, np.float64)
         self.ground = np.zeros(2, np.float64)  # the body's height offset (m, GROUND_RATE) and its first low-pass
         self._target = np.zeros((2, 6), np.float64)  # each leg's ankle target, weight, mode, carry, this frame
-        self.shown = np.zeros((2, 5), np.float64)  # each leg shown last frame: its ankle (x, y, z);
+        self.shown = np.zeros((2, 6), np.float64)  # each leg shown last frame: its ankle (x, y, z);
         #                                            a replant's height offset (m) and carry (1 -> 0)
         self.legs = np.zeros((2, 16), np.float64)  # each leg's held thigh and shin, its shown ones (local quaternions)
         self.rel = np.zeros((2, 2, 4), np.float64)  # a blend's turns from the dance's thigh, shin to the held's
