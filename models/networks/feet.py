@@ -27,7 +27,10 @@ dancers stand at different heights on the default skeleton.
   the foot it falls to 0 over :data:`RELEASE_FRAMES` (smoothstep), so the foot is handed
   back to the dance without a jump. A foot planted anew starts where it is shown and its
   hold grows over :data:`PLANT_FRAMES`, so planting never jumps either;
-- ``ground`` (2,) the body's height offset (the lift, low-passed twice).
+- ``ground`` (2,) the body's height offset (the lift, low-passed twice);
+- ``shown`` (2, 6), ``legs`` (2, 16), ``rel`` (2, 2, 4): the hand-back in rotation space's
+  (:data:`ROTATION_RELEASE`, :func:`_leg_blend`): each leg as shown last frame (ankle; thigh
+  and shin local rotations), the leg it turns from, the turns' signs, a replant's carry.
 
 **Every frame, per leg** (one compiled call, :func:`feet_kernel`; 0.014 ms a frame for both,
 p99 0.042 ms: benchmarks/hop_profile.py): the body is grounded; the dance's heel-toe midpoint
@@ -44,6 +47,17 @@ bent the other way, its ankle where it was), at most :data:`KNEE_MAX_DEG` (a tar
 the hip than that reaches is left short), swings the thigh onto the target, and turns
 the foot back to its world orientation. A leg with nothing to do (no weight, above the
 floor, knee bent forwards) is left bit for bit as it was.
+
+**A hand-back in rotation space.** A released foot's blended target that comes within
+:data:`RELEASE_CLEARANCE` of the hip joint (a dancer kicking the foot up past the hip) would
+swing the thigh round; from that frame the leg is no longer aimed at a target: the leg as
+shown then (kept in the hips' frame) is turned to the dance's own by the weight left, thigh
+and shin by their relative rotations' powers, each keeping its last frame's sign
+(:func:`_towards`: a turn past half a turn goes on the same way), the foot at the dance's
+world orientation. A foot planted again meanwhile is held where it is shown and carried from
+that leg to the planted solution over :data:`REPLANT_FRAMES`. Hand-written quaternion
+arithmetic in numba, as the IK, so the live path allocates nothing. Every other release is
+handed back as above.
 """
 
 from __future__ import annotations
@@ -84,19 +98,22 @@ FLOOR_PERCENTILE: float = 2.0
 #: 0.18 -> 0.17, contact-foot speed 0.19 -> 0.13 m/s, band amplitude 0.947 -> 0.920
 #: (benchmarks/studies/foot_skating.py --stage 6x5; 30 frames: 0.920, 1.36x, amplitude 0.916).
 RELEASE_FRAMES: int = 20
-#: A released foot is handed back in rotation space (True): while its weight falls, the leg is
-#: solved for the foot still over its plant (:data:`RELEASE_RISE`) and its thigh, shin and foot
-#: turned from that solution to the dance's own by the smoothstepped weight (shortest-arc slerp),
-#: so no target ever passes by the hip. False: as before, the ankle target blended from the plant
-#: to the dance's horizontally at the dance's height: a dancer kicking the released foot up past
-#: the hip took the target by the hip joint and the IK's thigh, aimed at it, swung round (94.8
-#: degrees in a frame, the shared sample's library on 3x2; docs/feet.md). Switch for measuring.
+#: A released foot whose blended ankle target comes within :data:`RELEASE_CLEARANCE` of the hip
+#: joint is handed back in rotation space from there (True): the leg as shown that frame, kept in
+#: the hips' frame, turned to the dance's own by the weight left (:func:`_leg_blend`), no target
+#: aimed at. False: as before, the target blended on: a dancer kicking the released foot up past
+#: the hip took it by the hip joint and the IK's thigh, aimed at it, swung round (94.8 degrees in a
+#: frame, the shared sample's library on 3x2; docs/feet.md). Switch for measuring.
 ROTATION_RELEASE: bool = True
-#: The held leg's ankle target is the dance's ankle over the plant, but at least this far (m) below
-#: the hip joint (:data:`ROTATION_RELEASE`): a target passing by the hip swings the thigh round.
+#: How near the hip joint (m) a released foot's blended ankle target may come before the hand-back
+#: goes on in rotation space (a knee folded past ~120 degrees). The shipped model's targets on
+#: vibeace and the bundled clip (seeds 0-2, 3x2 and 6x5) stay further: those streams as before, bit
+#: for bit (0.5 reaches one of them); synthetic kicks (tests/test_feet.py) turn the leg at most
+#: 54.7 degrees a frame (0.3: 64.3; as before: 180).
 RELEASE_CLEARANCE: float = 0.4
-#: Frames over which a foot planted again while it is handed back goes from the leg as shown to the
-#: planted solution (:data:`ROTATION_RELEASE`; smoothstep): the hand-back's leg is not the IK's.
+#: Frames over which a foot planted again while handed back in rotation space goes from the leg as
+#: shown to the planted solution (smoothstep): that leg is not the IK's, and the planted one would
+#: jump to it (5 and 20 read as 10 on the library's kick stream).
 REPLANT_FRAMES: int = 10
 #: Frames over which a foot newly planted comes to rest (its hold grows, smoothstep): no sudden stop.
 PLANT_FRAMES: int = 3
@@ -435,13 +452,16 @@ def _towards(a, b, e, rel, f, k):  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def _leg_blend(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, knee_max, wrap_forward, shown,
                legs, rel):  # pragma: no cover - compiled
-    """Leg f blended in rotation space (:data:`ROTATION_RELEASE`), in place. The held leg: its last
-    frame's thigh and shin (``legs[f, :8]``, local) re-aimed at ``target[f]``, so it moves smoothly
-    however the dance's leg swings. Handed back (mode 1): the leg shown turned from the dance's own
-    (floor and knee mended) towards the held by the weight ``target[f, 3]``; a replant's carry (mode
-    2): from the planted solution towards the held by ``target[f, 5]``. Thigh and shin turn
-    (:func:`_towards`, ``rel``), the foot keeps the dance's world orientation; a blend that would put
-    the heel or toe under the floor is solved once more for its own ankle raised onto it."""
+    """Leg f blended in rotation space (:data:`ROTATION_RELEASE`), in place, towards the held leg
+    ``legs[f, :8]`` (thigh and shin, local). Handed back (mode 1): from the dance's own leg (floor and
+    knee mended) by the weight ``target[f, 3]``, the held leg the one shown when the hand-back
+    switched, kept in the hips' frame (nothing aimed: no target to pass by the hip). A replant's
+    carry (mode 2): from the planted solution by ``target[f, 5]``, the held leg re-aimed at the same
+    target (``target[f]``: the ankle where it was shown, its soft reach undone, :func:`_unsoft`)
+    each frame. Thigh and shin turn (:func:`_towards`, ``rel``), the foot keeps the dance's world
+    orientation; a blend that would put the heel or toe under the floor is solved once more for its
+    own ankle raised onto it. ``shown[f]``: the leg shown last frame's ankle (:func:`_keep_shown`),
+    a replant's height offset (m) and carry (1 -> 0), the weight at the switch (-1: switch now)."""
     mode = target[f, 4]
     low = floor if mode == 1.0 else -1e9  # a carry's target lies beyond the ankle (undone soft reach): floor after
     _, du, dl, df = _leg_solve(pose, f, bones, offs, ang_rest, low, knee_min, soft, target[f, 0], target[f, 1],
