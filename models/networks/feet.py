@@ -106,14 +106,12 @@ RELEASE_FRAMES: int = 20
 #: frame, the shared sample's library on 3x2; docs/feet.md). Switch for measuring.
 ROTATION_RELEASE: bool = True
 #: How near the hip joint (m) a released foot's blended ankle target may come before the hand-back
-#: goes on in rotation space (a knee folded past ~120 degrees). The shipped model's targets on
-#: vibeace and the bundled clip (seeds 0-2, 3x2 and 6x5) stay further: those streams as before, bit
-#: for bit (0.5 reaches one of them); synthetic kicks (tests/test_feet.py) turn the leg at most
-#: 54.7 degrees a frame (0.3: 64.3; as before: 180).
+#: goes on in rotation space (a knee folded past ~120 degrees). The shipped model's targets stay
+#: further: the validation songs on 6x5 and 3x2 read as before (foot_skating.py, docs/feet.md).
 RELEASE_CLEARANCE: float = 0.4
 #: Frames over which a foot planted again while handed back in rotation space goes from the leg as
 #: shown to the planted solution (smoothstep): that leg is not the IK's, and the planted one would
-#: jump to it (5 and 20 read as 10 on the library's kick stream).
+#: jump to it.
 REPLANT_FRAMES: int = 10
 #: Frames over which a foot newly planted comes to rest (its hold grows, smoothstep): no sudden stop.
 PLANT_FRAMES: int = 3
