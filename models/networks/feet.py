@@ -32,8 +32,8 @@ dancers stand at different heights on the default skeleton.
   (:data:`ROTATION_RELEASE`, :func:`_leg_blend`): each leg as shown last frame (ankle; thigh
   and shin local rotations), the leg it turns from, the turns' signs, a replant's carry.
 
-**Every frame, per leg** (one compiled call, :func:`feet_kernel`; 0.014 ms a frame for both,
-p99 0.042 ms: benchmarks/hop_profile.py): the body is grounded; the dance's heel-toe midpoint
+**Every frame, per leg** (one compiled call, :func:`feet_kernel`; 0.037-0.038 ms a frame for
+both, p99 0.064-0.069 ms: benchmarks/hop_profile.py, docs/feet.md): the body is grounded; the dance's heel-toe midpoint
 is moved by ``weight`` towards the plant horizontally; a plant more than :data:`LEASH` from
 the dance's foot is pulled after it, softly (:data:`LEASH_PULL`: the foot slides rather
 than the leg being torn, where the exemplar's dancer travelled but the performer does not,
