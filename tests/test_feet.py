@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from models.evaluation.foot_skating import foot_points, foot_skating, knee_flexion_deg
 from models.networks.feet import FeetLock
 from models.rig.humanoid import BONE_INDEX, NUM_BONES
-from models.rig.kinematics import fk
+from models.rig.kinematics import fk, rotation_jumps_deg
 from models.rig.motion import Motion
 from models.rig.skeleton import load_default_skeleton
 
@@ -150,6 +150,66 @@ def test_a_held_foot_the_dance_kicks_up_folds_the_knee_smoothly_and_never_snaps_
     monkeypatch.setattr(feet_mod, "KNEE_WRAP_FORWARD", False)
     snapped = knees()
     assert snapped.min() < 1.0 and np.abs(np.diff(snapped, axis=0)).max() > 90.0  # the control: straight for a while
+
+
+def kick_past_the_hip(travel: float = 0.07, frames: int = 10) -> tuple[np.ndarray, list[tuple[float, float]]]:
+    """(poses (31, 87), contacts): standing with the left foot planted for 10 frames, then the left
+    foot released as the body travels ``travel`` m a frame forwards and the dance kicks the straight
+    leg up past hip height over ``frames`` frames (the thigh 0 -> 110 degrees forwards), held there."""
+    rest = np.zeros(3 + 4 * NUM_BONES, np.float32)
+    rest[1], rest[6::4] = 0.95, 1.0
+    poses, contacts = [], []
+    c = 3 + 4 * BONE_INDEX["LeftUpperLeg"]
+    for t in range(31):
+        pose = rest.copy()
+        pose[2] = travel * max(t - 10, 0)
+        pose[c: c + 4] = Rotation.from_euler("x", -110.0 * min(max(t - 10, 0) / frames, 1.0), degrees=True).as_quat()
+        poses.append(pose)
+        contacts.append((1.0 if t < 10 else 0.0, 1.0))
+    return np.array(poses), contacts
+
+
+def test_a_released_foot_kicked_past_the_hip_is_handed_back_without_a_thigh_snap(monkeypatch):
+    """The dance kicks a released foot up to hip height while the body travels away from its plant
+    (the shared sample's library on 3x2 turned LeftUpperLeg 94.8 degrees in a frame so). Handed
+    back in rotation space once the blended ankle target comes within ``RELEASE_CLEARANCE`` of the
+    hip joint (``ROTATION_RELEASE``), the leg turns at most 35 degrees a frame (measured 29; the
+    dance's own thigh 11); with the target blended on (as before) it passed by the hip joint and the
+    thigh, aimed at it, swung round (138)."""
+    import models.networks.feet as feet_mod
+
+    poses, contacts = kick_past_the_hip()
+    legs = [BONE_INDEX[f"Left{b}"] for b in ("UpperLeg", "LowerLeg", "Foot")]
+
+    def largest_step() -> float:
+        feet = FeetLock(floor=-10.0)
+        out = np.stack([feet.step(p.copy(), left, right) for p, (left, right) in zip(poses, contacts)])
+        return float(rotation_jumps_deg(out[:, 3:].reshape(len(out), -1, 4).astype(np.float64))[:, legs].max())
+
+    assert largest_step() <= 35.0
+    monkeypatch.setattr(feet_mod, "ROTATION_RELEASE", False)
+    assert largest_step() > 90.0  # the control: the snap
+
+
+def test_planted_and_free_legs_are_left_as_the_ik_has_them_by_the_rotation_hand_back(monkeypatch):
+    """The rotation-space hand-back (``ROTATION_RELEASE``) changes released legs only: a planted leg
+    (held, or its hold growing) and a free one come out bit for bit as without it."""
+    import models.networks.feet as feet_mod
+
+    poses = random_poses(100, seed=5)
+    target = midpoints(positions(poses)) + [0.1, 0.0, -0.1]
+
+    def legs(rotation: bool) -> np.ndarray:
+        monkeypatch.setattr(feet_mod, "ROTATION_RELEASE", rotation)
+        out = []
+        for t, p in enumerate(poses):
+            for weight, contact in ((1.0, 1.0), (0.3, 1.0), (0.0, 0.0)):
+                feet = FeetLock(floor=-10.0)
+                feet.planted[:], feet.weight[:], feet.plant[:] = int(contact), weight, target[t]
+                out.append(feet.step(p.copy(), contact, contact))
+        return np.array(out)
+
+    np.testing.assert_array_equal(legs(True), legs(False))
 
 
 def test_no_foot_goes_under_the_floor():

@@ -316,19 +316,6 @@ def test_the_shipped_performer_on_a_stage_takes_every_live_control_over_long_str
     run_machine(shipped().model, "3x2", 12)
 
 
-#: A known defect this machine found (in a fresh clone's `make test`; the same examples passed in
-#: another checkout: the dance's floats, and so its draws, follow the process's BLAS state): the
-#: feet part hands a released foot back to the dance over 20 frames by blending its ankle target
-#: towards the plant horizontally; the shared sample's dancer kicks the released foot up past the
-#: hip (its ankle 1.7 m high), the blended target passes by the hip and the IK's thigh, aimed at
-#: it, swings 95 degrees in one frame (LeftUpperLeg, frame 2571 of a lead/energy sequence on its
-#: spot). A faster hand-back of high feet took it to 41 but the shipped dances' largest leg step
-#: from 22 to 40 on a stage (not kept; docs/feet.md). Crashes and every other exception still fail.
-KNOWN_KICK_SNAP = pytest.mark.xfail(raises=AssertionError, strict=False,
-                                    reason="known: a released kick past the hip snaps the thigh (feet.py, docs/feet.md)")
-
-
-@KNOWN_KICK_SNAP
 def test_a_library_performer_takes_every_live_control_over_long_streams(tmp_path_factory):
     model = sample_library(str(tmp_path_factory.mktemp("library")))
     if model is None:

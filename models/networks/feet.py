@@ -27,10 +27,13 @@ dancers stand at different heights on the default skeleton.
   the foot it falls to 0 over :data:`RELEASE_FRAMES` (smoothstep), so the foot is handed
   back to the dance without a jump. A foot planted anew starts where it is shown and its
   hold grows over :data:`PLANT_FRAMES`, so planting never jumps either;
-- ``ground`` (2,) the body's height offset (the lift, low-passed twice).
+- ``ground`` (2,) the body's height offset (the lift, low-passed twice);
+- ``shown`` (2, 6), ``legs`` (2, 16), ``rel`` (2, 2, 4): the hand-back in rotation space's
+  (:data:`ROTATION_RELEASE`, :func:`_leg_blend`): each leg as shown last frame (ankle; thigh
+  and shin local rotations), the leg it turns from, the turns' signs, a replant's carry.
 
-**Every frame, per leg** (one compiled call, :func:`feet_kernel`; 0.014 ms a frame for both,
-p99 0.042 ms: benchmarks/hop_profile.py): the body is grounded; the dance's heel-toe midpoint
+**Every frame, per leg** (one compiled call, :func:`feet_kernel`; 0.037-0.038 ms a frame for
+both, p99 0.064-0.069 ms: benchmarks/hop_profile.py, docs/feet.md): the body is grounded; the dance's heel-toe midpoint
 is moved by ``weight`` towards the plant horizontally; a plant more than :data:`LEASH` from
 the dance's foot is pulled after it, softly (:data:`LEASH_PULL`: the foot slides rather
 than the leg being torn, where the exemplar's dancer travelled but the performer does not,
@@ -44,6 +47,17 @@ bent the other way, its ankle where it was), at most :data:`KNEE_MAX_DEG` (a tar
 the hip than that reaches is left short), swings the thigh onto the target, and turns
 the foot back to its world orientation. A leg with nothing to do (no weight, above the
 floor, knee bent forwards) is left bit for bit as it was.
+
+**A hand-back in rotation space.** A released foot's blended target that comes within
+:data:`RELEASE_CLEARANCE` of the hip joint (a dancer kicking the foot up past the hip) would
+swing the thigh round; from that frame the leg is no longer aimed at a target: the leg as
+shown then (kept in the hips' frame) is turned to the dance's own by the weight left, thigh
+and shin by their relative rotations' powers, each keeping its last frame's sign
+(:func:`_towards`: a turn past half a turn goes on the same way), the foot at the dance's
+world orientation. A foot planted again meanwhile is held where it is shown and carried from
+that leg to the planted solution over :data:`REPLANT_FRAMES`. Hand-written quaternion
+arithmetic in numba, as the IK, so the live path allocates nothing. Every other release is
+handed back as above.
 """
 
 from __future__ import annotations
@@ -84,6 +98,21 @@ FLOOR_PERCENTILE: float = 2.0
 #: 0.18 -> 0.17, contact-foot speed 0.19 -> 0.13 m/s, band amplitude 0.947 -> 0.920
 #: (benchmarks/studies/foot_skating.py --stage 6x5; 30 frames: 0.920, 1.36x, amplitude 0.916).
 RELEASE_FRAMES: int = 20
+#: A released foot whose blended ankle target comes within :data:`RELEASE_CLEARANCE` of the hip
+#: joint is handed back in rotation space from there (True): the leg as shown that frame, kept in
+#: the hips' frame, turned to the dance's own by the weight left (:func:`_leg_blend`), no target
+#: aimed at. False: as before, the target blended on: a dancer kicking the released foot up past
+#: the hip took it by the hip joint and the IK's thigh, aimed at it, swung round (94.8 degrees in a
+#: frame, the shared sample's library on 3x2; docs/feet.md). Switch for measuring.
+ROTATION_RELEASE: bool = True
+#: How near the hip joint (m) a released foot's blended ankle target may come before the hand-back
+#: goes on in rotation space (a knee folded past ~120 degrees). The shipped model's targets stay
+#: further: the validation songs on 6x5 and 3x2 read as before (foot_skating.py, docs/feet.md).
+RELEASE_CLEARANCE: float = 0.4
+#: Frames over which a foot planted again while handed back in rotation space goes from the leg as
+#: shown to the planted solution (smoothstep): that leg is not the IK's, and the planted one would
+#: jump to it.
+REPLANT_FRAMES: int = 10
 #: Frames over which a foot newly planted comes to rest (its hold grows, smoothstep): no sudden stop.
 PLANT_FRAMES: int = 3
 #: How far a planted foot may lie from the dance's foot horizontally (m) before it is pulled after
@@ -227,52 +256,105 @@ def _leg_fk(pose, f, bones, offs):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _unsoft(pose, f, bones, offs, hip, ankle, soft):  # pragma: no cover - compiled
+    """The ankle target (x, y, z) for which leg f's IK, with its soft reach ``soft``
+    (:data:`SOFT_REACH`), puts the ankle at ``ankle``: a replant holds the foot where it is shown."""
+    hx, hy, hz = ankle[0] - hip[0], ankle[1] - hip[1], ankle[2] - hip[2]
+    dist = math.sqrt(hx * hx + hy * hy + hz * hz)
+    ok = (offs[f, 1, 0], offs[f, 1, 1], offs[f, 1, 2])
+    v = _rot(_unitq(_q(pose, 3 + 4 * bones[f, 1])), (offs[f, 2, 0], offs[f, 2, 1], offs[f, 2, 2]))
+    r = math.sqrt((ok[1] * v[1] + ok[2] * v[2]) ** 2 + (ok[2] * v[1] - ok[1] * v[2]) ** 2)
+    start = math.sqrt(max(ok[0] * ok[0] + ok[1] * ok[1] + ok[2] * ok[2] + v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+                          + 2.0 * (ok[0] * v[0] + r), 0.0)) - soft
+    if soft <= 0.0 or dist <= start or dist < 1e-9:
+        return ankle
+    far = start - soft * math.log(max(1.0 - (dist - start) / soft, 1e-3))  # the soft reach undone
+    k = far / dist
+    return hip[0] + hx * k, hip[1] + hy * k, hip[2] + hz * k
+
+
+@njit(cache=True, nogil=True)
 def _leg_target(pose, f, bones, offs, planted, plant, weight, contact, leash, pull, release, plant_rate,
-                target):  # pragma: no cover - compiled
+                target, shown, legs, rel, rotation, clearance, carry_rate, soft):  # pragma: no cover - compiled
     """Leg f's state stepped (plant, release, leash) and its ankle target written to ``target[f]``:
-    x, y, z (the dance's ankle, moved by the blend weight towards the plant horizontally) and the
-    smoothstepped weight."""
-    _, ankle, heel, toe, _, _, _, _, _ = _leg_fk(pose, f, bones, offs)
+    x, y, z (the dance's ankle, moved by the blend weight towards the plant horizontally), the
+    blend weight, the mode (0: solved for it, :func:`_leg_ik`; with ``rotation``,
+    :data:`ROTATION_RELEASE`: 1, handed back in rotation space, the weight then the share of it left
+    since the switch; 2, a replant's carry, x, y, z then the planted target: :func:`_leg_blend`) and
+    the carry's weight. ``shown``, ``legs``, ``rel``: see :func:`_leg_blend`."""
+    hip, ankle, heel, toe, _, _, _, _, _ = _leg_fk(pose, f, bones, offs)
     ax, ay, az = ankle
     mx, mz = ax + 0.5 * (heel[0] + toe[0]), az + 0.5 * (heel[2] + toe[2])  # the dance's heel-toe midpoint
     w = weight[f]
+    c = shown[f, 4]
     if contact[f] > 0.5:
         if planted[f] == 0:  # planted where it is shown now
             if w > 0.0:  # mid-release (between plant and dance): held at once
-                e = w * w * (3.0 - 2.0 * w)
-                plant[f, 0] = mx + e * (plant[f, 0] - mx)
-                plant[f, 2] = mz + e * (plant[f, 2] - mz)
+                if shown[f, 5] > 0.0:  # handed back in rotation space: the planted leg carried in from the leg shown
+                    tx, ty, tz = _unsoft(pose, f, bones, offs, hip, (shown[f, 0], shown[f, 1], shown[f, 2]), soft)
+                    plant[f, 0], plant[f, 2] = mx + tx - ax, mz + tz - az
+                    c, shown[f, 3], shown[f, 5] = 1.0, ty - ay, 0.0
+                    legs[f, 0:8] = legs[f, 8:16]
+                    rel[f] = 0.0
+                else:
+                    e = w * w * (3.0 - 2.0 * w)
+                    plant[f, 0] = mx + e * (plant[f, 0] - mx)
+                    plant[f, 2] = mz + e * (plant[f, 2] - mz)
                 w = 1.0
             else:  # the dance's foot: the hold grows over plant_rate's frames, the foot slows to it
                 plant[f, 0], plant[f, 2] = mx, mz
             planted[f] = 1
         w = min(1.0, w + plant_rate)
     else:
+        if planted[f] == 1 and c > 0.0:  # released while carried in: handed back in rotation space at once
+            shown[f, 5] = -1.0
         planted[f] = 0
         w = max(0.0, w - release)
+        if w <= 0.0:
+            shown[f, 5] = 0.0
     weight[f] = w
     dx, dz = plant[f, 0] - mx, plant[f, 2] - mz
+    k = c * c * (3.0 - 2.0 * c)
+    shown[f, 4] = 0.0
+    if c > 0.0 and planted[f] == 1:  # a replant's carry: its height from the leg shown's to the dance's
+        ay += k * shown[f, 3]
+        shown[f, 4] = max(0.0, c - carry_rate)
+    else:
+        k = 0.0
     if planted[f] == 1:
         d = math.sqrt(dx * dx + dz * dz)
-        if d > leash:  # pulled after the dance's foot, by pull of the way past the leash a frame
-            k = 1.0 - pull * (d - leash) / d
-            plant[f, 0] = mx + dx * k
-            plant[f, 2] = mz + dz * k
+        if d > leash:  # pulled after the dance's foot, by pull of the way past the leash a frame (a carry: less)
+            s = 1.0 - pull * (1.0 - k) * (d - leash) / d
+            plant[f, 0] = mx + dx * s
+            plant[f, 2] = mz + dz * s
             dx, dz = plant[f, 0] - mx, plant[f, 2] - mz
     e = w * w * (3.0 - 2.0 * w)
-    target[f, 0], target[f, 1], target[f, 2], target[f, 3] = ax + e * dx, ay, az + e * dz, e
+    tx, ty, tz = ax + e * dx, ay, az + e * dz
+    mode = 0.0
+    if planted[f] == 0 and w > 0.0 and rotation:
+        hx, hy, hz = tx - hip[0], ty - hip[1], tz - hip[2]
+        if shown[f, 5] < 0.0 or (shown[f, 5] == 0.0 and hx * hx + hy * hy + hz * hz < clearance * clearance):
+            shown[f, 5] = e  # the target would pass by the hip: from here on the leg shown turns to the dance's
+            legs[f, 0:8] = legs[f, 8:16]
+            rel[f] = 0.0
+        if shown[f, 5] > 0.0:
+            mode, e = 1.0, e / shown[f, 5]
+    elif k > 0.0:
+        mode, e, tx, tz = 2.0, 1.0, ax + dx, az + dz
+    target[f, 0], target[f, 1], target[f, 2], target[f, 3], target[f, 4], target[f, 5] = tx, ty, tz, e, mode, k
 
 
 @njit(cache=True, nogil=True)
-def _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, knee_max,
-            wrap_forward):  # pragma: no cover - compiled
-    """Leg f of ``pose`` bent and swung so its ankle reaches ``target[f]`` (a leg of weight 0: its
+def _leg_solve(pose, f, bones, offs, ang_rest, floor, knee_min, soft, tx, ty, tz, held, knee_max,
+               wrap_forward):  # pragma: no cover - compiled
+    """Leg f of ``pose`` bent and swung so its ankle reaches (tx, ty, tz) (``held``; not held: its
     own ankle), raised onto the floor, the knee bent forwards by at least ``knee_min``; the foot
-    keeps its world orientation. Left bit for bit as it is when there is nothing to do."""
+    keeps its world orientation. (changed, thigh, shin, foot local rotations); not changed (nothing
+    to do): the pose's own."""
     cu, cl, cf = 3 + 4 * bones[f, 0], 3 + 4 * bones[f, 1], 3 + 4 * bones[f, 2]
     hip, ankle, heel, toe, gh, gu, gl, gf, ql = _leg_fk(pose, f, bones, offs)
-    held = target[f, 3] > 0.0
-    tx, ty, tz = (target[f, 0], target[f, 1], target[f, 2]) if held else ankle
+    if not held:
+        tx, ty, tz = ankle
     lift = floor - (ty + min(heel[1], toe[1]))
     if lift > 0.0:  # onto the floor
         ty += lift
@@ -281,8 +363,8 @@ def _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, knee_
     v = _rot(ql, oa)  # the shin in the thigh's frame
     phi0 = math.atan2(-v[2], -v[1]) - ang_rest[f]  # the knee's flexion now, about the thigh's X axis
     phi0 = (phi0 + math.pi) % (2.0 * math.pi) - math.pi
-    if not held and lift <= 0.0 and phi0 >= knee_min:
-        return  # nothing to do: the leg as the dance has it
+    if not held and lift <= 0.0 and phi0 >= knee_min:  # nothing to do: the leg as the dance has it
+        return False, _unitq(_q(pose, cu)), ql, _unitq(_q(pose, cf))
     hx, hy, hz = tx - hip[0], ty - hip[1], tz - hip[2]
     dist = math.sqrt(hx * hx + hy * hy + hz * hz)
     l1sq = ok[0] * ok[0] + ok[1] * ok[1] + ok[2] * ok[2]
@@ -321,10 +403,95 @@ def _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, knee_
     qu2 = _unitq(_mul(_conj(gh), gu))
     gl2 = _mul(gu, ql2)
     qf2 = _unitq(_mul(_conj(gl2), gf))  # the foot keeps its orientation in the world
+    return True, qu2, ql2, qf2
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _put(pose, f, bones, qu, ql, qf):  # pragma: no cover - compiled
+    """Leg f's thigh, shin and foot local rotations written into ``pose``."""
+    cu, cl, cf = 3 + 4 * bones[f, 0], 3 + 4 * bones[f, 1], 3 + 4 * bones[f, 2]
     for i in range(4):
-        pose[cu + i] = qu2[i]
-        pose[cl + i] = ql2[i]
-        pose[cf + i] = qf2[i]
+        pose[cu + i] = qu[i]
+        pose[cl + i] = ql[i]
+        pose[cf + i] = qf[i]
+
+
+@njit(cache=True, nogil=True)
+def _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, knee_max,
+            wrap_forward):  # pragma: no cover - compiled
+    """Leg f of ``pose`` solved (:func:`_leg_solve`) for its ankle target ``target[f]`` (a leg of
+    weight 0: its own ankle), in place; left bit for bit as it is when there is nothing to do."""
+    changed, qu, ql, qf = _leg_solve(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target[f, 0],
+                                     target[f, 1], target[f, 2], target[f, 3] > 0.0, knee_max, wrap_forward)
+    if changed:
+        _put(pose, f, bones, qu, ql, qf)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _towards(a, b, e, rel, f, k):  # pragma: no cover - compiled
+    """Unit quaternion a turned by ``e`` (0: a, 1: b) of the way to b. The turn from a to b,
+    ``rel[f, k]`` (its quaternion b a^-1), keeps its sign from the last frame's (all zeros: the
+    shorter arc), so a turn passing half a turn goes on the same way instead of flipping round."""
+    r = _mul(b, _conj(a))
+    last = (rel[f, k, 0], rel[f, k, 1], rel[f, k, 2], rel[f, k, 3])
+    d = r[3] if last[0] == 0.0 and last[1] == 0.0 and last[2] == 0.0 and last[3] == 0.0 else \
+        r[0] * last[0] + r[1] * last[1] + r[2] * last[2] + r[3] * last[3]
+    if d < 0.0:
+        r = (-r[0], -r[1], -r[2], -r[3])
+    rel[f, k, 0], rel[f, k, 1], rel[f, k, 2], rel[f, k, 3] = r
+    sn = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    if sn < 1e-9:  # no turn (or a whole one, its axis lost): a as it is
+        return a
+    th = e * math.atan2(sn, r[3])  # e of the half angle, in [0, pi]
+    k = math.sin(th) / sn
+    return _unitq(_mul((r[0] * k, r[1] * k, r[2] * k, math.cos(th)), a))
+
+
+@njit(cache=True, nogil=True)
+def _leg_blend(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, knee_max, wrap_forward, shown,
+               legs, rel):  # pragma: no cover - compiled
+    """Leg f blended in rotation space (:data:`ROTATION_RELEASE`), in place, towards the held leg
+    ``legs[f, :8]`` (thigh and shin, local). Handed back (mode 1): from the dance's own leg (floor and
+    knee mended) by the weight ``target[f, 3]``, the held leg the one shown when the hand-back
+    switched, kept in the hips' frame (nothing aimed: no target to pass by the hip). A replant's
+    carry (mode 2): from the planted solution by ``target[f, 5]``, the held leg re-aimed at the same
+    target (``target[f]``: the ankle where it was shown, its soft reach undone, :func:`_unsoft`)
+    each frame. Thigh and shin turn (:func:`_towards`, ``rel``), the foot keeps the dance's world
+    orientation; a blend that would put the heel or toe under the floor is solved once more for its
+    own ankle raised onto it. ``shown[f]``: the leg shown last frame's ankle (:func:`_keep_shown`),
+    a replant's height offset (m) and carry (1 -> 0), the weight at the switch (-1: switch now)."""
+    mode = target[f, 4]
+    low = floor if mode == 1.0 else -1e9  # a carry's target lies beyond the ankle (undone soft reach): floor after
+    _, du, dl, df = _leg_solve(pose, f, bones, offs, ang_rest, low, knee_min, soft, target[f, 0], target[f, 1],
+                               target[f, 2], mode == 2.0, knee_max, wrap_forward)
+    gh = _unitq(_q(pose, 3))
+    gf = _mul(_mul(_mul(gh, du), dl), df)  # the dance's foot in the world
+    hu, hl = _q(legs[f], 0), _q(legs[f], 4)
+    if mode == 2.0:  # the carried leg re-aimed at the planted target
+        _put(pose, f, bones, hu, hl, _unitq(_mul(_conj(_mul(_mul(gh, hu), hl)), gf)))
+        _, hu, hl, _ = _leg_solve(pose, f, bones, offs, ang_rest, low, knee_min, soft, target[f, 0], target[f, 1],
+                                  target[f, 2], True, knee_max, wrap_forward)
+        for i in range(4):
+            legs[f, i], legs[f, 4 + i] = hu[i], hl[i]
+    e = target[f, 3] if mode == 1.0 else target[f, 5]
+    ou, ol = _towards(du, hu, e, rel, f, 0), _towards(dl, hl, e, rel, f, 1)
+    _put(pose, f, bones, ou, ol, _unitq(_mul(_conj(_mul(_mul(gh, ou), ol)), gf)))
+    _, ankle, heel, toe, _, _, _, _, _ = _leg_fk(pose, f, bones, offs)
+    if ankle[1] + min(heel[1], toe[1]) < floor:
+        _, qu, ql, qf = _leg_solve(pose, f, bones, offs, ang_rest, floor, knee_min, soft, ankle[0], ankle[1],
+                                   ankle[2], True, knee_max, wrap_forward)
+        _put(pose, f, bones, qu, ql, qf)
+
+
+@njit(cache=True, nogil=True)
+def _keep_shown(pose, f, bones, offs, shown, legs):  # pragma: no cover - compiled
+    """Leg f as shown kept for a blend that may follow (:func:`_leg_blend`): its ankle in
+    ``shown[f, :3]``, thigh and shin (local) in ``legs[f, 8:]``."""
+    _, ankle, _, _, _, _, _, _, ql = _leg_fk(pose, f, bones, offs)
+    shown[f, 0], shown[f, 1], shown[f, 2] = ankle
+    hu = _unitq(_q(pose, 3 + 4 * bones[f, 0]))
+    for i in range(4):
+        legs[f, 8 + i], legs[f, 12 + i] = hu[i], ql[i]
 
 
 @njit(cache=True, nogil=True)
@@ -343,17 +510,25 @@ def _lowest(pose, f, bones, offs):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def feet_kernel(pose, bones, offs, ang_rest, planted, plant, weight, ground, target, contact, floor, leash, pull,
-                release, knee_min, ground_rate, plant_rate, soft, knee_max=math.pi,
-                wrap_forward=True):  # pragma: no cover - compiled
-    """Both legs of ``pose`` (P,) float32, in place; the state arrays updated (see :class:`FeetLock`)."""
+                release, knee_min, ground_rate, plant_rate, soft, knee_max, wrap_forward, shown, legs, rel, rotation,
+                clearance, carry_rate):  # pragma: no cover - compiled
+    """Both legs of ``pose`` (P,) float32, in place; the state arrays updated (see :class:`FeetLock`).
+    ``target`` (2, 6) is scratch; ``shown``, ``legs``, ``rel``: the blends' (``rotation``, :func:`_leg_blend`)."""
     if ground_rate > 0.0:  # the body lowered or raised by the exemplar's lift (GROUND_RATE < 1: low-passed twice)
         ground[1] += ground_rate * (contact[2] - ground[1])
         ground[0] += ground_rate * (ground[1] - ground[0])
         pose[1] = pose[1] + ground[0]
     for f in range(2):
-        _leg_target(pose, f, bones, offs, planted, plant, weight, contact, leash, pull, release, plant_rate, target)
+        _leg_target(pose, f, bones, offs, planted, plant, weight, contact, leash, pull, release, plant_rate, target,
+                    shown, legs, rel, rotation, clearance, carry_rate, soft)
     for f in range(2):
-        _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, knee_max, wrap_forward)
+        if target[f, 4] > 0.0:
+            _leg_blend(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, knee_max, wrap_forward, shown,
+                       legs, rel)
+        else:
+            _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, knee_max, wrap_forward)
+        if rotation:
+            _keep_shown(pose, f, bones, offs, shown, legs)
 
 
 class FeetLock:
@@ -381,7 +556,11 @@ class FeetLock:
         self.plant = np.zeros((2, 3), np.float64)
         self.weight = np.zeros(2, np.float64)
         self.ground = np.zeros(2, np.float64)  # the body's height offset (m, GROUND_RATE) and its first low-pass
-        self._target = np.zeros((2, 4), np.float64)  # each leg's ankle target and weight, this frame
+        self._target = np.zeros((2, 6), np.float64)  # each leg's ankle target, weight, mode, carry, this frame
+        self.shown = np.zeros((2, 6), np.float64)  # each leg shown last frame: its ankle (x, y, z);
+        #                                            a replant's height offset (m) and carry (1 -> 0)
+        self.legs = np.zeros((2, 16), np.float64)  # each leg's held thigh and shin, its shown ones (local quaternions)
+        self.rel = np.zeros((2, 2, 4), np.float64)  # a blend's turns from the dance's thigh, shin to the held's
         self._contact = np.zeros(3, np.float64)
         self.reset()
 
@@ -391,6 +570,9 @@ class FeetLock:
         self.plant[:] = 0.0
         self.weight[:] = 0.0
         self.ground[:] = 0.0
+        self.shown[:] = 0.0
+        self.legs[:] = 0.0
+        self.rel[:] = 0.0
 
     def step(self, pose: np.ndarray, left: float, right: float, lift: float = 0.0) -> np.ndarray:
         """``pose`` (P,) float32 with its legs put on the floor, in place (and returned); ``left``,
@@ -399,7 +581,8 @@ class FeetLock:
         self._contact[0], self._contact[1], self._contact[2] = left, right, lift
         feet_kernel(pose, self._bones, self._offs, self._ang_rest, self.planted, self.plant, self.weight, self.ground,
                     self._target, self._contact, self.floor, LEASH, LEASH_PULL, self._release, self._knee_min, GROUND_RATE,
-                    self._plant, SOFT_REACH, math.radians(KNEE_MAX_DEG), KNEE_WRAP_FORWARD)
+                    self._plant, SOFT_REACH, math.radians(KNEE_MAX_DEG), KNEE_WRAP_FORWARD, self.shown,
+                    self.legs, self.rel, ROTATION_RELEASE, RELEASE_CLEARANCE, 1.0 / max(REPLANT_FRAMES, 1))
         return pose
 
     def lift_of(self, pose: np.ndarray) -> float:
