@@ -36,7 +36,6 @@ KNOWN: dict[tuple[str, str], str] = {
     ("docs/install.md", "--index-url"): "pip's option",
     ("docs/feet.md", "feet.ROOT_LOCK"): "the option at b9a2be2, removed after",
     ("docs/feet.md", "Stage.nudge"): "part of the ROOT_LOCK option at b9a2be2",
-    ("docs/feet.md", "stage.md#fd-on-a-stage"): "pending: feet.md's own #fd-on-a-stage-what-the-hold-costs",
 }
 
 
