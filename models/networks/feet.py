@@ -236,7 +236,7 @@ def _rot(q, v):  # pragma: no cover - compiled
     return (vx + qw * tx + qy * tz - qz * ty, vy + qw * ty + qz * tx - qx * tz, vz + qw * tz + qx * ty - qy * tx)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _leg_fk(pose, f, bones, offs):  # pragma: no cover - compiled
     """Leg f of ``pose``: (hip joint, ankle, heel and toe from the ankle, Hips / thigh / shin / foot
     global rotations, shin local rotation)."""
@@ -406,7 +406,7 @@ def _leg_solve(pose, f, bones, offs, ang_rest, floor, knee_min, soft, tx, ty, tz
     return True, qu2, ql2, qf2
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _put(pose, f, bones, qu, ql, qf):  # pragma: no cover - compiled
     """Leg f's thigh, shin and foot local rotations written into ``pose``."""
     cu, cl, cf = 3 + 4 * bones[f, 0], 3 + 4 * bones[f, 1], 3 + 4 * bones[f, 2]
@@ -427,7 +427,7 @@ def _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, knee_
         _put(pose, f, bones, qu, ql, qf)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _towards(a, b, e, rel, f, k):  # pragma: no cover - compiled
     """Unit quaternion a turned by ``e`` (0: a, 1: b) of the way to b. The turn from a to b,
     ``rel[f, k]`` (its quaternion b a^-1), keeps its sign from the last frame's (all zeros: the
