@@ -527,7 +527,7 @@ def feet_kernel(pose, bones, offs, ang_rest, planted, plant, weight, ground, tar
                        legs, rel)
         else:
             _leg_ik(pose, f, bones, offs, ang_rest, floor, knee_min, soft, target, knee_max, wrap_forward)
-        if rotation:
+        if rotation and weight[f] > 0.0:  # only a held or released leg can switch or replant next frame
             _keep_shown(pose, f, bones, offs, shown, legs)
 
 
