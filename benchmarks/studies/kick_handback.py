@@ -1,6 +1,6 @@
 """A kick past the hip while a foot is handed back (docs/feet.md): the live-controls library machine's stream.
 
-The shared motion sample's library (``performer library build ../shared/data/motion``, or ``--library``)
+The shared motion sample's library (built now from ``--motion DIR``, or given as ``--library``)
 dances on spot (1, 2) of a 3x2 stage, seed 3, to the bundled clip looped, through the lead and energy
 changes the live-controls test's library machine (tests/test_live_controls.py) shrank its failure to;
 its dancer kicks a released left foot up past the hip near frame 2571. Prints, for the feet step as
@@ -10,9 +10,9 @@ thigh's largest over frames 2560-2590, and the frames whose releases switched to
 ``--plot PNG``: the left ankle's height, the left thigh's local angle and its per-frame turn over frames
 2540-2598, the step as set against the rotation hand-back off::
 
-    .venv/bin/python benchmarks/studies/kick_handback.py --plot docs/img/feet_kick.png
+    .venv/bin/python benchmarks/studies/kick_handback.py --motion ../shared/data/motion --plot docs/img/feet_kick.png
 
-Exit status 0; 2 without the shared sample (and no ``--library``).
+Exit status 0; 2 without ``--motion`` or ``--library``, or with a ``--motion`` that is not a folder.
 """
 
 from __future__ import annotations
@@ -26,6 +26,8 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[2]
+if str(REPO) not in sys.path:  # run as a script from anywhere (it imports foot_skating's --set)
+    sys.path.insert(0, str(REPO))
 #: The library machine's shrunk steps: (control, value, frames of music after it).
 STEPS: tuple[tuple[str, float, int], ...] = (
     ("lead", 66.37924453487464, 258), ("lead", 133.33131126389597, 99), ("lead", 182.6531606726096, 135),
@@ -67,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
 
     p = argparse.ArgumentParser(description=__doc__.split("\nExit status")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--library", metavar="NPZ", help="a library built from the shared sample (default: built now)")
+    p.add_argument("--motion", metavar="DIR", help="the shared motion sample's folder (../shared/data/motion): its library is built now")
+    p.add_argument("--library", metavar="NPZ", help="a library already built from the shared sample (instead of --motion)")
     p.add_argument("--set", action="append", default=[], metavar="PART.NAME=VALUE", help="a feet/stage constant")
     p.add_argument("--plot", metavar="PNG", help="write the kick's plot")
     a = p.parse_args(argv)
@@ -84,9 +87,10 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         library = a.library
         if library is None:
-            sample = REPO.parent / "shared" / "data" / "motion"
-            if not sample.is_dir():
-                print(f"kick_handback.py: no shared sample at {sample} (give --library)", file=sys.stderr)
+            sample = Path(a.motion) if a.motion else None
+            if sample is None or not sample.is_dir():
+                print(f"kick_handback.py: {'no folder at ' + str(sample) if sample else 'give --motion DIR or --library NPZ'}",
+                      file=sys.stderr)
                 return 2
             library = str(Path(tmp) / "sample.npz")
             subprocess.run([sys.executable, "-m", "realtime.cli", "library", "build", str(sample), "--out", library],
